@@ -1,0 +1,5 @@
+"""``python -m cnctwin`` runs the command line."""
+
+from cnctwin.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,53 @@
+"""The ``cnctwin`` command line: one subcommand per library verb.
+
+Each module in this package registers its subcommands through ``register(subparsers)``; the
+commands themselves stay thin and call the library.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from cnctwin.exceptions import CnctwinError
+
+__all__ = ["main"]
+
+# Modules that contribute subcommands, in help order. Each has ``register(subparsers)``.
+_COMMAND_MODULES: tuple[str, ...] = ("cnctwin.cli.io",)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every registered subcommand."""
+    parser = argparse.ArgumentParser(
+        prog="cnctwin",
+        description="Edge digital twin for CNC machine tools (SINUMERIK 840D sl class).",
+    )
+    parser.add_argument("--version", action="version", version=_version())
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in _COMMAND_MODULES:
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def _version() -> str:
+    from cnctwin import __version__
+
+    return f"cnctwin {__version__}"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit code (2 for bad input, 1 for other failures)."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "command", None):
+        parser.print_help()
+        return 0
+    try:
+        code = args.func(args)
+    except CnctwinError as exc:
+        print(f"cnctwin {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    return int(code or 0)

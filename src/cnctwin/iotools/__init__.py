@@ -1,0 +1,11 @@
+"""Readers and writers, one module per source (pvlib.iotools style).
+
+``read_recording(path)`` detects the format; format-specific readers are importable by name
+(``read_capture4analysis``, ...). Every reader returns a :class:`~cnctwin.recording.Recording`.
+"""
+
+from __future__ import annotations
+
+from cnctwin.iotools._detect import read_recording
+
+__all__ = ["read_recording"]
