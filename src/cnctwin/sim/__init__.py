@@ -1,0 +1,10 @@
+"""Physics simulator of a SINUMERIK 840D sl machining centre (issue #3).
+
+Produces what the edge device records: one sample per 2 ms position-control cycle (500 Hz) of
+spindle and feed-axis drive values, plus external sensors (dynamometer, thermal camera) and the
+true parameters used (``truth``).
+"""
+
+from cnctwin.sim.spindle import SpindleMotor
+
+__all__ = ["SpindleMotor"]
