@@ -1,0 +1,88 @@
+"""Storage of recordings: embedded DuckDB + Parquet (default) or PostgreSQL.
+
+>>> import cnctwin.store
+>>> with cnctwin.store.open("/tmp/cnctwin-store") as st:          # doctest: +SKIP
+...     rid = st.ingest(rec)
+...     cur = st.query_signals(["CURRENT|SP1"], start="2023-12-22T13:23:41Z")
+...     rec2 = st.load(rid)
+
+URLs understood by :func:`open`:
+
+* a plain path, ``file:///abs/path`` or ``duckdb:///abs/path`` (``duckdb://rel/path``):
+  :class:`~cnctwin.store.duckdb_store.DuckDBStore`;
+* ``postgresql://user@host:port/db?schema=name`` (``postgres://`` too):
+  :class:`~cnctwin.store.postgres_store.PostgresStore`; the schema defaults to ``cnctwin``.
+"""
+
+from __future__ import annotations
+
+import os
+import urllib.parse
+import urllib.request
+
+from cnctwin.exceptions import ConfigError
+from cnctwin.store.base import CATALOG_COLUMNS, Store, default_recording_id
+from cnctwin.store.duckdb_store import DuckDBStore
+
+__all__ = [
+    "CATALOG_COLUMNS",
+    "DuckDBStore",
+    "PostgresStore",
+    "Store",
+    "default_recording_id",
+    "open",
+]
+
+
+def open(url_or_path: str | os.PathLike[str], *, create: bool = True) -> Store:
+    """Open (and by default create) a store.
+
+    Parameters
+    ----------
+    url_or_path : str or path-like
+        A directory (embedded DuckDB + Parquet store), ``file://``/``duckdb://`` URL of one, or
+        a ``postgresql://`` URL (optional ``?schema=name``, default schema ``cnctwin``).
+    create : bool, default True
+        Create the directory / schema if missing; with False a missing store raises
+        :class:`~cnctwin.exceptions.StoreError`.
+
+    Returns
+    -------
+    Store
+        A :class:`DuckDBStore` or :class:`PostgresStore`.
+
+    Raises
+    ------
+    ConfigError
+        For a URL scheme that is not supported.
+    StoreError
+        If the store is missing (``create=False``) or the server cannot be reached.
+    """
+    if isinstance(url_or_path, os.PathLike):
+        return DuckDBStore(url_or_path, create=create)
+    text = str(url_or_path)
+    scheme = text.split("://", 1)[0].lower() if "://" in text else ""
+    if scheme in ("postgresql", "postgres"):
+        from cnctwin.store.postgres_store import PostgresStore
+
+        return PostgresStore(text, create=create)
+    if scheme == "duckdb":
+        return DuckDBStore(text[len("duckdb://"):], create=create)
+    if scheme == "file":
+        parsed = urllib.parse.urlparse(text)
+        return DuckDBStore(urllib.request.url2pathname(parsed.path), create=create)
+    if scheme:
+        raise ConfigError(
+            f"store URL scheme {scheme!r} is not supported; use a directory path, "
+            "file:///path, duckdb:///path or postgresql://user@host:port/db"
+        )
+    return DuckDBStore(text, create=create)
+
+
+def __getattr__(name: str) -> object:
+    # PostgresStore imports psycopg (the 'postgres' extra) only when asked for.
+    if name == "PostgresStore":
+        from cnctwin.store.postgres_store import PostgresStore
+
+        return PostgresStore
+    raise AttributeError(f"module 'cnctwin.store' has no attribute {name!r}")

@@ -1,0 +1,504 @@
+"""The storage interface shared by every backend, and the backend-neutral pieces of it.
+
+A store keeps :class:`~cnctwin.recording.Recording` objects so that many recordings of many
+machines can be searched by machine and time and read back signal by signal. Two backends
+implement :class:`Store`:
+
+* :class:`~cnctwin.store.duckdb_store.DuckDBStore`: embedded, a directory of Parquet files
+  partitioned by machine and UTC day plus a DuckDB catalog (the default);
+* :class:`~cnctwin.store.postgres_store.PostgresStore`: a PostgreSQL schema that keeps the HF
+  signals as ``float8[]`` blocks of consecutive cycles.
+
+This module holds what both need: the catalog row of a recording, the (de)serialisation of
+:class:`~cnctwin.recording.RecordingMeta` to JSON, the split of the HF table into runs of
+consecutive cycles on a linear time axis, and the normalisation of LF and event tables.
+"""
+
+from __future__ import annotations
+
+import abc
+import hashlib
+import json
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from cnctwin.exceptions import ConfigError, SignalNotFoundError
+from cnctwin.recording import (
+    EVENT_COLUMNS,
+    LF_COLUMNS,
+    CounterGap,
+    Recording,
+    RecordingMeta,
+)
+from cnctwin.signals import parse_column
+
+__all__ = [
+    "CATALOG_COLUMNS",
+    "Store",
+    "TimeRun",
+    "catalog_row",
+    "default_recording_id",
+    "meta_from_json",
+    "meta_to_json",
+    "normalize_events",
+    "normalize_lf",
+    "resolve_columns",
+    "time_runs",
+    "to_utc",
+]
+
+CATALOG_COLUMNS: tuple[str, ...] = (
+    "recording_id",
+    "machine",
+    "start_time",
+    "end_time",
+    "first_cycle",
+    "last_cycle",
+    "n_cycles",
+    "cycle_time_s",
+    "columns",
+    "units",
+    "source_files",
+    "source_format",
+    "issues",
+    "partial",
+    "n_gaps",
+    "meta",
+)
+"""Columns of :meth:`Store.recordings`. ``columns``/``units``/``source_files``/``issues`` are
+JSON text (a list or an object); ``meta`` is the full :class:`RecordingMeta` as JSON."""
+
+_ID_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._:@+=-]{0,199}$")
+
+_EVENT_INT_COLUMNS = (
+    "channel",
+    "seek_offset",
+    "selected_tool",
+    "active_tool",
+    "call_stack_level",
+)
+_EVENT_TEXT_COLUMNS = ("kind", "gcode", "ipo_gcode", "path")
+
+
+def to_utc(value: pd.Timestamp | str | None) -> pd.Timestamp | None:
+    """A timestamp as tz-aware UTC; naive input is taken as UTC."""
+    if value is None:
+        return None
+    ts = pd.Timestamp(value)
+    if ts.tzinfo is None:
+        return ts.tz_localize("UTC")
+    return ts.tz_convert("UTC")
+
+
+def check_recording_id(recording_id: str) -> str:
+    """Validate a recording id (it becomes a file name); returns it unchanged.
+
+    Raises
+    ------
+    ConfigError
+        If the id is empty, longer than 200 characters or contains characters other than
+        letters, digits and ``. _ : @ + = -`` (or starts with one of those).
+    """
+    if not isinstance(recording_id, str) or not _ID_PATTERN.match(recording_id):
+        raise ConfigError(
+            f"recording id {recording_id!r} is not valid: use 1-200 letters, digits and "
+            "'._:@+=-', starting with a letter or digit"
+        )
+    return recording_id
+
+
+def default_recording_id(rec: Recording) -> str:
+    """A deterministic id for ``rec``: machine, start time, first cycle and a content hash.
+
+    The same recording read twice from the same file gets the same id, so ingesting it again
+    replaces instead of duplicating (``"<machine>-20231222T132341-5558098-1a2b3c4d"``).
+    """
+    machine = re.sub(r"[^A-Za-z0-9._-]+", "_", rec.meta.machine or "unknown").strip("_.-")
+    machine = (machine or "unknown")[:60]
+    if rec.n_cycles:
+        t0 = pd.Timestamp(rec.hf["time"].iloc[0])
+        stamp = t0.strftime("%Y%m%dT%H%M%S")
+        first = int(rec.cycles[0])
+        last = int(rec.cycles[-1])
+    else:
+        stamp, first, last = "empty", 0, 0
+    h = hashlib.sha256()
+    h.update(
+        json.dumps(
+            [
+                rec.meta.machine,
+                first,
+                last,
+                rec.n_cycles,
+                rec.columns,
+                [str(s) for s in rec.meta.source_files],
+                int(pd.Timestamp(rec.hf["time"].iloc[0]).value) if rec.n_cycles else 0,
+            ]
+        ).encode()
+    )
+    if rec.n_cycles:
+        h.update(np.ascontiguousarray(rec.hf[rec.columns].to_numpy(dtype=np.float64)).tobytes())
+    return f"{machine}-{stamp}-{first}-{h.hexdigest()[:8]}"
+
+
+# ---------------------------------------------------------------------------- meta <-> JSON
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, pd.Timestamp):
+        return value.isoformat()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return str(value)
+
+
+def meta_to_json(meta: RecordingMeta) -> str:
+    """:class:`RecordingMeta` as a JSON object (time anchors as ``[cycle, ns since epoch]``).
+
+    ``attrs`` values that JSON cannot hold are stored as their ``str()`` (numpy scalars and
+    arrays as numbers/lists, timestamps as ISO text).
+    """
+    doc = {
+        "machine": meta.machine,
+        "cycle_time_s": meta.cycle_time_s,
+        "axis_map": {str(k): v for k, v in meta.axis_map.items()},
+        "units": meta.units,
+        "source_files": [str(s) for s in meta.source_files],
+        "source_format": meta.source_format,
+        "time_anchors": [[int(c), int(pd.Timestamp(t).value)] for c, t in meta.time_anchors],
+        "gaps": [[g.after_cycle, g.before_cycle] for g in meta.gaps],
+        "wraps": meta.wraps,
+        "issues": list(meta.issues),
+        "partial": meta.partial,
+        "attrs": meta.attrs,
+    }
+    return json.dumps(doc, default=_jsonable)
+
+
+def meta_from_json(text: str) -> RecordingMeta:
+    """Inverse of :func:`meta_to_json`."""
+    doc = json.loads(text)
+    return RecordingMeta(
+        machine=doc["machine"],
+        cycle_time_s=float(doc["cycle_time_s"]),
+        axis_map={int(k): v for k, v in doc["axis_map"].items()},
+        units=dict(doc["units"]),
+        source_files=list(doc["source_files"]),
+        source_format=doc["source_format"],
+        time_anchors=[
+            (int(c), pd.Timestamp(int(ns), unit="ns", tz="UTC")) for c, ns in doc["time_anchors"]
+        ],
+        gaps=[CounterGap(int(a), int(b)) for a, b in doc["gaps"]],
+        wraps=int(doc["wraps"]),
+        issues=list(doc["issues"]),
+        partial=bool(doc["partial"]),
+        attrs=dict(doc["attrs"]),
+    )
+
+
+def catalog_row(rec: Recording, recording_id: str) -> dict[str, Any]:
+    """The catalog entry (:data:`CATALOG_COLUMNS`) of ``rec``."""
+    n = rec.n_cycles
+    t = rec.hf["time"]
+    return {
+        "recording_id": recording_id,
+        "machine": rec.meta.machine,
+        "start_time": pd.Timestamp(t.iloc[0]) if n else None,
+        "end_time": pd.Timestamp(t.iloc[-1]) if n else None,
+        "first_cycle": int(rec.cycles[0]) if n else None,
+        "last_cycle": int(rec.cycles[-1]) if n else None,
+        "n_cycles": n,
+        "cycle_time_s": float(rec.meta.cycle_time_s),
+        "columns": json.dumps(rec.columns),
+        "units": json.dumps({c: rec.meta.units.get(c, "") for c in rec.columns}),
+        "source_files": json.dumps([str(s) for s in rec.meta.source_files]),
+        "source_format": rec.meta.source_format,
+        "issues": json.dumps(list(rec.meta.issues)),
+        "partial": bool(rec.meta.partial),
+        "n_gaps": len(rec.meta.gaps),
+        "meta": meta_to_json(rec.meta),
+    }
+
+
+# ---------------------------------------------------------------------------- HF time runs
+@dataclass(frozen=True)
+class TimeRun:
+    """Rows ``start .. start+n-1`` of an HF table: consecutive cycles, time linear in cycle.
+
+    Within a run ``cycle = first_cycle + i`` and ``time_ns = t0_ns + i * step_ns``, so a run
+    is fully described by these four numbers; :func:`time_runs` splits a table at counter gaps
+    and wherever the time column departs from that line.
+    """
+
+    start: int
+    n: int
+    first_cycle: int
+    t0_ns: int
+
+
+def time_runs(
+    cycles: NDArray[np.int64], time_ns: NDArray[np.int64], *, step_ns: int
+) -> list[TimeRun]:
+    """Split an HF table into runs of consecutive cycles with ``time = t0 + i * step``.
+
+    Parameters
+    ----------
+    cycles : numpy.ndarray of int64
+        Unwrapped, increasing cycle counter.
+    time_ns : numpy.ndarray of int64
+        UTC time of each cycle in ns since the Unix epoch [ns].
+    step_ns : int
+        Cycle time [ns].
+
+    Returns
+    -------
+    list of TimeRun
+        Covering every row exactly once, in order.
+    """
+    n = cycles.size
+    if n == 0:
+        return []
+    offset = time_ns - cycles * step_ns
+    breaks = np.flatnonzero((np.diff(cycles) != 1) | (np.diff(offset) != 0)) + 1
+    starts = np.concatenate([[0], breaks]).astype(np.int64)
+    ends = np.concatenate([breaks, [n]]).astype(np.int64)
+    return [
+        TimeRun(int(s), int(e - s), int(cycles[s]), int(time_ns[s]))
+        for s, e in zip(starts, ends, strict=True)
+    ]
+
+
+def block_bounds(runs: Iterable[TimeRun], *, block_cycles: int) -> list[tuple[int, int]]:
+    """Cut runs into blocks of at most ``block_cycles`` rows: ``(start_row, n)`` pairs."""
+    out: list[tuple[int, int]] = []
+    for r in runs:
+        for s in range(0, r.n, block_cycles):
+            out.append((r.start + s, min(block_cycles, r.n - s)))
+    return out
+
+
+# ---------------------------------------------------------------------------- LF and events
+def normalize_events(events: pd.DataFrame) -> pd.DataFrame:
+    """Events with exactly :data:`EVENT_COLUMNS` in the canonical dtypes.
+
+    ``cycle`` int64; channel, offsets, tools, call level nullable ``Int64``; texts ``object``
+    with ``None`` for missing. Columns absent in the input are added empty.
+    """
+    out = pd.DataFrame(index=pd.RangeIndex(len(events)))
+    for col in EVENT_COLUMNS:
+        src = events[col] if col in events.columns else pd.Series([None] * len(events))
+        src = src.reset_index(drop=True)
+        if col == "cycle":
+            out[col] = src.astype("int64")
+        elif col in _EVENT_INT_COLUMNS:
+            out[col] = pd.to_numeric(src, errors="raise").astype("Int64")
+        else:
+            vals = src.astype(object)
+            out[col] = pd.Series(
+                [None if (v is None or (isinstance(v, float) and np.isnan(v)) or v is pd.NA)
+                 else str(v) for v in vals],
+                dtype=object,
+            )
+    return out
+
+
+def normalize_lf(lf: pd.DataFrame) -> pd.DataFrame:
+    """LF values with exactly :data:`LF_COLUMNS` in the canonical dtypes."""
+    out = pd.DataFrame(index=pd.RangeIndex(len(lf)))
+    for col in LF_COLUMNS:
+        src = lf[col].reset_index(drop=True) if col in lf.columns else pd.Series(
+            [None] * len(lf)
+        )
+        if col == "cycle":
+            out[col] = src.astype("int64")
+        elif col == "time":
+            out[col] = pd.to_datetime(src, utc=True).astype("datetime64[ns, UTC]")
+        elif col == "value":
+            out[col] = pd.to_numeric(src, errors="coerce").astype("float64")
+        else:
+            vals = src.astype(object)
+            out[col] = pd.Series(
+                [None if (v is None or (isinstance(v, float) and np.isnan(v)) or v is pd.NA)
+                 else str(v) for v in vals],
+                dtype=object,
+            )
+    return out
+
+
+def resolve_columns(
+    wanted: Sequence[str], available: Iterable[str], *, where: str = "the store"
+) -> list[str]:
+    """Expand signal codes (``"CURRENT"``) and column names (``"CURRENT|SP1"``) to columns.
+
+    Parameters
+    ----------
+    wanted : sequence of str
+        Codes or ``CODE|AXIS`` column names.
+    available : iterable of str
+        Columns that exist.
+    where : str
+        Named in the error message.
+
+    Returns
+    -------
+    list of str
+        Matching columns in the order of ``available`` grouped by ``wanted``, no duplicates.
+
+    Raises
+    ------
+    SignalNotFoundError
+        If an entry of ``wanted`` matches nothing; the message lists what exists.
+    """
+    avail = list(dict.fromkeys(available))
+    out: dict[str, None] = {}
+    for w in wanted:
+        hits = [c for c in avail if c == w or parse_column(c)[0] == w]
+        if not hits:
+            raise SignalNotFoundError(
+                f"signal {w!r} is not in {where}; available columns: "
+                f"{', '.join(avail) if avail else '(none)'}"
+            )
+        for h in hits:
+            out.setdefault(h, None)
+    return list(out)
+
+
+# ---------------------------------------------------------------------------- the interface
+class Store(abc.ABC):
+    """A store of recordings; see :func:`cnctwin.store.open`.
+
+    Use as a context manager (``with cnctwin.store.open(path) as st: ...``) or call
+    :meth:`close`.
+    """
+
+    url: str
+
+    @abc.abstractmethod
+    def ingest(self, rec: Recording, *, recording_id: str | None = None) -> str:
+        """Store ``rec`` and return its id.
+
+        Parameters
+        ----------
+        rec : Recording
+            The recording. HF values, LF values, events, external channels and metadata
+            (gaps, issues, partial flag, attrs) are stored.
+        recording_id : str, optional
+            Id to store it under; default :func:`default_recording_id` (deterministic, so the
+            same file ingested twice is stored once). Ingesting an id that exists replaces it.
+
+        Returns
+        -------
+        str
+            The recording id.
+        """
+
+    @abc.abstractmethod
+    def recordings(
+        self,
+        *,
+        machine: str | None = None,
+        start: pd.Timestamp | str | None = None,
+        end: pd.Timestamp | str | None = None,
+    ) -> pd.DataFrame:
+        """The catalog: one row per recording (:data:`CATALOG_COLUMNS`), sorted by start time.
+
+        Parameters
+        ----------
+        machine : str, optional
+            Only this machine.
+        start, end : Timestamp or str, optional
+            Only recordings overlapping ``[start, end]`` (UTC; naive times are taken as UTC).
+        """
+
+    @abc.abstractmethod
+    def query_signals(
+        self,
+        signals: Sequence[str],
+        *,
+        machine: str | None = None,
+        start: pd.Timestamp | str | None = None,
+        end: pd.Timestamp | str | None = None,
+        recording_id: str | None = None,
+    ) -> pd.DataFrame:
+        """HF values of some signals over a time range.
+
+        Parameters
+        ----------
+        signals : sequence of str
+            Column names (``"CURRENT|SP1"``) or codes (``"CURRENT"``, expanded to every axis).
+        machine : str, optional
+            Only this machine.
+        start, end : Timestamp or str, optional
+            Inclusive UTC time range.
+        recording_id : str, optional
+            Only this recording.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Column ``time`` (UTC) and one float64 column per matched signal (NaN where a
+            recording lacks it). Indexed by ``cycle`` when ``recording_id`` is given, otherwise
+            by ``(recording_id, cycle)``; sorted.
+
+        Raises
+        ------
+        SignalNotFoundError
+            If a requested signal is in none of the selected recordings.
+        """
+
+    @abc.abstractmethod
+    def load(self, recording_id: str) -> Recording:
+        """Read a stored recording back (HF, LF, events, external channels, metadata).
+
+        Raises
+        ------
+        StoreError
+            If the id is not in the store (the message lists some that are).
+        """
+
+    @abc.abstractmethod
+    def sql(self, query: str) -> pd.DataFrame:
+        """Run a SQL query and return the result.
+
+        Both backends offer ``recordings``, ``lf``, ``events`` and ``hf_long``
+        (``recording_id, cycle, time, signal, value``); DuckDB also has the wide ``hf`` view.
+        """
+
+    @abc.abstractmethod
+    def delete(self, recording_id: str) -> bool:
+        """Remove a recording; returns whether it existed."""
+
+    @abc.abstractmethod
+    def close(self) -> None:
+        """Release the connection (idempotent)."""
+
+    def __enter__(self) -> Store:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.url}>"
+
+
+def index_result(frame: pd.DataFrame, *, single: bool) -> pd.DataFrame:
+    """Set the :meth:`Store.query_signals` index on a frame with ``recording_id``/``cycle``."""
+    frame = frame.sort_values(["recording_id", "cycle"], kind="stable")
+    if single:
+        frame = frame.drop(columns="recording_id").set_index("cycle")
+    else:
+        frame = frame.set_index(["recording_id", "cycle"])
+    return frame

@@ -1,0 +1,539 @@
+"""The embedded store: Parquet files partitioned by machine and UTC day, a DuckDB catalog.
+
+Layout under ``root``::
+
+    catalog.duckdb                                         recordings + files tables
+    hf/machine=<m>/day=<YYYY-MM-DD>/<recording_id>.parquet  wide HF table, one file per day
+    lf/machine=<m>/<recording_id>.parquet                   LF values (long form)
+    events/machine=<m>/<recording_id>.parquet               NC events
+    external/machine=<m>/<recording_id>/<channel>.parquet   channels with their own clock
+
+An HF file holds columns ``recording_id``, ``cycle`` (int64), ``time`` (timestamp[ns, UTC]) and
+one float64 column per ``CODE|AXIS`` signal (the column metadata carry the unit). A recording
+that spans UTC midnight is split into one file per day. Files are zstd-compressed, floats use
+Parquet's BYTE_STREAM_SPLIT encoding (better compression of smooth signals), and row groups
+hold 65 536 cycles (131 s at 2 ms) so that a time-range read skips the rest by statistics.
+
+Reads of HF values go through pyarrow (exact ns times, column pruning, row-group skipping);
+:meth:`DuckDBStore.sql` runs DuckDB over views of the files. ``<m>`` is the machine name with
+characters other than letters, digits and ``._-`` percent-encoded.
+
+DuckDB allows one writing process per catalog file: open a store for writing from one process
+at a time (readers of the Parquet files themselves are not restricted).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import urllib.parse
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import duckdb
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from cnctwin.exceptions import StoreError
+from cnctwin.recording import ExternalChannel, Recording
+from cnctwin.store.base import (
+    CATALOG_COLUMNS,
+    Store,
+    catalog_row,
+    check_recording_id,
+    default_recording_id,
+    index_result,
+    meta_from_json,
+    normalize_events,
+    normalize_lf,
+    resolve_columns,
+    to_utc,
+)
+
+__all__ = ["DuckDBStore", "hf_table"]
+
+_NS_PER_DAY = 86_400 * 10**9
+_DUCK_TYPES = {"int64": "BIGINT", "Int64": "BIGINT", "float64": "DOUBLE",
+               "datetime64[ns, UTC]": "TIMESTAMPTZ"}
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS recordings (
+    recording_id VARCHAR PRIMARY KEY,
+    machine VARCHAR NOT NULL,
+    start_time TIMESTAMPTZ,
+    end_time TIMESTAMPTZ,
+    first_cycle BIGINT,
+    last_cycle BIGINT,
+    n_cycles BIGINT NOT NULL,
+    cycle_time_s DOUBLE NOT NULL,
+    columns VARCHAR NOT NULL,
+    units VARCHAR NOT NULL,
+    source_files VARCHAR NOT NULL,
+    source_format VARCHAR NOT NULL,
+    issues VARCHAR NOT NULL,
+    partial BOOLEAN NOT NULL,
+    n_gaps INTEGER NOT NULL,
+    meta VARCHAR NOT NULL,
+    external VARCHAR NOT NULL,
+    ingested_at TIMESTAMPTZ NOT NULL
+);
+CREATE TABLE IF NOT EXISTS files (
+    recording_id VARCHAR NOT NULL,
+    kind VARCHAR NOT NULL,
+    name VARCHAR NOT NULL,
+    path VARCHAR NOT NULL,
+    day DATE,
+    start_time TIMESTAMPTZ,
+    end_time TIMESTAMPTZ,
+    first_cycle BIGINT,
+    last_cycle BIGINT,
+    n_rows BIGINT NOT NULL
+);
+"""
+
+
+def _path_part(value: str) -> str:
+    return urllib.parse.quote(value, safe="._-") if value else "_none_"
+
+
+def hf_table(rec: Recording, recording_id: str, rows: slice | None = None) -> pa.Table:
+    """The HF table of ``rec`` (optionally some rows) as stored in a Parquet file.
+
+    Columns ``recording_id`` (dictionary string), ``cycle`` (int64), ``time``
+    (timestamp[ns, UTC]) and the signals (float64, field metadata ``unit``).
+    """
+    hf = rec.hf if rows is None else rec.hf.iloc[rows]
+    n = len(hf)
+    arrays: list[pa.Array] = [
+        pa.DictionaryArray.from_arrays(
+            pa.array(np.zeros(n, dtype=np.int32)), pa.array([recording_id])
+        ),
+        pa.array(hf.index.to_numpy(dtype=np.int64)),
+        pa.array(hf["time"].to_numpy(dtype="datetime64[ns]"), type=pa.timestamp("ns", tz="UTC")),
+    ]
+    fields = [
+        pa.field("recording_id", pa.dictionary(pa.int32(), pa.string())),
+        pa.field("cycle", pa.int64()),
+        pa.field("time", pa.timestamp("ns", tz="UTC")),
+    ]
+    for col in rec.columns:
+        arrays.append(pa.array(hf[col].to_numpy(dtype=np.float64)))
+        fields.append(
+            pa.field(col, pa.float64(), metadata={b"unit": rec.meta.units.get(col, "").encode()})
+        )
+    return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
+
+
+class DuckDBStore(Store):
+    """Recordings in Parquet files under ``root`` with a DuckDB catalog.
+
+    Parameters
+    ----------
+    root : str or path-like
+        Store directory.
+    create : bool, default True
+        Create the directory and catalog if missing; with False a missing store raises
+        :class:`~cnctwin.exceptions.StoreError`.
+    row_group_cycles : int, default 65536
+        Parquet row-group size of the HF files [cycles].
+    compression : str, default 'zstd'
+        Parquet compression codec.
+    read_only : bool, default False
+        Open the catalog read-only (several processes may then read at once).
+    """
+
+    def __init__(
+        self,
+        root: str | os.PathLike[str],
+        *,
+        create: bool = True,
+        row_group_cycles: int = 65_536,
+        compression: str = "zstd",
+        read_only: bool = False,
+    ) -> None:
+        self.root = Path(root).expanduser().resolve()
+        self.url = f"duckdb://{self.root}"
+        self.row_group_cycles = int(row_group_cycles)
+        self.compression = compression
+        catalog = self.root / "catalog.duckdb"
+        if not catalog.exists():
+            if not create or read_only:
+                raise StoreError(
+                    f"no cnctwin store at {self.root} (missing catalog.duckdb); "
+                    "open it with create=True to make one"
+                )
+            self.root.mkdir(parents=True, exist_ok=True)
+        try:
+            self._con: duckdb.DuckDBPyConnection | None = duckdb.connect(
+                str(catalog), read_only=read_only
+            )
+        except duckdb.Error as exc:
+            raise StoreError(
+                f"cannot open the catalog {catalog}: {exc}. Another process may hold it open "
+                "for writing; close that store or open this one with read_only=True"
+            ) from exc
+        self._con.execute("SET TimeZone = 'UTC'")
+        if not read_only:
+            self._con.execute(_SCHEMA)
+
+    # ------------------------------------------------------------------ helpers
+    @property
+    def con(self) -> duckdb.DuckDBPyConnection:
+        """The DuckDB connection to the catalog."""
+        if self._con is None:
+            raise StoreError(f"store {self.root} is closed")
+        return self._con
+
+    def _abs(self, rel: str) -> Path:
+        return self.root / rel
+
+    def _write_parquet(self, table: pa.Table, rel: str, *, floats: Sequence[str] = ()) -> str:
+        path = self._abs(rel)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".tmp")
+        pq.write_table(
+            table,
+            tmp,
+            compression=self.compression,
+            row_group_size=self.row_group_cycles,
+            use_dictionary=[c for c in table.column_names if c not in floats],
+            use_byte_stream_split=list(floats) if floats else False,
+        )
+        return str(tmp)
+
+    def _existing_files(self, recording_id: str) -> list[str]:
+        rows = self.con.execute(
+            "SELECT path FROM files WHERE recording_id = ?", [recording_id]
+        ).fetchall()
+        return [r[0] for r in rows]
+
+    # ------------------------------------------------------------------ write
+    def ingest(self, rec: Recording, *, recording_id: str | None = None) -> str:
+        rid = check_recording_id(
+            recording_id if recording_id is not None else default_recording_id(rec)
+        )
+        mdir = f"machine={_path_part(rec.meta.machine)}"
+        files: list[dict[str, Any]] = []
+        tmp_to_final: list[tuple[str, str]] = []
+        # HF, one file per UTC day
+        if rec.n_cycles:
+            t_ns = rec.hf["time"].to_numpy(dtype="datetime64[ns]").view(np.int64)
+            days = t_ns // _NS_PER_DAY
+            cycles = rec.cycles
+            for day in np.unique(days):
+                mask = days == day
+                idx = np.flatnonzero(mask)
+                day_str = str(np.datetime64(int(day), "D"))
+                rel = f"hf/{mdir}/day={day_str}/{rid}.parquet"
+                if idx.size == idx[-1] - idx[0] + 1:
+                    table = hf_table(rec, rid, slice(int(idx[0]), int(idx[-1]) + 1))
+                else:  # time not monotonic across days: take the rows of this day
+                    table = hf_table(rec, rid).take(pa.array(idx))
+                tmp = self._write_parquet(table, rel, floats=rec.columns)
+                tmp_to_final.append((tmp, rel))
+                files.append(
+                    {
+                        "kind": "hf", "name": "", "path": rel, "day": day_str,
+                        "start_time": pd.Timestamp(int(t_ns[idx].min()), tz="UTC"),
+                        "end_time": pd.Timestamp(int(t_ns[idx].max()), tz="UTC"),
+                        "first_cycle": int(cycles[idx[0]]), "last_cycle": int(cycles[idx[-1]]),
+                        "n_rows": int(idx.size),
+                    }
+                )
+        # LF and events, one file each per recording
+        for kind, frame in (("lf", normalize_lf(rec.lf)), ("events", normalize_events(rec.events))):
+            rel = f"{kind}/{mdir}/{rid}.parquet"
+            frame.insert(0, "recording_id", rid)
+            table = pa.Table.from_pandas(frame, preserve_index=False)
+            tmp_to_final.append((self._write_parquet(table, rel), rel))
+            files.append(
+                {"kind": kind, "name": "", "path": rel, "day": None, "start_time": None,
+                 "end_time": None, "first_cycle": None, "last_cycle": None,
+                 "n_rows": len(frame)}
+            )
+        external: dict[str, dict[str, Any]] = {}
+        for i, (name, ch) in enumerate(rec.external.items()):
+            rel = f"external/{mdir}/{rid}/{i:03d}_{_path_part(name)}.parquet"
+            data = ch.data.copy()
+            index_name = data.index.name or "time_s"
+            data = data.reset_index(names=index_name)
+            table = pa.Table.from_pandas(data, preserve_index=False)
+            tmp_to_final.append((self._write_parquet(table, rel), rel))
+            files.append(
+                {"kind": "external", "name": name, "path": rel, "day": None, "start_time": None,
+                 "end_time": None, "first_cycle": None, "last_cycle": None,
+                 "n_rows": len(data)}
+            )
+            external[name] = {
+                "path": rel, "index": index_name, "units": ch.units, "fs_hz": ch.fs_hz,
+                "offset_s": ch.offset_s, "drift_ppm": ch.drift_ppm, "aligned": ch.aligned,
+                "source": ch.source,
+            }
+        row = catalog_row(rec, rid)
+        row["external"] = json.dumps(external)
+        row["ingested_at"] = pd.Timestamp.now(tz="UTC")
+        old = set(self._existing_files(rid))
+        new = {rel for _, rel in tmp_to_final}
+        con = self.con
+        con.execute("BEGIN TRANSACTION")
+        try:
+            con.execute("DELETE FROM files WHERE recording_id = ?", [rid])
+            con.execute("DELETE FROM recordings WHERE recording_id = ?", [rid])
+            cols = [*CATALOG_COLUMNS, "external", "ingested_at"]
+            con.execute(
+                f"INSERT INTO recordings ({', '.join(cols)}) "
+                f"VALUES ({', '.join('?' for _ in cols)})",
+                [row[c] for c in cols],
+            )
+            fcols = ["recording_id", "kind", "name", "path", "day", "start_time", "end_time",
+                     "first_cycle", "last_cycle", "n_rows"]
+            for f in files:
+                f["recording_id"] = rid
+                con.execute(
+                    f"INSERT INTO files ({', '.join(fcols)}) "
+                    f"VALUES ({', '.join('?' for _ in fcols)})",
+                    [f[c] for c in fcols],
+                )
+            for tmp, rel in tmp_to_final:
+                os.replace(tmp, self._abs(rel))
+            con.execute("COMMIT")
+        except BaseException:
+            con.execute("ROLLBACK")
+            for tmp, _ in tmp_to_final:
+                Path(tmp).unlink(missing_ok=True)
+            raise
+        for rel in old - new:
+            self._abs(rel).unlink(missing_ok=True)
+        return rid
+
+    def delete(self, recording_id: str) -> bool:
+        old = self._existing_files(recording_id)
+        n = self.con.execute(
+            "SELECT count(*) FROM recordings WHERE recording_id = ?", [recording_id]
+        ).fetchone()
+        existed = bool(n and n[0])
+        self.con.execute("DELETE FROM files WHERE recording_id = ?", [recording_id])
+        self.con.execute("DELETE FROM recordings WHERE recording_id = ?", [recording_id])
+        for rel in old:
+            self._abs(rel).unlink(missing_ok=True)
+        return existed
+
+    # ------------------------------------------------------------------ read
+    def recordings(
+        self,
+        *,
+        machine: str | None = None,
+        start: pd.Timestamp | str | None = None,
+        end: pd.Timestamp | str | None = None,
+    ) -> pd.DataFrame:
+        where, params = _catalog_filter(machine, to_utc(start), to_utc(end))
+        out = self.con.execute(
+            f"SELECT {', '.join(CATALOG_COLUMNS)} FROM recordings {where} "
+            "ORDER BY start_time, recording_id",
+            params,
+        ).df()
+        for col in ("start_time", "end_time"):
+            out[col] = pd.to_datetime(out[col], utc=True)
+        return out
+
+    def _catalog_entry(self, recording_id: str) -> tuple[str, str]:
+        row = self.con.execute(
+            "SELECT meta, external FROM recordings WHERE recording_id = ?", [recording_id]
+        ).fetchone()
+        if row is None:
+            some = [r[0] for r in self.con.execute(
+                "SELECT recording_id FROM recordings ORDER BY start_time LIMIT 5"
+            ).fetchall()]
+            raise StoreError(
+                f"recording {recording_id!r} is not in the store {self.root}; "
+                f"ids there include: {', '.join(some) if some else '(store is empty)'}"
+            )
+        return str(row[0]), str(row[1])
+
+    def query_signals(
+        self,
+        signals: Sequence[str],
+        *,
+        machine: str | None = None,
+        start: pd.Timestamp | str | None = None,
+        end: pd.Timestamp | str | None = None,
+        recording_id: str | None = None,
+    ) -> pd.DataFrame:
+        t0, t1 = to_utc(start), to_utc(end)
+        cat = self.recordings(machine=machine, start=t0, end=t1)
+        if recording_id is not None:
+            if recording_id not in set(cat["recording_id"]):
+                self._catalog_entry(recording_id)  # raises if unknown
+            cat = cat[cat["recording_id"] == recording_id]
+        cols_by_rec = {r: json.loads(c) for r, c in zip(cat["recording_id"], cat["columns"],
+                                                         strict=True)}
+        available = [c for cols in cols_by_rec.values() for c in cols]
+        where = f"recording {recording_id!r}" if recording_id else "the selected recordings"
+        wanted = resolve_columns(signals, available, where=where) if cols_by_rec else list(
+            signals
+        )
+        frames: list[pd.DataFrame] = []
+        if cols_by_rec:
+            ids = list(cols_by_rec)
+            sel = self.con.execute(
+                "SELECT recording_id, path FROM files WHERE kind = 'hf' AND recording_id IN "
+                f"({', '.join('?' for _ in ids)})"
+                + (" AND end_time >= ?" if t0 is not None else "")
+                + (" AND start_time <= ?" if t1 is not None else "")
+                + " ORDER BY recording_id, first_cycle",
+                [*ids, *([t0] if t0 is not None else []), *([t1] if t1 is not None else [])],
+            ).fetchall()
+            filters: list[tuple[str, str, Any]] = []
+            if t0 is not None:
+                filters.append(("time", ">=", t0))
+            if t1 is not None:
+                filters.append(("time", "<=", t1))
+            for rid, rel in sel:
+                present = [c for c in wanted if c in cols_by_rec[rid]]
+                table = pq.read_table(
+                    self._abs(rel),
+                    columns=["cycle", "time", *present],
+                    filters=filters or None,
+                )
+                frame = table.to_pandas()
+                frame.insert(0, "recording_id", rid)
+                frames.append(frame)
+        if frames:
+            out = pd.concat(frames, ignore_index=True)
+        else:
+            out = pd.DataFrame(
+                {"recording_id": pd.Series(dtype=object), "cycle": pd.Series(dtype="int64"),
+                 "time": pd.Series(dtype="datetime64[ns, UTC]")}
+            )
+        for c in wanted:
+            if c not in out.columns:
+                out[c] = np.nan
+        out = out[["recording_id", "cycle", "time", *wanted]]
+        out["recording_id"] = out["recording_id"].astype(object)
+        return index_result(out, single=recording_id is not None)
+
+    def load(self, recording_id: str) -> Recording:
+        meta_text, external_text = self._catalog_entry(recording_id)
+        meta = meta_from_json(meta_text)
+        rows = self.con.execute(
+            "SELECT kind, path FROM files WHERE recording_id = ? ORDER BY kind, first_cycle",
+            [recording_id],
+        ).fetchall()
+        by_kind: dict[str, list[str]] = {}
+        for kind, rel in rows:
+            by_kind.setdefault(kind, []).append(rel)
+        columns = json.loads(
+            self.con.execute(
+                "SELECT columns FROM recordings WHERE recording_id = ?", [recording_id]
+            ).fetchone()[0]  # type: ignore[index]
+        )
+        hf_paths = by_kind.get("hf", [])
+        if hf_paths:
+            hf = pd.concat(
+                [pq.read_table(self._abs(p)).to_pandas() for p in hf_paths], ignore_index=True
+            )
+            hf = hf.drop(columns="recording_id").sort_values("cycle", kind="stable")
+            hf = hf.set_index("cycle")
+        else:
+            hf = pd.DataFrame(
+                {"time": pd.Series(dtype="datetime64[ns, UTC]"),
+                 **{c: pd.Series(dtype="float64") for c in columns}},
+                index=pd.Index([], dtype="int64", name="cycle"),
+            )
+        hf = hf[["time", *columns]]
+        hf["time"] = hf["time"].astype("datetime64[ns, UTC]")
+        lf = normalize_lf(pq.read_table(self._abs(by_kind["lf"][0])).to_pandas())
+        events = normalize_events(pq.read_table(self._abs(by_kind["events"][0])).to_pandas())
+        external: dict[str, ExternalChannel] = {}
+        for name, d in json.loads(external_text).items():
+            data = pq.read_table(self._abs(d["path"])).to_pandas().set_index(d["index"])
+            external[name] = ExternalChannel(
+                name=name, data=data, units=dict(d["units"]), fs_hz=d["fs_hz"],
+                offset_s=float(d["offset_s"]), drift_ppm=float(d["drift_ppm"]),
+                aligned=bool(d["aligned"]), source=d["source"],
+            )
+        return Recording(hf, lf=lf, events=events, external=external, meta=meta)
+
+    def sql(self, query: str) -> pd.DataFrame:
+        self._refresh_views()
+        try:
+            return self.con.execute(query).df()
+        except duckdb.Error as exc:
+            raise StoreError(
+                f"SQL failed on {self.url}: {exc}. Tables/views: recordings, files, hf (wide), "
+                "hf_long (recording_id, cycle, time, signal, value), lf, events"
+            ) from exc
+
+    def _refresh_views(self) -> None:
+        con = self.con
+        root = str(self.root).replace("'", "''")
+        have = {
+            k: bool(n)
+            for k, n in con.execute(
+                "SELECT kind, count(*) FROM files GROUP BY kind"
+            ).fetchall()
+        }
+        if have.get("hf"):
+            con.execute(
+                "CREATE OR REPLACE TEMP VIEW hf AS SELECT * FROM "
+                f"read_parquet('{root}/hf/*/*/*.parquet', union_by_name = true, "
+                "hive_partitioning = true, hive_types = {'machine': VARCHAR, 'day': DATE})"
+            )
+            con.execute(
+                "CREATE OR REPLACE TEMP VIEW hf_long AS SELECT recording_id, cycle, time, "
+                "signal, value FROM (UNPIVOT (SELECT * EXCLUDE (machine) FROM hf) "
+                "ON COLUMNS(* EXCLUDE (recording_id, cycle, time, day)) "
+                "INTO NAME signal VALUE value)"
+            )
+        else:
+            con.execute(
+                "CREATE OR REPLACE TEMP VIEW hf AS SELECT NULL::VARCHAR AS recording_id, "
+                "NULL::BIGINT AS cycle, NULL::TIMESTAMPTZ AS time, NULL::VARCHAR AS machine "
+                "WHERE false"
+            )
+            con.execute(
+                "CREATE OR REPLACE TEMP VIEW hf_long AS SELECT NULL::VARCHAR AS recording_id, "
+                "NULL::BIGINT AS cycle, NULL::TIMESTAMPTZ AS time, NULL::VARCHAR AS signal, "
+                "NULL::DOUBLE AS value WHERE false"
+            )
+        for kind in ("lf", "events"):
+            if not have.get(kind):
+                stub = normalize_lf(pd.DataFrame()) if kind == "lf" else normalize_events(
+                    pd.DataFrame()
+                )
+                cols = ", ".join(
+                    f"NULL::{_DUCK_TYPES.get(str(t), 'VARCHAR')} AS {c}"
+                    for c, t in stub.dtypes.items()
+                )
+                con.execute(f"CREATE OR REPLACE TEMP VIEW {kind} AS SELECT {cols} WHERE false")
+                continue
+            con.execute(
+                f"CREATE OR REPLACE TEMP VIEW {kind} AS SELECT * FROM "
+                f"read_parquet('{root}/{kind}/*/*.parquet', union_by_name = true, "
+                "hive_partitioning = true, hive_types = {'machine': VARCHAR})"
+            )
+
+    def close(self) -> None:
+        if self._con is not None:
+            self._con.close()
+            self._con = None
+
+
+def _catalog_filter(
+    machine: str | None, start: pd.Timestamp | None, end: pd.Timestamp | None
+) -> tuple[str, list[Any]]:
+    clauses: list[str] = []
+    params: list[Any] = []
+    if machine is not None:
+        clauses.append("machine = ?")
+        params.append(machine)
+    if start is not None:
+        clauses.append("end_time >= ?")
+        params.append(start)
+    if end is not None:
+        clauses.append("start_time <= ?")
+        params.append(end)
+    return ("WHERE " + " AND ".join(clauses)) if clauses else "", params
