@@ -264,7 +264,11 @@ def cycles_to_time(
         a_ns = np.array([pd.Timestamp(a[1]).value for a in anchors], dtype=np.int64)
         base_cycle = int(a_cyc[0])
         offsets = a_ns - (a_cyc - base_cycle) * step_ns
-        base_ns = int(np.median(offsets))
+        # integer median: np.median goes through float64, which rounds epoch nanoseconds
+        # (~1.7e18) to 256 ns steps
+        srt = np.sort(offsets)
+        mid = srt.size // 2
+        base_ns = int(srt[mid]) if srt.size % 2 else (int(srt[mid - 1]) + int(srt[mid])) // 2
     ns = base_ns + (c - base_cycle) * step_ns
     return pd.DatetimeIndex(pd.to_datetime(ns, unit="ns", utc=True), name="time")
 
