@@ -7,5 +7,7 @@
 from __future__ import annotations
 
 from cnctwin.iotools._detect import read_recording
+from cnctwin.iotools.sinumerik_trace import read_sinumerik_trace
 
 __all__ = ["read_recording"]
+__all__ += ["read_sinumerik_trace"]
