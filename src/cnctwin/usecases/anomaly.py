@@ -1,0 +1,511 @@
+"""Anomaly detectors with one interface for batch and streaming, and a backtest.
+
+Every detector follows river's anomaly API [1]: ``learn_one(x)`` updates it with one sample
+(a dict of floats), ``score_one(x)`` returns a float where HIGH means anomalous. ``learn_many`` and
+``score_many`` take a DataFrame and give the same numbers as the one-sample calls in order (a
+conformance test checks it for every detector through ``_unit_test_params``).
+
+Detectors
+---------
+``PhysicsResidualDetector``
+    The twin's job: score the residual between a measured signal and the value the twin
+    predicts (e.g. spindle current against the calibrated model), normalized by the residual
+    spread learned on good data.
+``EnvelopeDetector``
+    The vendor teach-in baseline (ToolScope, TNC7 process monitoring): a min/max envelope of a
+    signal over the progress of a repeated operation, learned from good parts.
+``SpectralDetector``
+    Chatter: power in a frequency band over a sliding window, relative to the learned level.
+``TappingDetector``
+    The loose tap of thesis Figure 5.10: fluctuation of spindle current and Z following error
+    while the spindle runs in reverse (extraction), relative to the learned level.
+
+References
+----------
+.. [1] Montiel et al., "River: machine learning for streaming data in Python", JMLR 22 (2021);
+   river/anomaly/base.py: "A high score is indicative of an anomaly".
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections import deque
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike, NDArray
+
+from cnctwin.exceptions import ConfigError
+
+__all__ = [
+    "DETECTORS",
+    "BacktestResult",
+    "Detector",
+    "EnvelopeDetector",
+    "PhysicsResidualDetector",
+    "SpectralDetector",
+    "TappingDetector",
+    "backtest",
+]
+
+
+class _Welford:
+    """Running mean and variance (Welford's algorithm)."""
+
+    __slots__ = ("m2", "mean", "n")
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.mean = 0.0
+        self.m2 = 0.0
+
+    def update(self, x: float) -> None:
+        self.n += 1
+        d = x - self.mean
+        self.mean += d / self.n
+        self.m2 += d * (x - self.mean)
+
+    @property
+    def std(self) -> float:
+        return math.sqrt(self.m2 / (self.n - 1)) if self.n > 1 else float("nan")
+
+
+class Detector:
+    """Base class: one-sample learning and scoring, with batch helpers.
+
+    Subclasses implement ``learn_one`` and ``score_one`` and list their input keys in
+    ``inputs``; ``_unit_test_params`` gives parameters for the conformance tests.
+    """
+
+    inputs: tuple[str, ...] = ()
+
+    def learn_one(self, x: Mapping[str, float]) -> None:
+        """Update the detector with one good (normal) sample."""
+        raise NotImplementedError
+
+    def score_one(self, x: Mapping[str, float]) -> float:
+        """Anomaly score of one sample: high means anomalous; 0 or below means normal."""
+        raise NotImplementedError
+
+    def learn_many(self, df: pd.DataFrame) -> None:
+        """Learn every row of ``df`` in order (same as repeated ``learn_one``)."""
+        self._check_columns(df)
+        for row in df[list(self.inputs)].itertuples(index=False):
+            self.learn_one(dict(zip(self.inputs, row, strict=True)))
+
+    def score_many(self, df: pd.DataFrame) -> NDArray[np.float64]:
+        """Score every row of ``df`` in order (same as repeated ``score_one``)."""
+        self._check_columns(df)
+        out = np.empty(len(df))
+        for i, row in enumerate(df[list(self.inputs)].itertuples(index=False)):
+            out[i] = self.score_one(dict(zip(self.inputs, row, strict=True)))
+        return out
+
+    def clone(self) -> Detector:
+        """A fresh, unlearned copy with the same parameters."""
+        return type(self)(**self._params())
+
+    def _params(self) -> dict[str, Any]:
+        raise NotImplementedError
+
+    def _check_columns(self, df: pd.DataFrame) -> None:
+        missing = [c for c in self.inputs if c not in df.columns]
+        if missing:
+            raise ConfigError(
+                f"{type(self).__name__} needs columns {list(self.inputs)}; missing {missing}"
+            )
+
+    @classmethod
+    def _unit_test_params(cls) -> dict[str, Any]:
+        return {}
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self._params().items())
+        return f"{type(self).__name__}({args})"
+
+
+class PhysicsResidualDetector(Detector):
+    """Residual between a measured and a twin-predicted signal, in learned standard deviations.
+
+    Score: ``|EWMA(residual) - mean_learned| / std_learned - threshold_sigma`` where the EWMA
+    (time constant ``smoothing`` samples) suppresses sample noise. Above 0 is anomalous.
+
+    Parameters
+    ----------
+    measured : str, default 'current_a'
+        Key of the measured value.
+    predicted : str, default 'predicted_current_a'
+        Key of the twin's prediction.
+    smoothing : float, default 25
+        EWMA time constant [samples] (25 samples = 50 ms at 500 Hz).
+    threshold_sigma : float, default 5
+        Learned standard deviations that count as normal.
+    """
+
+    def __init__(
+        self,
+        *,
+        measured: str = "current_a",
+        predicted: str = "predicted_current_a",
+        smoothing: float = 25.0,
+        threshold_sigma: float = 5.0,
+    ) -> None:
+        if smoothing < 1:
+            raise ConfigError(f"smoothing must be >= 1 sample, not {smoothing}")
+        self.measured = measured
+        self.predicted = predicted
+        self.smoothing = smoothing
+        self.threshold_sigma = threshold_sigma
+        self.inputs = (measured, predicted)
+        self._alpha = 1.0 / smoothing
+        self._ewma: float | None = None
+        self._stats = _Welford()
+
+    def _params(self) -> dict[str, Any]:
+        return {"measured": self.measured, "predicted": self.predicted,
+                "smoothing": self.smoothing, "threshold_sigma": self.threshold_sigma}
+
+    def _smooth(self, x: Mapping[str, float]) -> float:
+        r = float(x[self.measured]) - float(x[self.predicted])
+        self._ewma = r if self._ewma is None else self._ewma + self._alpha * (r - self._ewma)
+        return self._ewma
+
+    def learn_one(self, x: Mapping[str, float]) -> None:
+        self._stats.update(self._smooth(x))
+
+    def score_one(self, x: Mapping[str, float]) -> float:
+        s = self._smooth(x)
+        std = self._stats.std
+        if not math.isfinite(std) or std == 0.0:
+            return 0.0
+        return abs(s - self._stats.mean) / std - self.threshold_sigma
+
+    @classmethod
+    def _unit_test_params(cls) -> dict[str, Any]:
+        return {"smoothing": 5.0}
+
+
+class EnvelopeDetector(Detector):
+    """Learned min/max envelope over the progress of a repeated operation (vendor teach-in).
+
+    Parameters
+    ----------
+    signal : str, default 'current_a'
+        Monitored value.
+    progress : str, default 'progress'
+        Position within the operation, in [0, 1] (e.g. depth / hole depth, or samples since the
+        block start / expected duration).
+    n_bins : int, default 50
+        Bins over the progress.
+    margin : float, default 0.1
+        Extra margin as a fraction of the learned band width (and at least ``min_margin``).
+    min_margin : float, default 0.05
+        Minimum absolute margin [unit of ``signal``].
+
+    Notes
+    -----
+    Score = distance outside ``[min - m, max + m]`` divided by ``m`` (m = margin); 0 inside.
+    Anything above 0 leaves the envelope; bins never seen in teach-in score 0 (no evidence).
+    """
+
+    def __init__(
+        self,
+        *,
+        signal: str = "current_a",
+        progress: str = "progress",
+        n_bins: int = 50,
+        margin: float = 0.1,
+        min_margin: float = 0.05,
+    ) -> None:
+        if n_bins < 1:
+            raise ConfigError(f"n_bins must be >= 1, not {n_bins}")
+        self.signal = signal
+        self.progress = progress
+        self.n_bins = n_bins
+        self.margin = margin
+        self.min_margin = min_margin
+        self.inputs = (signal, progress)
+        self._lo = np.full(n_bins, np.inf)
+        self._hi = np.full(n_bins, -np.inf)
+
+    def _params(self) -> dict[str, Any]:
+        return {"signal": self.signal, "progress": self.progress, "n_bins": self.n_bins,
+                "margin": self.margin, "min_margin": self.min_margin}
+
+    def _bin(self, p: float) -> int:
+        return min(max(int(p * self.n_bins), 0), self.n_bins - 1)
+
+    def learn_one(self, x: Mapping[str, float]) -> None:
+        b = self._bin(float(x[self.progress]))
+        v = float(x[self.signal])
+        self._lo[b] = min(self._lo[b], v)
+        self._hi[b] = max(self._hi[b], v)
+
+    def score_one(self, x: Mapping[str, float]) -> float:
+        b = self._bin(float(x[self.progress]))
+        lo, hi = self._lo[b], self._hi[b]
+        if not np.isfinite(lo):
+            return 0.0
+        m = max(self.margin * (hi - lo), self.min_margin)
+        v = float(x[self.signal])
+        return float(max(lo - m - v, v - hi - m, 0.0) / m)
+
+    @classmethod
+    def _unit_test_params(cls) -> dict[str, Any]:
+        return {"n_bins": 10}
+
+
+class SpectralDetector(Detector):
+    """Band power over a sliding window relative to the learned level (chatter detection).
+
+    Parameters
+    ----------
+    signal : str, default 'current_a'
+        Monitored value (spindle current, a feed-axis current, or CONT_DEV).
+    fs_hz : float, default 500
+        Sample rate [Hz].
+    band_hz : (float, float), default (20, 240)
+        Band searched for a chatter line [Hz].
+    window : int, default 128
+        Window length [samples].
+    hop : int, default 16
+        The spectrum is recomputed every ``hop`` samples; scores in between repeat it.
+
+    Notes
+    -----
+    Score = 10·log10(max band power / learned mean of that quantity) − ``threshold_db``.
+    The mean of the window is removed before the Hann-windowed FFT.
+    """
+
+    def __init__(
+        self,
+        *,
+        signal: str = "current_a",
+        fs_hz: float = 500.0,
+        band_hz: tuple[float, float] = (20.0, 240.0),
+        window: int = 128,
+        hop: int = 16,
+        threshold_db: float = 10.0,
+    ) -> None:
+        if not 0 <= band_hz[0] < band_hz[1] <= fs_hz / 2:
+            raise ConfigError(f"band_hz must lie in [0, {fs_hz / 2}] Hz, got {band_hz}")
+        if window < 8 or hop < 1:
+            raise ConfigError("window must be >= 8 samples and hop >= 1")
+        self.signal = signal
+        self.fs_hz = fs_hz
+        self.band_hz = band_hz
+        self.window = window
+        self.hop = hop
+        self.threshold_db = threshold_db
+        self.inputs = (signal,)
+        freqs = np.fft.rfftfreq(window, 1.0 / fs_hz)
+        self._band = (freqs >= band_hz[0]) & (freqs <= band_hz[1])
+        self._taper = np.hanning(window)
+        self._buf: deque[float] = deque(maxlen=window)
+        self._count = 0
+        self._last = 0.0
+        self._level = _Welford()
+
+    def _params(self) -> dict[str, Any]:
+        return {"signal": self.signal, "fs_hz": self.fs_hz, "band_hz": self.band_hz,
+                "window": self.window, "hop": self.hop, "threshold_db": self.threshold_db}
+
+    def _power(self, x: Mapping[str, float]) -> float | None:
+        self._buf.append(float(x[self.signal]))
+        self._count += 1
+        if len(self._buf) < self.window or self._count % self.hop:
+            return None
+        w = np.asarray(self._buf)
+        spec = np.abs(np.fft.rfft((w - w.mean()) * self._taper)) ** 2
+        return float(spec[self._band].max())
+
+    def learn_one(self, x: Mapping[str, float]) -> None:
+        p = self._power(x)
+        if p is not None:
+            self._level.update(p)
+
+    def score_one(self, x: Mapping[str, float]) -> float:
+        p = self._power(x)
+        if p is not None:
+            ref = self._level.mean if self._level.n else float("nan")
+            self._last = (
+                10.0 * math.log10(max(p, 1e-300) / ref) - self.threshold_db
+                if ref > 0 and math.isfinite(ref) else 0.0
+            )
+        return self._last
+
+    @classmethod
+    def _unit_test_params(cls) -> dict[str, Any]:
+        return {"window": 32, "hop": 4}
+
+
+class TappingDetector(Detector):
+    """Loose tap on extraction: fluctuation while the spindle runs in reverse.
+
+    Thesis Figure 5.10: when the loose tap is extracted (spindle reversed), the dynamometer
+    torque, the spindle current and the Z encoder position fluctuate. The detector tracks the
+    rolling standard deviation of the sample-to-sample change of ``current_a`` and of
+    ``z_error_mm`` (following error of Z) while ``speed_rpm`` has the reverse sign, and scores
+    their ratio to the learned level.
+
+    Parameters
+    ----------
+    window : int, default 50
+        Rolling window [samples] (100 ms at 500 Hz).
+    direction : int, default -1
+        Sign of the spindle speed during extraction (M3 tapping reverses to M4: -1).
+    threshold_ratio : float, default 3
+        Ratio to the learned fluctuation that counts as normal.
+    """
+
+    inputs = ("current_a", "z_error_mm", "speed_rpm")
+
+    def __init__(
+        self, *, window: int = 50, direction: int = -1, threshold_ratio: float = 3.0
+    ) -> None:
+        if direction not in (-1, 1):
+            raise ConfigError(f"direction must be -1 or +1, not {direction}")
+        self.window = window
+        self.direction = direction
+        self.threshold_ratio = threshold_ratio
+        self._prev: tuple[float, float] | None = None
+        self._dc: deque[float] = deque(maxlen=window)
+        self._dz: deque[float] = deque(maxlen=window)
+        self._ref_c = _Welford()
+        self._ref_z = _Welford()
+
+    def _params(self) -> dict[str, Any]:
+        return {"window": self.window, "direction": self.direction,
+                "threshold_ratio": self.threshold_ratio}
+
+    def _update(self, x: Mapping[str, float]) -> tuple[float, float] | None:
+        c, z, n = float(x["current_a"]), float(x["z_error_mm"]), float(x["speed_rpm"])
+        reverse = n * self.direction > 1.0
+        prev, self._prev = self._prev, (c, z)
+        if not reverse or prev is None:
+            self._dc.clear()
+            self._dz.clear()
+            return None
+        self._dc.append(c - prev[0])
+        self._dz.append(z - prev[1])
+        if len(self._dc) < self.window:
+            return None
+        return float(np.std(self._dc)), float(np.std(self._dz))
+
+    def learn_one(self, x: Mapping[str, float]) -> None:
+        f = self._update(x)
+        if f is not None:
+            self._ref_c.update(f[0])
+            self._ref_z.update(f[1])
+
+    def score_one(self, x: Mapping[str, float]) -> float:
+        f = self._update(x)
+        if f is None or self._ref_c.n == 0:
+            return 0.0
+        rc = f[0] / max(self._ref_c.mean, 1e-12)
+        rz = f[1] / max(self._ref_z.mean, 1e-12)
+        return max(rc, rz) - self.threshold_ratio
+
+    @classmethod
+    def _unit_test_params(cls) -> dict[str, Any]:
+        return {"window": 10}
+
+
+@dataclass(frozen=True)
+class BacktestResult:
+    """Detections of a detector replayed over recordings with known fault onsets.
+
+    Attributes
+    ----------
+    alarms_s : list of float
+        Times at which the score crossed the threshold upward [s].
+    delays_s : list of float
+        Per fault onset, the delay to the first alarm within ``max_delay_s``; NaN if missed [s].
+    misses : int
+        Faults with no alarm within ``max_delay_s``.
+    false_alarms : int
+        Alarms not within ``max_delay_s`` after any fault onset.
+    false_alarms_per_hour : float
+        ``false_alarms`` per hour of monitored (non-learning) time [1/h].
+    monitored_s : float
+        Scored duration [s].
+    """
+
+    alarms_s: list[float]
+    delays_s: list[float]
+    misses: int
+    false_alarms: int
+    false_alarms_per_hour: float
+    monitored_s: float
+
+
+def backtest(
+    detector: Detector,
+    data: pd.DataFrame,
+    *,
+    time_s: ArrayLike,
+    learn_until_s: float,
+    fault_onsets_s: Sequence[float] = (),
+    threshold: float = 0.0,
+    max_delay_s: float = 2.0,
+    refractory_s: float = 1.0,
+) -> BacktestResult:
+    """Replay a stream: learn on the first part, score the rest, compare alarms with faults.
+
+    Parameters
+    ----------
+    detector : Detector
+        A fresh detector (it is cloned, the argument is not changed).
+    data : pandas.DataFrame
+        Samples with the detector's input columns, in time order.
+    time_s : array-like
+        Time of each row [s].
+    learn_until_s : float
+        Rows before this time are learned (teach-in on good data), the rest scored [s].
+    fault_onsets_s : sequence of float
+        True fault onset times [s].
+    threshold : float, default 0
+        Score above which an alarm is raised.
+    max_delay_s : float, default 2
+        An alarm within this time after an onset counts as a detection [s].
+    refractory_s : float, default 1
+        After an alarm, further crossings within this time are not new alarms [s].
+    """
+    t = np.asarray(time_s, dtype=np.float64)
+    if t.size != len(data):
+        raise ConfigError(f"time_s has {t.size} values, data {len(data)} rows")
+    det = copy.deepcopy(detector.clone())
+    learn = t < learn_until_s
+    det.learn_many(data.loc[learn])
+    scores = det.score_many(data.loc[~learn])
+    ts = t[~learn]
+    alarms: list[float] = []
+    above_prev = False
+    for ti, s in zip(ts, scores, strict=True):
+        above = bool(s > threshold)
+        if above and not above_prev and (not alarms or ti - alarms[-1] >= refractory_s):
+            alarms.append(float(ti))
+        above_prev = above
+    onsets = sorted(float(o) for o in fault_onsets_s)
+    delays: list[float] = []
+    matched: set[int] = set()
+    for o in onsets:
+        hits = [i for i, a in enumerate(alarms) if o <= a <= o + max_delay_s]
+        delays.append(alarms[hits[0]] - o if hits else float("nan"))
+        matched.update(hits)
+    false = len(alarms) - len(matched)
+    monitored = float(ts[-1] - ts[0]) if ts.size > 1 else 0.0
+    return BacktestResult(
+        alarms, delays, int(np.isnan(delays).sum()) if delays else 0, false,
+        false / (monitored / 3600.0) if monitored > 0 else float("nan"), monitored,
+    )
+
+
+DETECTORS: tuple[type[Detector], ...] = (
+    PhysicsResidualDetector, EnvelopeDetector, SpectralDetector, TappingDetector,
+)
+"""Every detector class; the conformance tests run on each."""
