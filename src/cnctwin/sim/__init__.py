@@ -5,6 +5,6 @@ spindle and feed-axis drive values, plus external sensors (dynamometer, thermal 
 true parameters used (``truth``).
 """
 
-from cnctwin.sim.spindle import SpindleMotor
+from cnctwin.sim.spindle import SpindleMotor, SpindleState, SpindleTrace, simulate_spindle
 
-__all__ = ["SpindleMotor"]
+__all__ = ["SpindleMotor", "SpindleState", "SpindleTrace", "simulate_spindle"]
