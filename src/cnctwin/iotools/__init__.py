@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from cnctwin.iotools._detect import read_recording
 from cnctwin.iotools.sinumerik_trace import read_sinumerik_trace
+from cnctwin.iotools.umich import read_umich, read_umich_dataset, read_umich_labels
 
 __all__ = ["read_recording"]
-__all__ += ["read_sinumerik_trace"]
+__all__ += ["read_sinumerik_trace", "read_umich", "read_umich_dataset", "read_umich_labels"]
