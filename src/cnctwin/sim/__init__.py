@@ -8,3 +8,7 @@ true parameters used (``truth``).
 from cnctwin.sim.spindle import SpindleMotor, SpindleState, SpindleTrace, simulate_spindle
 
 __all__ = ["SpindleMotor", "SpindleState", "SpindleTrace", "simulate_spindle"]
+
+from cnctwin.sim.gcode import Block, DrillCycle, Program, parse_program
+
+__all__ += ["Block", "DrillCycle", "Program", "parse_program"]
