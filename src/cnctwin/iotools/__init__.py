@@ -7,8 +7,15 @@
 from __future__ import annotations
 
 from cnctwin.iotools._detect import read_recording
+from cnctwin.iotools.flat_csv import read_flat_csv
 from cnctwin.iotools.sinumerik_trace import read_sinumerik_trace
 from cnctwin.iotools.umich import read_umich, read_umich_dataset, read_umich_labels
 
 __all__ = ["read_recording"]
-__all__ += ["read_sinumerik_trace", "read_umich", "read_umich_dataset", "read_umich_labels"]
+__all__ += [  # readers of the non-Capture4Analysis sources
+    "read_flat_csv",
+    "read_sinumerik_trace",
+    "read_umich",
+    "read_umich_dataset",
+    "read_umich_labels",
+]

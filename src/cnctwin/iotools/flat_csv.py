@@ -1,0 +1,334 @@
+"""Reader for flattened SINUMERIK edge exports in the KIT CNC-milling layout.
+
+The KIT CNC milling data set (Ströbel et al. 2025, DOI 10.35097/hvvwn1kfwf7qt48z) publishes
+each trial as three CSV files:
+
+* ``<TRIAL>_hfdata.csv``: one row per position-control cycle; columns ``CYCLE`` and the HF
+  addresses ``DES_POS|1``, ``ENC_POS|1``, ... (``<CODE>|<axis number>``).
+* ``<TRIAL>_header.csv``: ``SignalName,Type,Axis,Address``; ``SignalName`` is a long name
+  (``ActualAxisPosition``), ``Address`` the code (``ENC_POS|1``). The reader keys on
+  ``Address`` and takes the axis name of each axis number from ``Axis``.
+* ``<TRIAL>_hfblockevent.csv``: ``HFProbeCounter,Channel,SeekOffset,SelectedTool,ActiveTool,
+  GCode,IpoGC,ipoReadError,laBuf`` -> ``events`` (kind ``"block"``).
+
+An optional ``<TRIAL>_hfcallevent.csv`` (``HFProbeCounter,Channel,SeekOffset,CallStackLevel,
+Path``) becomes call events. The files carry no wall-clock time: unless a ``time`` column is
+present in ``hfdata`` (ISO 8601 UTC), times start at the Unix epoch (noted in ``meta.issues``).
+"""
+
+from __future__ import annotations
+
+import csv
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from cnctwin.exceptions import FormatError
+from cnctwin.recording import EVENT_COLUMNS, Recording, RecordingMeta, find_gaps, unwrap_cycles
+from cnctwin.signals import DEFAULT_AXIS_MAP
+
+__all__ = ["FLAT_CSV_SUFFIXES", "flat_csv_paths", "read_flat_csv"]
+
+FLAT_CSV_SUFFIXES: tuple[str, ...] = ("_hfdata.csv", "_header.csv", "_hfblockevent.csv",
+                                      "_hfcallevent.csv")
+"""File-name endings of one trial."""
+
+_BLOCK_COLS = {
+    "HFProbeCounter": "cycle", "Channel": "channel", "SeekOffset": "seek_offset",
+    "SelectedTool": "selected_tool", "ActiveTool": "active_tool", "GCode": "gcode",
+    "IpoGC": "ipo_gcode",
+}
+_CALL_COLS = {
+    "HFProbeCounter": "cycle", "Channel": "channel", "SeekOffset": "seek_offset",
+    "CallStackLevel": "call_stack_level", "Path": "path",
+}
+_INT_EVENT_COLS = ("channel", "seek_offset", "selected_tool", "active_tool", "call_stack_level")
+
+
+def flat_csv_paths(path: str | PathLike[str]) -> dict[str, Path]:
+    """The files of one trial from any of them or from the stem.
+
+    Parameters
+    ----------
+    path : str or path-like
+        ``.../T01_hfdata.csv``, ``.../T01_header.csv``, ``.../T01_hfblockevent.csv`` or the
+        stem ``.../T01``.
+
+    Returns
+    -------
+    dict
+        ``{"hfdata": Path, "header": Path, "hfblockevent": Path, "hfcallevent": Path}``
+        (the paths whether or not they exist).
+    """
+    p = Path(path)
+    stem = str(p)
+    for suffix in FLAT_CSV_SUFFIXES:
+        if p.name.endswith(suffix):
+            stem = str(p)[: -len(suffix)]
+            break
+    return {s[1:-4]: Path(stem + s) for s in FLAT_CSV_SUFFIXES}
+
+
+def _read_rows(path: Path, *, salvage: bool, issues: list[str]) -> tuple[list[str], list[
+        tuple[int, list[str]]], bool]:
+    """Header and (line number, row) pairs; rows of the wrong length raise or are dropped."""
+    with path.open(newline="", encoding="utf-8-sig") as fh:
+        reader = csv.reader(fh)
+        try:
+            header = next(reader)
+        except StopIteration:
+            raise FormatError("empty file", path=str(path)) from None
+        header = [h.strip() for h in header]
+        rows: list[tuple[int, list[str]]] = []
+        bad: list[int] = []
+        for row in reader:
+            line = reader.line_num
+            if not row:
+                continue
+            if len(row) != len(header):
+                if not salvage:
+                    raise FormatError(
+                        f"row has {len(row)} fields, the header has {len(header)} (pass "
+                        "salvage=True to keep the good rows)", path=str(path),
+                        position=f"line {line}",
+                    )
+                bad.append(line)
+                continue
+            rows.append((line, row))
+    if bad:
+        shown = ", ".join(map(str, bad[:10])) + (" ..." if len(bad) > 10 else "")
+        issues.append(f"{path.name}: {len(bad)} row(s) of the wrong length dropped (lines "
+                      f"{shown})")
+    return header, rows, bool(bad)
+
+
+def _to_float(rows: list[tuple[int, list[str]]], header: list[str], path: Path,
+              cols: list[int]) -> np.ndarray:
+    out = np.empty((len(rows), len(cols)), dtype=np.float64)
+    for i, (line, row) in enumerate(rows):
+        for j, c in enumerate(cols):
+            cell = row[c].strip()
+            if cell == "":
+                out[i, j] = np.nan
+                continue
+            try:
+                out[i, j] = float(cell)
+            except ValueError:
+                raise FormatError(f"value {cell!r} is not a number", path=str(path),
+                                  position=f"line {line}", field=header[c]) from None
+    return out
+
+
+def _read_header(path: Path, issues: list[str]) -> tuple[dict[int, str], dict[str, str],
+                                                         list[dict[str, str]]]:
+    """Axis map and long name -> address from ``_header.csv``."""
+    axis_map: dict[int, str] = {}
+    name_to_addr: dict[str, str] = {}
+    with path.open(newline="", encoding="utf-8-sig") as fh:
+        reader = csv.DictReader(fh)
+        fields = [f.strip() for f in (reader.fieldnames or [])]
+        if "Address" not in fields:
+            raise FormatError(f"header file needs an 'Address' column, found {fields}",
+                              path=str(path), position="line 1", field="Address")
+        entries = [{(k or "").strip(): (v or "").strip() for k, v in r.items()} for r in reader]
+    empty_axis = 0
+    for e in entries:
+        addr = e.get("Address", "")
+        if e.get("SignalName"):
+            name_to_addr[e["SignalName"]] = addr
+        if "|" not in addr:
+            continue
+        num = addr.split("|", 1)[1]
+        if not num.isdigit():
+            continue
+        axis = e.get("Axis", "")
+        if axis:
+            axis_map.setdefault(int(num), axis)
+        else:
+            empty_axis += 1
+    if empty_axis:
+        issues.append(f"{path.name}: {empty_axis} row(s) with an empty Axis field")
+    return axis_map, name_to_addr, entries
+
+
+def _events(path: Path, kind: str, colmap: dict[str, str], *, salvage: bool,
+            issues: list[str]) -> tuple[pd.DataFrame, bool]:
+    header, rows, partial = _read_rows(path, salvage=salvage, issues=issues)
+    if "HFProbeCounter" not in header:
+        raise FormatError("event file needs an 'HFProbeCounter' column", path=str(path),
+                          position="line 1", field="HFProbeCounter")
+    data: dict[str, list[Any]] = {c: [] for c in EVENT_COLUMNS}
+    idx = {h: i for i, h in enumerate(header)}
+    for line, row in rows:
+        rec: dict[str, Any] = {c: None for c in EVENT_COLUMNS}
+        rec["kind"] = kind
+        for src, dst in colmap.items():
+            if src not in idx:
+                continue
+            cell = row[idx[src]].strip()
+            if dst == "cycle" or dst in _INT_EVENT_COLS:
+                if cell in ("", "null", "None"):
+                    if dst == "cycle":
+                        raise FormatError("empty HFProbeCounter", path=str(path),
+                                          position=f"line {line}", field=src)
+                    continue
+                try:
+                    rec[dst] = int(float(cell))
+                except ValueError:
+                    raise FormatError(f"value {cell!r} is not an integer", path=str(path),
+                                      position=f"line {line}", field=src) from None
+            else:
+                rec[dst] = None if cell in ("", "null", "None") else cell
+        for c in EVENT_COLUMNS:
+            data[c].append(rec[c])
+    df = pd.DataFrame(data)
+    df["cycle"] = df["cycle"].astype("int64")
+    for c in _INT_EVENT_COLS:
+        df[c] = pd.array(data[c], dtype="Int64")
+    for c in ("kind", "gcode", "ipo_gcode", "path"):
+        df[c] = df[c].astype("object")
+    return df, partial
+
+
+def read_flat_csv(
+    path: str | PathLike[str],
+    *,
+    cycle_time_s: float = 0.002,
+    salvage: bool = False,
+) -> Recording:
+    """Read a trial exported as flattened CSVs (KIT layout).
+
+    Parameters
+    ----------
+    path : str or path-like
+        Any of ``<TRIAL>_hfdata.csv``, ``<TRIAL>_header.csv``, ``<TRIAL>_hfblockevent.csv``,
+        or the stem ``<TRIAL>``.
+    cycle_time_s : float, default 0.002
+        Position-control cycle time [s].
+    salvage : bool, default False
+        Drop rows of the wrong length (listed in ``meta.issues``) and set ``meta.partial``
+        instead of raising.
+
+    Returns
+    -------
+    Recording
+        Columns ``CODE|AXIS`` (axis names from ``_header.csv``; from
+        :data:`~cnctwin.signals.DEFAULT_AXIS_MAP` if it is missing, with an issue).
+        ``meta.attrs["header"]`` holds the header rows (long names, types).
+
+    Raises
+    ------
+    FormatError
+        Missing ``_hfdata.csv`` or ``CYCLE`` column, rows of the wrong length (file and line),
+        non-numeric values (file, line and column).
+    """
+    files = flat_csv_paths(path)
+    hfpath = files["hfdata"]
+    if not hfpath.exists():
+        raise FormatError(
+            f"no {hfpath.name} beside the given path; expected <TRIAL>_hfdata.csv", path=str(path)
+        )
+    issues: list[str] = []
+    sources = [str(hfpath)]
+    axis_map: dict[int, str] = {}
+    name_to_addr: dict[str, str] = {}
+    header_rows: list[dict[str, str]] = []
+    if files["header"].exists():
+        axis_map, name_to_addr, header_rows = _read_header(files["header"], issues)
+        sources.append(str(files["header"]))
+    else:
+        issues.append(f"no {files['header'].name}: axis names from the default axis map "
+                      f"{DEFAULT_AXIS_MAP}")
+
+    header, rows, partial = _read_rows(hfpath, salvage=salvage, issues=issues)
+    addresses = [name_to_addr.get(h, h) if "|" not in h else h for h in header]
+    if "CYCLE" not in addresses:
+        raise FormatError(f"no CYCLE column in {hfpath.name} (columns: {header[:5]} ...)",
+                          path=str(hfpath), position="line 1", field="CYCLE")
+    ci = addresses.index("CYCLE")
+    time_i = next((i for i, h in enumerate(header) if h.lower() in ("time", "timestamp")),
+                  None)
+    sig_idx = [i for i in range(len(header)) if i not in (ci, time_i)]
+    values = _to_float(rows, header, hfpath, [ci, *sig_idx])
+    if np.isnan(values[:, 0]).any():
+        line = rows[int(np.flatnonzero(np.isnan(values[:, 0]))[0])][0]
+        raise FormatError("empty CYCLE value", path=str(hfpath), position=f"line {line}",
+                          field="CYCLE")
+    cycles, wraps = unwrap_cycles(values[:, 0].astype(np.int64))
+    n_nan = int(np.isnan(values[:, 1:]).sum())
+    if n_nan:
+        issues.append(f"{hfpath.name}: {n_nan} empty cells kept as NaN")
+
+    used_default = False
+    for a in addresses:
+        if "|" in a:
+            num = a.split("|", 1)[1]
+            if num.isdigit() and int(num) not in axis_map:
+                if int(num) in DEFAULT_AXIS_MAP:
+                    axis_map[int(num)] = DEFAULT_AXIS_MAP[int(num)]
+                    used_default = True
+                else:
+                    axis_map[int(num)] = f"AX{num}"
+                    issues.append(f"axis number {num} unknown; named AX{num}")
+    if used_default and files["header"].exists():
+        issues.append("some axis numbers had no Axis name in the header; filled from the "
+                      "default axis map")
+    names: list[str] = []
+    for i in sig_idx:
+        a = addresses[i]
+        code, _, num = a.partition("|")
+        names.append(f"{code}|{axis_map[int(num)]}" if num.isdigit() else a)
+    hf = pd.DataFrame(values[:, 1:], columns=names, index=pd.Index(cycles, name="cycle"))
+    if not hf.index.is_monotonic_increasing:
+        issues.append(f"{hfpath.name}: rows not in cycle order; sorted")
+        hf = hf.sort_index(kind="stable")
+    if hf.index.has_duplicates:
+        n_dup = int(hf.index.duplicated().sum())
+        issues.append(f"{hfpath.name}: {n_dup} duplicate CYCLE rows; kept the last")
+        hf = hf[~hf.index.duplicated(keep="last")]
+
+    anchors: list[tuple[int, pd.Timestamp]] = []
+    if time_i is not None:
+        t = pd.to_datetime(pd.Series([r[time_i] for _, r in rows]), utc=True, errors="coerce")
+        ok = t.notna().to_numpy()
+        if ok.any():
+            j = int(np.flatnonzero(ok)[0])
+            anchors = [(int(cycles[j]), pd.Timestamp(t.iloc[j]))]
+    else:
+        issues.append("no wall-clock time in the flat CSV: times start at the Unix epoch")
+
+    events = []
+    if files["hfblockevent"].exists():
+        ev, part = _events(files["hfblockevent"], "block", _BLOCK_COLS, salvage=salvage,
+                           issues=issues)
+        events.append(ev)
+        partial |= part
+        sources.append(str(files["hfblockevent"]))
+    if files["hfcallevent"].exists():
+        ev, part = _events(files["hfcallevent"], "call", _CALL_COLS, salvage=salvage,
+                           issues=issues)
+        events.append(ev)
+        partial |= part
+        sources.append(str(files["hfcallevent"]))
+    ev_all = None
+    if events:
+        ev_all = pd.concat(events, ignore_index=True).sort_values("cycle", kind="stable")
+        ev_all["cycle"], _ = unwrap_cycles(ev_all["cycle"].to_numpy())
+        ev_all = ev_all.reset_index(drop=True)
+
+    meta = RecordingMeta(
+        cycle_time_s=cycle_time_s,
+        axis_map=dict(sorted(axis_map.items())),
+        source_files=sources,
+        source_format="flat_csv",
+        time_anchors=anchors,
+        gaps=find_gaps(hf.index.to_numpy()),
+        wraps=wraps,
+        issues=issues,
+        partial=partial,
+        attrs={"header": header_rows},
+    )
+    return Recording(hf, events=ev_all, meta=meta)
