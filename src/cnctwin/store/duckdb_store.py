@@ -175,9 +175,9 @@ class DuckDBStore(Store):
                 f"cannot open the catalog {catalog}: {exc}. Another process may hold it open "
                 "for writing; close that store or open this one with read_only=True"
             ) from exc
-        self._con.execute("SET TimeZone = 'UTC'")
+        _run(self._con, "SET TimeZone = 'UTC'")
         if not read_only:
-            self._con.execute(_SCHEMA)
+            _run(self._con, _SCHEMA)
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -186,6 +186,12 @@ class DuckDBStore(Store):
         if self._con is None:
             raise StoreError(f"store {self.root} is closed")
         return self._con
+
+    def _df(self, query: str, params: list[Any] | None = None) -> pd.DataFrame:
+        rel = self.con.sql(query, params=params)
+        if rel is None:  # a statement without a result
+            return pd.DataFrame()
+        return rel.to_arrow_table().to_pandas()
 
     def _abs(self, rel: str) -> Path:
         return self.root / rel
@@ -205,9 +211,10 @@ class DuckDBStore(Store):
         return str(tmp)
 
     def _existing_files(self, recording_id: str) -> list[str]:
-        rows = self.con.execute(
+        rows = _run(
+            self.con,
             "SELECT path FROM files WHERE recording_id = ?", [recording_id]
-        ).fetchall()
+        )
         return [r[0] for r in rows]
 
     # ------------------------------------------------------------------ write
@@ -278,12 +285,12 @@ class DuckDBStore(Store):
         old = set(self._existing_files(rid))
         new = {rel for _, rel in tmp_to_final}
         con = self.con
-        con.execute("BEGIN TRANSACTION")
+        _run(con, "BEGIN TRANSACTION")
         try:
-            con.execute("DELETE FROM files WHERE recording_id = ?", [rid])
-            con.execute("DELETE FROM recordings WHERE recording_id = ?", [rid])
+            _run(con, "DELETE FROM files WHERE recording_id = ?", [rid])
+            _run(con, "DELETE FROM recordings WHERE recording_id = ?", [rid])
             cols = [*CATALOG_COLUMNS, "external", "ingested_at"]
-            con.execute(
+            _run(con,
                 f"INSERT INTO recordings ({', '.join(cols)}) "
                 f"VALUES ({', '.join('?' for _ in cols)})",
                 [row[c] for c in cols],
@@ -292,16 +299,16 @@ class DuckDBStore(Store):
                      "first_cycle", "last_cycle", "n_rows"]
             for f in files:
                 f["recording_id"] = rid
-                con.execute(
+                _run(con,
                     f"INSERT INTO files ({', '.join(fcols)}) "
                     f"VALUES ({', '.join('?' for _ in fcols)})",
                     [f[c] for c in fcols],
                 )
             for tmp, rel in tmp_to_final:
                 os.replace(tmp, self._abs(rel))
-            con.execute("COMMIT")
+            _run(con, "COMMIT")
         except BaseException:
-            con.execute("ROLLBACK")
+            _run(con, "ROLLBACK")
             for tmp, _ in tmp_to_final:
                 Path(tmp).unlink(missing_ok=True)
             raise
@@ -311,12 +318,13 @@ class DuckDBStore(Store):
 
     def delete(self, recording_id: str) -> bool:
         old = self._existing_files(recording_id)
-        n = self.con.execute(
+        n = _run(
+            self.con,
             "SELECT count(*) FROM recordings WHERE recording_id = ?", [recording_id]
-        ).fetchone()
-        existed = bool(n and n[0])
-        self.con.execute("DELETE FROM files WHERE recording_id = ?", [recording_id])
-        self.con.execute("DELETE FROM recordings WHERE recording_id = ?", [recording_id])
+        )
+        existed = bool(n[0][0])
+        _run(self.con, "DELETE FROM files WHERE recording_id = ?", [recording_id])
+        _run(self.con, "DELETE FROM recordings WHERE recording_id = ?", [recording_id])
         for rel in old:
             self._abs(rel).unlink(missing_ok=True)
         return existed
@@ -330,23 +338,26 @@ class DuckDBStore(Store):
         end: pd.Timestamp | str | None = None,
     ) -> pd.DataFrame:
         where, params = _catalog_filter(machine, to_utc(start), to_utc(end))
-        out = self.con.execute(
+        out = self._df(
             f"SELECT {', '.join(CATALOG_COLUMNS)} FROM recordings {where} "
             "ORDER BY start_time, recording_id",
             params,
-        ).df()
+        )
         for col in ("start_time", "end_time"):
             out[col] = pd.to_datetime(out[col], utc=True)
         return out
 
     def _catalog_entry(self, recording_id: str) -> tuple[str, str]:
-        row = self.con.execute(
+        rows = _run(
+            self.con,
             "SELECT meta, external FROM recordings WHERE recording_id = ?", [recording_id]
-        ).fetchone()
+        )
+        row = rows[0] if rows else None
         if row is None:
-            some = [r[0] for r in self.con.execute(
+            some = [r[0] for r in _run(
+            self.con,
                 "SELECT recording_id FROM recordings ORDER BY start_time LIMIT 5"
-            ).fetchall()]
+            )]
             raise StoreError(
                 f"recording {recording_id!r} is not in the store {self.root}; "
                 f"ids there include: {', '.join(some) if some else '(store is empty)'}"
@@ -378,14 +389,15 @@ class DuckDBStore(Store):
         frames: list[pd.DataFrame] = []
         if cols_by_rec:
             ids = list(cols_by_rec)
-            sel = self.con.execute(
+            sel = _run(
+            self.con,
                 "SELECT recording_id, path FROM files WHERE kind = 'hf' AND recording_id IN "
                 f"({', '.join('?' for _ in ids)})"
                 + (" AND end_time >= ?" if t0 is not None else "")
                 + (" AND start_time <= ?" if t1 is not None else "")
                 + " ORDER BY recording_id, first_cycle",
                 [*ids, *([t0] if t0 is not None else []), *([t1] if t1 is not None else [])],
-            ).fetchall()
+            )
             filters: list[tuple[str, str, Any]] = []
             if t0 is not None:
                 filters.append(("time", ">=", t0))
@@ -418,17 +430,19 @@ class DuckDBStore(Store):
     def load(self, recording_id: str) -> Recording:
         meta_text, external_text = self._catalog_entry(recording_id)
         meta = meta_from_json(meta_text)
-        rows = self.con.execute(
+        rows = _run(
+            self.con,
             "SELECT kind, path FROM files WHERE recording_id = ? ORDER BY kind, first_cycle",
             [recording_id],
-        ).fetchall()
+        )
         by_kind: dict[str, list[str]] = {}
         for kind, rel in rows:
             by_kind.setdefault(kind, []).append(rel)
         columns = json.loads(
-            self.con.execute(
+            _run(
+            self.con,
                 "SELECT columns FROM recordings WHERE recording_id = ?", [recording_id]
-            ).fetchone()[0]  # type: ignore[index]
+            )[0][0]
         )
         hf_paths = by_kind.get("hf", [])
         if hf_paths:
@@ -460,7 +474,7 @@ class DuckDBStore(Store):
     def sql(self, query: str) -> pd.DataFrame:
         self._refresh_views()
         try:
-            return self.con.execute(query).df()
+            return self._df(query)
         except duckdb.Error as exc:
             raise StoreError(
                 f"SQL failed on {self.url}: {exc}. Tables/views: recordings, files, hf (wide), "
@@ -472,29 +486,29 @@ class DuckDBStore(Store):
         root = str(self.root).replace("'", "''")
         have = {
             k: bool(n)
-            for k, n in con.execute(
+            for k, n in _run(con,
                 "SELECT kind, count(*) FROM files GROUP BY kind"
-            ).fetchall()
+            )
         }
         if have.get("hf"):
-            con.execute(
+            _run(con,
                 "CREATE OR REPLACE TEMP VIEW hf AS SELECT * FROM "
                 f"read_parquet('{root}/hf/*/*/*.parquet', union_by_name = true, "
                 "hive_partitioning = true, hive_types = {'machine': VARCHAR, 'day': DATE})"
             )
-            con.execute(
+            _run(con,
                 "CREATE OR REPLACE TEMP VIEW hf_long AS SELECT recording_id, cycle, time, "
                 "signal, value FROM (UNPIVOT (SELECT * EXCLUDE (machine) FROM hf) "
                 "ON COLUMNS(* EXCLUDE (recording_id, cycle, time, day)) "
                 "INTO NAME signal VALUE value)"
             )
         else:
-            con.execute(
+            _run(con,
                 "CREATE OR REPLACE TEMP VIEW hf AS SELECT NULL::VARCHAR AS recording_id, "
                 "NULL::BIGINT AS cycle, NULL::TIMESTAMPTZ AS time, NULL::VARCHAR AS machine "
                 "WHERE false"
             )
-            con.execute(
+            _run(con,
                 "CREATE OR REPLACE TEMP VIEW hf_long AS SELECT NULL::VARCHAR AS recording_id, "
                 "NULL::BIGINT AS cycle, NULL::TIMESTAMPTZ AS time, NULL::VARCHAR AS signal, "
                 "NULL::DOUBLE AS value WHERE false"
@@ -508,9 +522,9 @@ class DuckDBStore(Store):
                     f"NULL::{_DUCK_TYPES.get(str(t), 'VARCHAR')} AS {c}"
                     for c, t in stub.dtypes.items()
                 )
-                con.execute(f"CREATE OR REPLACE TEMP VIEW {kind} AS SELECT {cols} WHERE false")
+                _run(con, f"CREATE OR REPLACE TEMP VIEW {kind} AS SELECT {cols} WHERE false")
                 continue
-            con.execute(
+            _run(con,
                 f"CREATE OR REPLACE TEMP VIEW {kind} AS SELECT * FROM "
                 f"read_parquet('{root}/{kind}/*/*.parquet', union_by_name = true, "
                 "hive_partitioning = true, hive_types = {'machine': VARCHAR})"
@@ -520,6 +534,11 @@ class DuckDBStore(Store):
         if self._con is not None:
             self._con.close()
             self._con = None
+
+
+def _run(con: duckdb.DuckDBPyConnection, query: str, params: Any = None) -> list[Any]:
+    """Execute and fetch everything (DuckDB 2 refuses new work while a result is pending)."""
+    return con.execute(query, params).fetchall()
 
 
 def _catalog_filter(

@@ -1,0 +1,167 @@
+"""Synthetic recordings with closed-form values and an independent reader of the real C4A JSON
+for the store tests (a plain module so test files can import it: ``import store_helpers``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from cnctwin.recording import (
+    ExternalChannel,
+    Recording,
+    RecordingMeta,
+    find_gaps,
+    unwrap_cycles,
+)
+
+# ---------------------------------------------------------------------------- synthetic data
+CURRENT_AMPLITUDE_A = 3.0
+CURRENT_FREQ_HZ = 5.0
+FEED_MM_PER_CYCLE = 0.01
+
+
+def current_a(cycles: np.ndarray, *, cycle_time_s: float = 0.002) -> np.ndarray:
+    """The synthetic spindle current: 3 A sine at 5 Hz of the cycle counter time [A]."""
+    return CURRENT_AMPLITUDE_A * np.sin(2 * np.pi * CURRENT_FREQ_HZ * cycles * cycle_time_s)
+
+
+def position_mm(cycles: np.ndarray) -> np.ndarray:
+    """The synthetic X position: 0.01 mm per cycle [mm]."""
+    return FEED_MM_PER_CYCLE * cycles.astype(np.float64)
+
+
+def make_recording(
+    *,
+    machine: str,
+    start: str,
+    n: int,
+    first_cycle: int = 1_000,
+    gap: tuple[int, int] | None = None,
+    extra: bool = False,
+) -> Recording:
+    """A recording with CURRENT|SP1, ENC_POS|X1, ENC_POS|Y1 (and events/LF/issues if extra).
+
+    ``gap=(i, k)`` removes ``k`` cycles after row ``i``.
+    """
+    cycles = np.arange(first_cycle, first_cycle + n, dtype=np.int64)
+    if gap is not None:
+        i, k = gap
+        cycles = np.concatenate([cycles[:i], cycles[i:] + k])
+    signals = {
+        "CURRENT|SP1": current_a(cycles),
+        "ENC_POS|X1": position_mm(cycles),
+        "ENC_POS|Y1": -position_mm(cycles),
+    }
+    rec = Recording.from_arrays(
+        cycles, signals, start_time=start, machine=machine, axis_map={1: "X1", 2: "Y1", 6: "SP1"}
+    )
+    rec.meta.source_files = [f"/data/{machine}/{start[:10]}.json"]
+    if extra:
+        c = rec.cycles
+        rec.events = pd.DataFrame(
+            {
+                "cycle": [int(c[3]), int(c[10]), int(c[-1])],
+                "kind": ["block", "call", "block"],
+                "channel": pd.array([1, 1, None], dtype="Int64"),
+                "seek_offset": pd.array([39, 390, 41], dtype="Int64"),
+                "gcode": ["M17", None, "G1 X10 F400"],
+                "ipo_gcode": ["G0", None, "G1"],
+                "selected_tool": pd.array([6, None, 6], dtype="Int64"),
+                "active_tool": pd.array([6, None, 6], dtype="Int64"),
+                "path": [None, "/_CUTTING", None],
+                "call_stack_level": pd.array([None, 2, None], dtype="Int64"),
+            }
+        )
+        t = rec.hf["time"]
+        rec.lf = pd.DataFrame(
+            {
+                "cycle": [int(c[0]), int(c[0]), int(c[-1])],
+                "time": [t.iloc[0], t.iloc[0], t.iloc[-1]],
+                "signal": ["/Channel/State/actToolIdent", "MOTOR_TEMP|SP1", "MOTOR_TEMP|SP1"],
+                "value": [np.nan, 41.5, 42.25],
+                "text": ["182437", "41.5", "42.25"],
+            }
+        )
+        rec.meta.issues.extend(["filled empty axis field of CURRENT|6 from the axis map",
+                                "removed 1 duplicate block event"])
+        rec.meta.partial = True
+        rec.meta.attrs = {"header": {"RecorderVersion": "3.1.0-36"}, "job": ["a", "b"]}
+        rec.external["dynamometer"] = ExternalChannel(
+            name="dynamometer",
+            data=pd.DataFrame(
+                {"torque_nm": [0.1, 0.2, 0.4]}, index=pd.Index([0.0, 0.5, 1.0], name="time_s")
+            ),
+            units={"torque_nm": "Nm"},
+            fs_hz=2.0,
+            offset_s=0.25,
+            drift_ppm=12.0,
+            aligned=True,
+            source="dyn.csv",
+        )
+    return rec
+
+
+# ---------------------------------------------------------------------------- real C4A file
+def read_c4a_local(path: Path) -> Recording:
+    """A minimal independent Capture4Analysis JSON -> Recording, used only if
+    ``cnctwin.iotools.read_capture4analysis`` is not there yet.
+
+    Columns ``CODE|<Axis>`` from ``Header.SignalListHFData`` (``Axis`` field), rows from
+    ``Payload[*].HFData`` (first value CYCLE), time anchors from ``HFTimestamp`` entries,
+    events from ``HFBlockEvent``/``HFCallEvent``, LF from ``LFData``.
+    """
+    doc: dict[str, Any] = json.loads(path.read_text())
+    header = doc["Header"]
+    names = []
+    for s in header["SignalListHFData"][1:]:
+        code = s["Address"].split("|")[0]
+        names.append(f"{code}|{s['Axis']}")
+    rows: list[list[float]] = []
+    anchors: list[tuple[int, pd.Timestamp]] = []
+    events: list[dict[str, Any]] = []
+    lf: list[dict[str, Any]] = []
+    for item in doc["Payload"]:
+        if "HFData" in item:
+            rows.extend(item["HFData"])
+        elif "HFTimestamp" in item:
+            ts = item["HFTimestamp"]
+            anchors.append((int(ts["HFProbeCounter"]), pd.Timestamp(ts["Time"])))
+        elif "HFBlockEvent" in item:
+            e = item["HFBlockEvent"]
+            events.append(
+                {"cycle": e["HFProbeCounter"], "kind": "block", "channel": e["Channel"],
+                 "seek_offset": e["SeekOffset"], "gcode": e["GCode"], "ipo_gcode": e["IpoGC"],
+                 "selected_tool": e["SelectedTool"], "active_tool": e["ActiveTool"]}
+            )
+        elif "HFCallEvent" in item:
+            e = item["HFCallEvent"]
+            events.append(
+                {"cycle": e["HFProbeCounter"], "kind": "call", "channel": e["Channel"],
+                 "seek_offset": e["SeekOffset"], "path": e["Path"],
+                 "call_stack_level": e["CallStackLevel"]}
+            )
+        elif "LFData" in item:
+            for v in item["LFData"]:
+                try:
+                    value = float(v["value"])
+                except ValueError:
+                    value = np.nan
+                lf.append({"cycle": v["HFProbeCounter"], "time": pd.Timestamp(v["timestamp"]),
+                           "signal": v["address"], "value": value, "text": v["value"]})
+    arr = np.asarray(rows, dtype=np.float64)
+    cycles, wraps = unwrap_cycles(arr[:, 0].astype(np.int64))
+    meta = RecordingMeta(
+        machine=header["MachineInfo"]["MachineName"],
+        cycle_time_s=float(header["CycleTimeMs"]) / 1000.0,
+        source_files=[str(path)],
+        source_format="capture4analysis-test-helper",
+        time_anchors=anchors,
+        gaps=find_gaps(cycles),
+        wraps=wraps,
+    )
+    hf = pd.DataFrame(arr[:, 1:], columns=names, index=pd.Index(cycles, name="cycle"))
+    return Recording(hf, lf=pd.DataFrame(lf), events=pd.DataFrame(events), meta=meta)
