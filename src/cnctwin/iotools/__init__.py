@@ -7,11 +7,21 @@
 from __future__ import annotations
 
 from cnctwin.iotools._detect import read_recording
+from cnctwin.iotools.capture4analysis import (
+    Capture4AnalysisWriter,
+    read_capture4analysis,
+    write_capture4analysis,
+)
 from cnctwin.iotools.flat_csv import read_flat_csv
 from cnctwin.iotools.sinumerik_trace import read_sinumerik_trace
 from cnctwin.iotools.umich import read_umich, read_umich_dataset, read_umich_labels
 
 __all__ = ["read_recording"]
+__all__ += [  # Capture4Analysis / Data Recorder, Parquet and CSV export
+    "Capture4AnalysisWriter",
+    "read_capture4analysis",
+    "write_capture4analysis",
+]
 __all__ += [  # readers of the non-Capture4Analysis sources
     "read_flat_csv",
     "read_sinumerik_trace",
