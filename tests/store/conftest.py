@@ -94,7 +94,7 @@ def store(store_url: str) -> Iterator[Store]:
 def c4a_rec(c4a_file: Path) -> Recording:
     """The real C4A recording, read by the project reader if present, else by the helper."""
     try:
-        from cnctwin.iotools import read_capture4analysis  # type: ignore[attr-defined]
+        from cnctwin.iotools import read_capture4analysis
     except ImportError:
         warnings.warn(
             "cnctwin.iotools.read_capture4analysis is not available; the store tests read the "

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from numpy.typing import ArrayLike
 
 from cnctwin.recording import (
     ExternalChannel,
@@ -51,7 +52,7 @@ def make_recording(
     if gap is not None:
         i, k = gap
         cycles = np.concatenate([cycles[:i], cycles[i:] + k])
-    signals = {
+    signals: dict[str, ArrayLike] = {
         "CURRENT|SP1": current_a(cycles),
         "ENC_POS|X1": position_mm(cycles),
         "ENC_POS|Y1": -position_mm(cycles),
