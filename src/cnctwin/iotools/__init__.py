@@ -12,8 +12,14 @@ from cnctwin.iotools.capture4analysis import (
     read_capture4analysis,
     write_capture4analysis,
 )
+from cnctwin.iotools.dynamometer import (
+    attach_external,
+    read_dynamometer_csv,
+    read_dynamometer_tdms,
+)
 from cnctwin.iotools.flat_csv import read_flat_csv
 from cnctwin.iotools.sinumerik_trace import read_sinumerik_trace
+from cnctwin.iotools.thermal import read_thermal_camera_csv
 from cnctwin.iotools.umich import read_umich, read_umich_dataset, read_umich_labels
 
 __all__ = ["read_recording"]
@@ -23,8 +29,12 @@ __all__ += [  # Capture4Analysis / Data Recorder, Parquet and CSV export
     "write_capture4analysis",
 ]
 __all__ += [  # readers of the non-Capture4Analysis sources
+    "attach_external",
+    "read_dynamometer_csv",
+    "read_dynamometer_tdms",
     "read_flat_csv",
     "read_sinumerik_trace",
+    "read_thermal_camera_csv",
     "read_umich",
     "read_umich_dataset",
     "read_umich_labels",
