@@ -16,7 +16,8 @@ hold 65 536 cycles (131 s at 2 ms) so that a time-range read skips the rest by s
 
 Reads of HF values go through pyarrow (exact ns times, column pruning, row-group skipping);
 :meth:`DuckDBStore.sql` runs DuckDB over views of the files. ``<m>`` is the machine name with
-characters other than letters, digits and ``._-`` percent-encoded.
+characters other than letters, digits and ``._-`` percent-encoded (the ``hf``, ``lf`` and
+``events`` views decode it back to the machine name).
 
 DuckDB allows one writing process per catalog file: open a store for writing from one process
 at a time (readers of the Parquet files themselves are not restricted).

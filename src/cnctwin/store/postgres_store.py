@@ -319,7 +319,7 @@ class PostgresStore(Store):
             )
         except psycopg.Error as exc:
             raise StoreError(
-                f"cannot connect to PostgreSQL at {self.url}: {exc}".strip()
+                f"cannot connect to PostgreSQL at {self.url}: {' '.join(str(exc).split())}"
                 + "; start the server or check host, port, user and database in the URL"
             ) from exc
         s = psql.Identifier(self.schema)
