@@ -12,12 +12,14 @@ from cnctwin.iotools.capture4analysis import (
     read_capture4analysis,
     write_capture4analysis,
 )
+from cnctwin.iotools.csv_export import write_csv
 from cnctwin.iotools.dynamometer import (
     attach_external,
     read_dynamometer_csv,
     read_dynamometer_tdms,
 )
 from cnctwin.iotools.flat_csv import read_flat_csv
+from cnctwin.iotools.parquet import read_parquet, write_parquet
 from cnctwin.iotools.sinumerik_trace import read_sinumerik_trace
 from cnctwin.iotools.thermal import read_thermal_camera_csv
 from cnctwin.iotools.umich import read_umich, read_umich_dataset, read_umich_labels
@@ -26,7 +28,10 @@ __all__ = ["read_recording"]
 __all__ += [  # Capture4Analysis / Data Recorder, Parquet and CSV export
     "Capture4AnalysisWriter",
     "read_capture4analysis",
+    "read_parquet",
     "write_capture4analysis",
+    "write_csv",
+    "write_parquet",
 ]
 __all__ += [  # readers of the non-Capture4Analysis sources
     "attach_external",

@@ -1,14 +1,158 @@
-"""Format detection behind :func:`cnctwin.read_recording`."""
+"""Format detection behind :func:`cnctwin.read_recording`.
+
+Readers are imported lazily (``importlib``) inside the dispatch, so one missing or broken
+reader module gives a clear :class:`~cnctwin.exceptions.FormatError` for that format only.
+"""
 
 from __future__ import annotations
 
+import importlib
+import zipfile
+from collections.abc import Callable
 from os import PathLike
 from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
 
 from cnctwin.exceptions import FormatError
-from cnctwin.recording import Recording
+from cnctwin.recording import ExternalChannel, Recording, RecordingMeta
 
-__all__ = ["read_recording"]
+__all__ = ["SUPPORTED_FORMATS", "detect_format", "read_recording"]
+
+SUPPORTED_FORMATS: dict[str, tuple[str, str, str]] = {
+    "capture4analysis": (
+        "cnctwin.iotools.capture4analysis", "read_capture4analysis",
+        ".json or .zip with Header/Payload (Capture4Analysis, SINUMERIK Data Recorder)",
+    ),
+    "edge_dataobject": (
+        "cnctwin.iotools.edge_dataobject", "read_edge_dataobject",
+        ".json with header/body.datapoint (SINUMERIK Edge dataobject)",
+    ),
+    "sinumerik_trace": (
+        "cnctwin.iotools.sinumerik_trace", "read_sinumerik_trace",
+        ".xml SINUMERIK servo trace",
+    ),
+    "parquet": (
+        "cnctwin.iotools.parquet", "read_parquet",
+        ".parquet file or cnctwin Parquet directory",
+    ),
+    "flat_csv": (
+        "cnctwin.iotools.flat_csv", "read_flat_csv",
+        "*_hfdata.csv flattened CSV (KIT layout)",
+    ),
+    "umich": (
+        "cnctwin.iotools.umich", "read_umich",
+        ".csv UMich CNC mill experiment (X1_ActualPosition column)",
+    ),
+    "dynamometer": (
+        "cnctwin.iotools.dynamometer", "read_dynamometer_tdms",
+        ".tdms dynamometer recording",
+    ),
+}
+"""Format name -> (module, function, description)."""
+
+
+def _supported() -> str:
+    return "; ".join(desc for _, _, desc in SUPPORTED_FORMATS.values())
+
+
+def _sniff_json(head: bytes) -> str | None:
+    text = head.lstrip(b"\xef\xbb\xbf \t\r\n")
+    if not text.startswith(b"{"):
+        return None
+    if b'"Header"' in text or b'"Payload"' in text:
+        return "capture4analysis"
+    if b'"header"' in text and (b'"body"' in text or b'"datapoint"' in text):
+        return "edge_dataobject"
+    if b'"body"' in text and b'"datapoint"' in text:
+        return "edge_dataobject"
+    return None
+
+
+def detect_format(path: str | PathLike[str]) -> str:
+    """Name of the format of ``path`` (a key of :data:`SUPPORTED_FORMATS`).
+
+    Raises
+    ------
+    FormatError
+        If no format matches; the message lists the supported formats.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise FormatError("file not found", path=str(p))
+    name = p.name.lower()
+    suffix = p.suffix.lower()
+    if p.is_dir():
+        if (p / "hf.parquet").is_file() or any(p.glob("*.parquet")):
+            return "parquet"
+        raise FormatError(f"directory is not a cnctwin Parquet recording; supported: "
+                          f"{_supported()}", path=str(p))
+    if suffix == ".parquet":
+        return "parquet"
+    if suffix == ".tdms":
+        return "dynamometer"
+    if suffix == ".xml":
+        return "sinumerik_trace"
+    if suffix == ".zip":
+        try:
+            with zipfile.ZipFile(p) as zf:
+                members = [m for m in zf.namelist() if m.lower().endswith(".json")]
+                if members:
+                    with zf.open(members[0]) as fh:
+                        kind = _sniff_json(fh.read(65536))
+                    if kind:
+                        return kind
+        except (zipfile.BadZipFile, OSError, EOFError):
+            return "capture4analysis"  # let the reader report (or salvage) the broken zip
+        raise FormatError(f"zip archive holds no recognised JSON recording; supported: "
+                          f"{_supported()}", path=str(p))
+    with p.open("rb") as fh:
+        head = fh.read(65536)
+    if suffix == ".json" or head.lstrip()[:1] == b"{":
+        kind = _sniff_json(head)
+        if kind:
+            return kind
+        if suffix == ".json":
+            raise FormatError(
+                "JSON without Header/Payload (Capture4Analysis) or header/body.datapoint "
+                f"(Edge dataobject); supported: {_supported()}", path=str(p))
+    if suffix == ".csv":
+        if name.endswith(("_hfdata.csv", "_header.csv", "_hfblockevent.csv",
+                          "_hfcallevent.csv")):
+            return "flat_csv"
+        first_line = head.split(b"\n", 1)[0]
+        if b"X1_ActualPosition" in first_line:
+            return "umich"
+        raise FormatError(
+            "CSV not recognised (expected <TRIAL>_hfdata.csv or a UMich experiment CSV with "
+            f"X1_ActualPosition); supported: {_supported()}", path=str(p))
+    if head.startswith(b"PAR1"):
+        return "parquet"
+    if head.lstrip().startswith(b"<"):
+        return "sinumerik_trace"
+    if head.startswith(b"TDSm"):
+        return "dynamometer"
+    raise FormatError(f"format not recognised; supported: {_supported()}", path=str(p))
+
+
+def _reader(kind: str, path: Path) -> Callable[..., Any]:
+    module_name, func_name, desc = SUPPORTED_FORMATS[kind]
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise FormatError(
+            f"looks like {desc}, but its reader is not available ({module_name}: {exc})",
+            path=str(path),
+        ) from exc
+    func = getattr(module, func_name, None)
+    if func is None:
+        raise FormatError(
+            f"looks like {desc}, but its reader is not available ({module_name} has no "
+            f"{func_name})", path=str(path),
+        )
+    return func
 
 
 def read_recording(path: str | PathLike[str], *, salvage: bool = False) -> Recording:
@@ -17,10 +161,11 @@ def read_recording(path: str | PathLike[str], *, salvage: bool = False) -> Recor
     Parameters
     ----------
     path : str or path-like
-        The file (or the first file of a chained Capture4Analysis run).
+        The file (or the first file of a chained Capture4Analysis run, or a Parquet
+        directory).
     salvage : bool, default False
         Keep what can be read from damaged input and mark the recording partial
-        (``rec.meta.partial``) instead of raising.
+        (``rec.meta.partial``) instead of raising. Passed to readers that support it.
 
     Returns
     -------
@@ -29,11 +174,32 @@ def read_recording(path: str | PathLike[str], *, salvage: bool = False) -> Recor
     Raises
     ------
     FormatError
-        If the format is not recognised or the file is damaged (and ``salvage`` is False).
+        If the format is not recognised (the message lists the supported formats), its
+        reader is not available, or the file is damaged (and ``salvage`` is False).
     """
     p = Path(path)
-    if not p.exists():
-        raise FormatError("file not found", path=str(p))
-    raise FormatError(
-        "format not recognised (no reader registered yet)", path=str(p)
-    )
+    kind = detect_format(p)
+    func = _reader(kind, p)
+    import inspect
+
+    try:
+        params = inspect.signature(func).parameters
+    except (TypeError, ValueError):  # pragma: no cover - builtins
+        params = {}  # type: ignore[assignment]
+    kwargs: dict[str, Any] = {}
+    if "salvage" in params:
+        kwargs["salvage"] = salvage
+    rec = func(p, **kwargs)
+    if isinstance(rec, ExternalChannel):
+        # a source with its own clock only (dynamometer): an empty HF table plus the channel
+        hf = pd.DataFrame(index=pd.Index(np.empty(0, dtype=np.int64), name="cycle"))
+        meta = RecordingMeta(source_files=[str(p)], source_format=kind, issues=[
+            f"{kind} file has no HF data; its samples are in rec.external[{rec.name!r}]"])
+        return Recording(hf, external={rec.name: rec}, meta=meta)
+    if not isinstance(rec, Recording):
+        # readers may return a Recording plus extras; the first element is the recording
+        if isinstance(rec, tuple) and rec and isinstance(rec[0], Recording):
+            return rec[0]
+        raise FormatError(f"reader {func.__module__}.{func.__name__} did not return a "
+                          "Recording", path=str(p))
+    return rec
