@@ -18,6 +18,11 @@ from cnctwin.iotools.dynamometer import (
     read_dynamometer_csv,
     read_dynamometer_tdms,
 )
+from cnctwin.iotools.edge_dataobject import (
+    EdgeDataobjectAssembler,
+    parse_edge_dataobject,
+    read_edge_dataobject,
+)
 from cnctwin.iotools.flat_csv import read_flat_csv
 from cnctwin.iotools.parquet import read_parquet, write_parquet
 from cnctwin.iotools.sinumerik_trace import read_sinumerik_trace
@@ -34,9 +39,12 @@ __all__ += [  # Capture4Analysis / Data Recorder, Parquet and CSV export
     "write_parquet",
 ]
 __all__ += [  # readers of the non-Capture4Analysis sources
+    "EdgeDataobjectAssembler",
     "attach_external",
+    "parse_edge_dataobject",
     "read_dynamometer_csv",
     "read_dynamometer_tdms",
+    "read_edge_dataobject",
     "read_flat_csv",
     "read_sinumerik_trace",
     "read_thermal_camera_csv",
