@@ -72,7 +72,7 @@ class ThermalCamera:
     Attributes
     ----------
     clock_offset_s : float
-        Recording time of its own t = 0 [s]. [E] 4.2
+        Recording time of its own t = 0 [s] (negative: started before the recording). [E] -12.5
     clock_drift_ppm : float
         Clock drift [ppm]. [E] -60
     noise_c : float
@@ -81,7 +81,7 @@ class ThermalCamera:
         Reading taken this long after the tool leaves the hole [s]. [E] 0.3
     """
 
-    clock_offset_s: float = 4.2
+    clock_offset_s: float = -12.5
     clock_drift_ppm: float = -60.0
     noise_c: float = 4.0
     delay_s: float = 0.3
