@@ -13,6 +13,7 @@ from cnctwin.iotools.capture4analysis import (
     write_capture4analysis,
 )
 from cnctwin.iotools.csv_export import write_csv
+from cnctwin.iotools.databus import DatabusDecoder, DatabusValue
 from cnctwin.iotools.dynamometer import (
     attach_external,
     read_dynamometer_csv,
@@ -39,6 +40,8 @@ __all__ += [  # Capture4Analysis / Data Recorder, Parquet and CSV export
     "write_parquet",
 ]
 __all__ += [  # readers of the non-Capture4Analysis sources
+    "DatabusDecoder",
+    "DatabusValue",
     "EdgeDataobjectAssembler",
     "attach_external",
     "parse_edge_dataobject",

@@ -1,0 +1,402 @@
+"""Decoder for the Siemens Industrial Edge Databus payload format (connector metadata + data).
+
+Connectors (S7, OPC UA, Modbus, ...) publish a retained **metadata** message on
+``ie/m/j/simatic/v1/<instance>/dp``::
+
+    {"seq": 1, "hashVersion": 123, "applicationName": "...", "connections": [
+        {"name": "PLC_1", "type": "s7", "dataPoints": [
+            {"name": "default", "topic": "ie/d/j/simatic/v1/s7c1/dp/r/PLC_1/default",
+             "publishType": "bulk",
+             "dataPointDefinitions": [{"name": "Axis_X_Load", "id": "101",
+                                       "dataType": "LReal"}]}]}]}
+
+and **data** messages on the ``topic`` of each data point collection:
+
+* ``bulk``: ``{"seq": 84631, "vals": [{"id": "101", "qc": 3, "ts": "...Z", "val": 80}]}``
+* ``timeseries``: ``{"seq": .., "records": [{"ts": "...", "rseq": .., "vals": [{"id", "val",
+  "qc"}]}]}`` (a value without ``ts`` takes its record's ``ts``)
+* ``single`` (deprecated): ``{"seq": .., "val": .., "ts": .., "qc": ..}``; the datapoint is
+  the single definition of the collection whose ``topic`` the message came on.
+
+Rules from the payload-format documentation (industrial-edge/common-databus-payload-format,
+PayloadFormat.md; developer.siemens.com/industrial-edge/databus): ids are opaque and not stable
+across reconfiguration (a new metadata message replaces the id map); numbers may be quoted or
+unquoted and 64-bit integers come as strings; ``qc`` 0 = BAD, 1 = UNCERTAIN, 2 = GOOD
+(non-cascade), 3 = GOOD (cascade).
+
+Output choice: :meth:`DatabusDecoder.recording` returns a :class:`~cnctwin.recording.Recording`
+whose HF table is on a cycle base derived from the timestamps: cycle = floor(ts / cycle_time_s)
+counted from the Unix epoch (so windows of one stream share one cycle numbering), one row per
+cycle in which any value arrived, NaN where a datapoint had no value (nothing is held or
+interpolated). Text values go to the LF long table. Every decoded value, with its exact
+timestamp, id and quality, is also kept in ``meta.attrs["databus_values"]`` (a DataFrame);
+values with quality BAD or UNCERTAIN are kept and counted in ``meta.issues``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from cnctwin.exceptions import ConfigError, FormatError
+from cnctwin.recording import Recording, RecordingMeta
+
+__all__ = ["QC_NAMES", "DatabusDecoder", "DatabusValue"]
+
+QC_NAMES: dict[int, str] = {0: "BAD", 1: "UNCERTAIN", 2: "GOOD", 3: "GOOD_CASCADE"}
+"""Databus quality codes."""
+
+
+@dataclass(frozen=True)
+class DatabusValue:
+    """One decoded datapoint value.
+
+    Attributes
+    ----------
+    topic : str
+        Topic the data message came on.
+    id : str
+        Datapoint id (as in the message).
+    name : str
+        Datapoint name from the metadata (``""`` if the id is unknown).
+    column : str
+        Recording column (``name_map`` entry, else the name).
+    time : pandas.Timestamp
+        UTC timestamp of the value.
+    value : float or str or None
+        Numeric value as float; text as str.
+    qc : int or None
+        Quality code (0 BAD, 1 UNCERTAIN, 2/3 GOOD).
+    seq : int or None
+        Message sequence number.
+    """
+
+    topic: str
+    id: str
+    name: str
+    column: str
+    time: pd.Timestamp
+    value: float | str | None
+    qc: int | None
+    seq: int | None
+
+
+def _load(message: str | bytes | dict[str, Any], label: str) -> dict[str, Any]:
+    if isinstance(message, dict):
+        return message
+    try:
+        doc = json.loads(message)
+    except json.JSONDecodeError as exc:
+        raise FormatError(f"not JSON: {exc.msg}", path=label,
+                          position=f"line {exc.lineno}, column {exc.colno}") from None
+    except UnicodeDecodeError as exc:
+        raise FormatError(f"not UTF-8 text: {exc}", path=label) from None
+    if not isinstance(doc, dict):
+        raise FormatError("top level is not a JSON object", path=label)
+    return doc
+
+
+def _value(raw: Any) -> tuple[float | str | None, bool]:
+    """Numeric value (quoted or not) as float; text kept; flag for precision loss."""
+    if raw is None:
+        return None, False
+    if isinstance(raw, bool):
+        return float(raw), False
+    if isinstance(raw, int):
+        return float(raw), abs(raw) > 2**53
+    if isinstance(raw, float):
+        return raw, False
+    if isinstance(raw, str):
+        s = raw.strip()
+        try:
+            if s.lstrip("+-").isdigit():
+                i = int(s)
+                return float(i), abs(i) > 2**53
+            f = float(s)
+            if math.isfinite(f) or s.lower() in ("nan", "inf", "-inf"):
+                return f, False
+        except ValueError:
+            pass
+        if s.lower() in ("true", "false"):
+            return float(s.lower() == "true"), False
+        return raw, False
+    return json.dumps(raw), False
+
+
+class DatabusDecoder:
+    """Decode Databus metadata and data messages into values and recordings.
+
+    Parameters
+    ----------
+    metadata : str, bytes or dict, optional
+        A metadata message to start with (else call :meth:`update_metadata` first).
+    name_map : dict, optional
+        Datapoint name -> recording column, e.g. ``{"Axis_X_Load": "LOAD|X1"}``. Unmapped
+        names are used as columns as they are.
+    cycle_time_s : float, default 0.002
+        Cycle base of :meth:`recording` [s].
+    salvage : bool, default False
+        Keep values with an id the metadata does not know (column ``UNKNOWN_ID_<id>``, listed
+        in :attr:`issues`) instead of raising.
+
+    Attributes
+    ----------
+    values : list of DatabusValue
+        Values decoded since the last :meth:`recording` with ``clear=True``.
+    issues : list of str
+        Oddities seen (unknown ids, sequence gaps, metadata replacements, precision loss).
+    """
+
+    def __init__(
+        self,
+        metadata: str | bytes | dict[str, Any] | None = None,
+        *,
+        name_map: dict[str, str] | None = None,
+        cycle_time_s: float = 0.002,
+        salvage: bool = False,
+    ) -> None:
+        if cycle_time_s <= 0:
+            raise ConfigError(f"cycle_time_s must be > 0, not {cycle_time_s}")
+        self.name_map = dict(name_map or {})
+        self.cycle_time_s = cycle_time_s
+        self.salvage = salvage
+        self.values: list[DatabusValue] = []
+        self.issues: list[str] = []
+        self.metadata: dict[str, Any] | None = None
+        self._ids: dict[str, dict[str, str]] = {}
+        self._topics: dict[str, dict[str, Any]] = {}
+        self._last_seq: dict[str, int] = {}
+        if metadata is not None:
+            self.update_metadata(metadata)
+
+    # ------------------------------------------------------------------ metadata
+    @property
+    def data_topics(self) -> list[str]:
+        """Data topics announced by the current metadata."""
+        return list(self._topics)
+
+    def update_metadata(self, message: str | bytes | dict[str, Any], *,
+                        topic: str = "<metadata>") -> None:
+        """Replace the id map with the one of a (new) metadata message.
+
+        Raises
+        ------
+        FormatError
+            If the message has no ``connections`` list or a definition lacks ``id``/``name``.
+        """
+        doc = _load(message, topic)
+        conns = doc.get("connections")
+        if not isinstance(conns, list):
+            raise FormatError("metadata has no 'connections' list", path=topic,
+                              field="connections")
+        ids: dict[str, dict[str, str]] = {}
+        topics: dict[str, dict[str, Any]] = {}
+        names_seen: dict[str, str] = {}
+        for ci, conn in enumerate(conns):
+            for di, dp in enumerate(conn.get("dataPoints") or []):
+                defs = dp.get("dataPointDefinitions") or []
+                t = dp.get("topic")
+                if t:
+                    topics[t] = {"publishType": dp.get("publishType", ""),
+                                 "ids": [str(d.get("id")) for d in defs],
+                                 "connection": conn.get("name", "")}
+                for ki, d in enumerate(defs):
+                    pos = f"connections[{ci}].dataPoints[{di}].dataPointDefinitions[{ki}]"
+                    if "id" not in d or "name" not in d:
+                        raise FormatError("definition without id or name", path=topic,
+                                          position=pos)
+                    name = str(d["name"])
+                    column = self.name_map.get(name, name)
+                    if column in names_seen and names_seen[column] != conn.get("name", ""):
+                        column = f"{conn.get('name', '')}.{name}"
+                    names_seen[column] = conn.get("name", "")
+                    ids[str(d["id"])] = {"name": name, "column": column,
+                                         "dataType": str(d.get("dataType", "")),
+                                         "connection": str(conn.get("name", ""))}
+        if self.metadata is not None and ids != self._ids:
+            self.issues.append(
+                f"metadata replaced (hashVersion {self.metadata.get('hashVersion')} -> "
+                f"{doc.get('hashVersion')}); ids are resolved with the new map from now on"
+            )
+        self.metadata = doc
+        self._ids = ids
+        self._topics = topics
+
+    # ------------------------------------------------------------------ data
+    def decode(self, message: str | bytes | dict[str, Any], *, topic: str = "<data>",
+               ) -> list[DatabusValue]:
+        """Decode one data message (bulk, timeseries or single) and keep its values.
+
+        Returns
+        -------
+        list of DatabusValue
+
+        Raises
+        ------
+        FormatError
+            No metadata yet, an unknown id (unless ``salvage``), a missing or bad ``ts``, or an
+            unrecognised message shape; position e.g. ``vals[3]``, field ``id``.
+        """
+        if self.metadata is None:
+            raise FormatError("data message before any metadata message: subscribe to the "
+                              "metadata topic first", path=topic)
+        doc = _load(message, topic)
+        seq = doc.get("seq")
+        seq_i = int(seq) if isinstance(seq, (int, str)) and str(seq).isdigit() else None
+        if seq_i is not None:
+            last = self._last_seq.get(topic)
+            if last is not None and seq_i != last + 1:
+                self.issues.append(f"{topic}: seq jumped from {last} to {seq_i}")
+            self._last_seq[topic] = seq_i
+        out: list[DatabusValue] = []
+        if "vals" in doc:
+            for i, v in enumerate(doc["vals"]):
+                out.append(self._one(v, v.get("ts") if isinstance(v, dict) else None,
+                                     topic, f"vals[{i}]", seq_i))
+        elif "records" in doc:
+            for r_i, rec in enumerate(doc["records"]):
+                for i, v in enumerate(rec.get("vals") or []):
+                    out.append(self._one(v, v.get("ts", rec.get("ts")), topic,
+                                         f"records[{r_i}].vals[{i}]", seq_i))
+        elif "val" in doc:
+            info = self._topics.get(topic)
+            if info is None or len(info["ids"]) != 1:
+                raise FormatError(
+                    "'single' message: cannot tell the datapoint (the topic is not a "
+                    "one-definition collection in the metadata)", path=topic, field="val")
+            v = {"id": info["ids"][0], "val": doc["val"], "qc": doc.get("qc")}
+            out.append(self._one(v, doc.get("ts"), topic, "val", seq_i))
+        else:
+            raise FormatError("not a Databus data message (no 'vals', 'records' or 'val')",
+                              path=topic)
+        self.values.extend(out)
+        return out
+
+    def _one(self, v: Any, ts: Any, topic: str, pos: str, seq: int | None) -> DatabusValue:
+        if not isinstance(v, dict) or "id" not in v:
+            raise FormatError("value without an id", path=topic, position=pos, field="id")
+        vid = str(v["id"])
+        info = self._ids.get(vid)
+        if info is None:
+            if not self.salvage:
+                raise FormatError(
+                    f"id {vid!r} is not in the current metadata (known: "
+                    f"{sorted(self._ids)[:20]}); the connector may have been reconfigured: "
+                    "wait for the new metadata, or decode with salvage=True",
+                    path=topic, position=pos, field="id")
+            self.issues.append(f"{topic} {pos}: unknown id {vid!r} kept as UNKNOWN_ID_{vid}")
+            info = {"name": "", "column": f"UNKNOWN_ID_{vid}"}
+        if ts is None:
+            raise FormatError("value without a timestamp", path=topic, position=pos,
+                              field="ts")
+        try:
+            t = pd.Timestamp(ts)
+        except (ValueError, TypeError):
+            raise FormatError(f"timestamp {ts!r} is not a date-time", path=topic,
+                              position=pos, field="ts") from None
+        t = t.tz_localize("UTC") if t.tzinfo is None else t.tz_convert("UTC")
+        value, lost = _value(v.get("val"))
+        if lost:
+            self.issues.append(f"{topic} {pos}: 64-bit integer {v.get('val')!r} beyond 2**53 "
+                               "lost precision as float")
+        qc_raw = v.get("qc")
+        try:
+            qc = int(qc_raw) if qc_raw is not None else None
+        except (TypeError, ValueError):
+            raise FormatError(f"qc {qc_raw!r} is not an integer", path=topic, position=pos,
+                              field="qc") from None
+        return DatabusValue(topic=topic, id=vid, name=info["name"], column=info["column"],
+                            time=t, value=value, qc=qc, seq=seq)
+
+    # ------------------------------------------------------------------ output
+    def values_frame(self, values: list[DatabusValue] | None = None) -> pd.DataFrame:
+        """Values as a long table (``time, column, name, id, value, text, qc, topic, seq``)."""
+        vals = self.values if values is None else values
+        return pd.DataFrame({
+            "time": pd.to_datetime([v.time for v in vals], utc=True),
+            "column": pd.Series([v.column for v in vals], dtype=object),
+            "name": pd.Series([v.name for v in vals], dtype=object),
+            "id": pd.Series([v.id for v in vals], dtype=object),
+            "value": np.array([v.value if isinstance(v.value, float) else np.nan
+                               for v in vals], dtype=np.float64),
+            "text": pd.Series([v.value if isinstance(v.value, str) else None for v in vals],
+                              dtype=object),
+            "qc": pd.array([v.qc for v in vals], dtype="Int64"),
+            "topic": pd.Series([v.topic for v in vals], dtype=object),
+            "seq": pd.array([v.seq for v in vals], dtype="Int64"),
+        })
+
+    def recording(self, *, clear: bool = False, machine: str = "") -> Recording:
+        """The values decoded so far as a recording on a ``cycle_time_s`` base.
+
+        Parameters
+        ----------
+        clear : bool, default False
+            Forget the values (and issues) afterwards (for windows of a stream).
+        machine : str, optional
+            Stored in ``meta.machine``; default the metadata's ``applicationName``.
+
+        Returns
+        -------
+        Recording
+            Cycle = floor(ns since epoch / cycle ns); time anchor (0, epoch). Several values
+            of one column in one cycle: the last is kept (counted in ``meta.issues``).
+        """
+        df = self.values_frame()
+        step_ns = round(self.cycle_time_s * 1e9)
+        issues = list(self.issues)
+        if df.empty:
+            hf = pd.DataFrame(index=pd.Index(np.empty(0, dtype=np.int64), name="cycle"))
+        else:
+            ns = df["time"].astype("datetime64[ns, UTC]").astype("int64").to_numpy()
+            cyc = np.floor_divide(ns, step_ns)
+            df["cycle"] = cyc
+            num = df[df["text"].isna()]
+            dup = num.duplicated(subset=["cycle", "column"], keep="last")
+            if dup.any():
+                issues.append(f"{int(dup.sum())} values shared a cycle with a later value of "
+                              "the same datapoint; the last is kept in the HF table (all are in "
+                              "meta.attrs['databus_values'])")
+            hf = num[~dup].pivot(index="cycle", columns="column", values="value")
+            hf.columns.name = None
+            hf.index = hf.index.astype(np.int64)
+            hf.index.name = "cycle"
+            hf = hf.sort_index()
+            for q, label in ((0, "BAD"), (1, "UNCERTAIN")):
+                bad = df[df["qc"] == q]
+                if len(bad):
+                    per = bad.groupby("column").size().to_dict()
+                    issues.append(f"{len(bad)} values with quality {label} (qc={q}) kept: "
+                                  f"{per}")
+        txt = df[df["text"].notna()] if not df.empty else df
+        lf = None
+        if len(txt):
+            lf = pd.DataFrame({
+                "cycle": txt["cycle"].astype(np.int64).to_numpy(),
+                "time": txt["time"].to_numpy(),
+                "signal": txt["column"].to_numpy(dtype=object),
+                "value": np.full(len(txt), np.nan),
+                "text": txt["text"].to_numpy(dtype=object),
+            })
+        units: dict[str, str] = {}
+        meta = RecordingMeta(
+            machine=machine or str((self.metadata or {}).get("applicationName", "")),
+            cycle_time_s=self.cycle_time_s,
+            units=units,
+            source_files=sorted({v.topic for v in self.values}),
+            source_format="databus",
+            time_anchors=[(0, pd.Timestamp(0, tz="UTC"))],
+            gaps=[],  # values are irregular: rows without values are not gaps
+            issues=issues,
+            attrs={"databus_values": df, "datapoints": dict(self._ids),
+                   "hashVersion": (self.metadata or {}).get("hashVersion")},
+        )
+        if clear:
+            self.values = []
+            self.issues = []
+        return Recording(hf, lf=lf, meta=meta)
