@@ -12,3 +12,13 @@ __all__ = ["SpindleMotor", "SpindleState", "SpindleTrace", "simulate_spindle"]
 from cnctwin.sim.gcode import Block, DrillCycle, Program, parse_program
 
 __all__ += ["Block", "DrillCycle", "Program", "parse_program"]
+
+from cnctwin.sim.interpolator import (  # noqa: E402
+    AxisLimits,
+    SpindleLimits,
+    Trajectory,
+    interpolate,
+    interpolate_chunks,
+)
+
+__all__ += ["AxisLimits", "SpindleLimits", "Trajectory", "interpolate", "interpolate_chunks"]
