@@ -1,0 +1,353 @@
+"""Recording sinks of the simulator: in memory, Parquet chunks, Capture4Analysis JSON.
+
+:func:`cnctwin.sim.simulation.simulate` hands each chunk of simulated cycles to a sink as a
+:class:`RecordedChunk` (HF columns ``CODE|AXIS`` on real cycle numbers, LF values in long form,
+NC events). Sinks:
+
+* :class:`MemorySink`: builds one :class:`~cnctwin.recording.Recording` (default).
+* :class:`ParquetChunkSink`: one Parquet file per chunk (``hf_000000.parquet`` ...), plus
+  ``lf.parquet``, ``events.parquet`` and ``meta.json``; memory stays bounded by one chunk, so a
+  3.5 h wear run fits in well under 2 GB. :func:`read_parquet_chunks` reads the directory back.
+* :class:`Capture4AnalysisSink`: streams into Capture4Analysis JSON with
+  :class:`cnctwin.iotools.capture4analysis.Capture4AnalysisWriter` (what the edge device writes).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from cnctwin.exceptions import ConfigError
+from cnctwin.recording import (
+    EVENT_COLUMNS,
+    LF_COLUMNS,
+    Recording,
+    RecordingMeta,
+    cycles_to_time,
+    find_gaps,
+)
+
+__all__ = [
+    "Capture4AnalysisSink",
+    "MemorySink",
+    "ParquetChunkSink",
+    "RecordedChunk",
+    "RecordingSink",
+    "read_parquet_chunks",
+]
+
+
+@dataclass
+class RecordedChunk:
+    """One chunk of recorded cycles.
+
+    Attributes
+    ----------
+    cycles : numpy.ndarray of int64
+        Real (unwrapped) cycle numbers of the recorded rows (dropped cycles are absent).
+    hf : dict
+        ``CODE|AXIS`` -> float64 array, one value per row of ``cycles``.
+    lf : pandas.DataFrame
+        LF values in long form (:data:`cnctwin.recording.LF_COLUMNS`).
+    events : pandas.DataFrame
+        NC events (:data:`cnctwin.recording.EVENT_COLUMNS`) with real cycle numbers.
+    """
+
+    cycles: NDArray[np.int64]
+    hf: dict[str, NDArray[np.float64]]
+    lf: pd.DataFrame
+    events: pd.DataFrame
+
+
+class RecordingSink(Protocol):
+    """What :func:`~cnctwin.sim.simulation.simulate` writes to."""
+
+    def open(self, columns: list[str], meta: RecordingMeta) -> None:
+        """Called once before the first chunk with the HF column order and the metadata."""
+
+    def write(self, chunk: RecordedChunk) -> None:
+        """Called once per chunk, in cycle order."""
+
+    def close(self, meta: RecordingMeta) -> Recording | None:
+        """Called at the end with the final metadata; returns a Recording if it keeps one."""
+
+
+@dataclass
+class MemorySink:
+    """Collects every chunk and builds one :class:`Recording` at :meth:`close`."""
+
+    _columns: list[str] = field(default_factory=list)
+    _chunks: list[RecordedChunk] = field(default_factory=list)
+    _meta: RecordingMeta | None = None
+
+    def open(self, columns: list[str], meta: RecordingMeta) -> None:
+        """Remember the column order."""
+        self._columns = list(columns)
+        self._chunks = []
+        self._meta = meta
+
+    def write(self, chunk: RecordedChunk) -> None:
+        """Keep the chunk."""
+        self._chunks.append(chunk)
+
+    def close(self, meta: RecordingMeta) -> Recording:
+        """Concatenate the chunks into a Recording (gaps from dropped cycles in ``meta.gaps``)."""
+        cycles = (np.concatenate([c.cycles for c in self._chunks]) if self._chunks
+                  else np.empty(0, dtype=np.int64))
+        data = {
+            col: (np.concatenate([c.hf[col] for c in self._chunks]) if self._chunks
+                  else np.empty(0))
+            for col in self._columns
+        }
+        hf = pd.DataFrame(data, index=pd.Index(cycles, name="cycle"))
+        hf.insert(0, "time", cycles_to_time(cycles, meta.time_anchors,
+                                            cycle_time_s=meta.cycle_time_s))
+        lf = _concat([c.lf for c in self._chunks], LF_COLUMNS)
+        events = _concat([c.events for c in self._chunks], EVENT_COLUMNS)
+        meta.gaps = find_gaps(cycles)
+        self._chunks = []
+        return Recording(hf, lf=lf, events=events, meta=meta)
+
+
+def _concat(frames: list[pd.DataFrame], columns: tuple[str, ...]) -> pd.DataFrame | None:
+    frames = [f for f in frames if len(f)]
+    if not frames:
+        return None
+    out = pd.concat(frames, ignore_index=True)
+    return out[list(columns)]
+
+
+class ParquetChunkSink:
+    """Write one Parquet file per chunk into a directory.
+
+    Parameters
+    ----------
+    directory : str or path-like
+        Output directory (created). Files: ``hf_000000.parquet`` ... (columns ``cycle``,
+        ``time``, ``CODE|AXIS``), ``lf.parquet``, ``events.parquet``, ``meta.json``.
+    compression : str, default 'zstd'
+        Parquet compression codec.
+
+    Notes
+    -----
+    LF values and events are small (10 Hz and per block) and are kept until :meth:`close`;
+    HF rows leave memory chunk by chunk.
+    """
+
+    def __init__(self, directory: str | Path, *, compression: str = "zstd") -> None:
+        self.directory = Path(directory)
+        self.compression = compression
+        self.files: list[Path] = []
+        self._columns: list[str] = []
+        self._lf: list[pd.DataFrame] = []
+        self._events: list[pd.DataFrame] = []
+        self._meta: RecordingMeta | None = None
+        self._last_cycle: int | None = None
+        self._gaps: list[tuple[int, int]] = []
+
+    def open(self, columns: list[str], meta: RecordingMeta) -> None:
+        """Create the directory."""
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self._columns = list(columns)
+        self._meta = meta
+
+    def write(self, chunk: RecordedChunk) -> None:
+        """Write the chunk's HF rows to the next file."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        assert self._meta is not None, "open() first"
+        c = chunk.cycles
+        if c.size:
+            prev = self._last_cycle
+            cc = c if prev is None else np.concatenate([[prev], c])
+            self._gaps += [(g.after_cycle, g.before_cycle) for g in find_gaps(cc)]
+            self._last_cycle = int(c[-1])
+        time = cycles_to_time(c, self._meta.time_anchors, cycle_time_s=self._meta.cycle_time_s)
+        arrays = [pa.array(c), pa.array(time)] + [pa.array(chunk.hf[k]) for k in self._columns]
+        table = pa.Table.from_arrays(arrays, names=["cycle", "time", *self._columns])
+        path = self.directory / f"hf_{len(self.files):06d}.parquet"
+        pq.write_table(table, path, compression=self.compression)
+        self.files.append(path)
+        if len(chunk.lf):
+            self._lf.append(chunk.lf)
+        if len(chunk.events):
+            self._events.append(chunk.events)
+
+    def close(self, meta: RecordingMeta) -> None:
+        """Write LF values, events and metadata; returns ``None`` (data stay on disk)."""
+        lf = _concat(self._lf, LF_COLUMNS)
+        ev = _concat(self._events, EVENT_COLUMNS)
+        if lf is not None:
+            _write_frame(lf, self.directory / "lf.parquet", self.compression)
+        if ev is not None:
+            _write_frame(ev, self.directory / "events.parquet", self.compression)
+        doc = {
+            "machine": meta.machine,
+            "cycle_time_s": meta.cycle_time_s,
+            "axis_map": {str(k): v for k, v in meta.axis_map.items()},
+            "source_format": meta.source_format,
+            "time_anchors": [[int(c), pd.Timestamp(t).isoformat()] for c, t in meta.time_anchors],
+            "gaps": self._gaps,
+            "attrs": _jsonable(meta.attrs),
+            "hf_files": [p.name for p in self.files],
+        }
+        (self.directory / "meta.json").write_text(json.dumps(doc, indent=1), encoding="utf-8")
+        self._lf, self._events = [], []
+        return None
+
+
+def _write_frame(frame: pd.DataFrame, path: Path, compression: str) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), path,
+                   compression=compression)
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, str | int | float | bool) or obj is None:
+        return obj
+    return str(obj)
+
+
+def read_parquet_chunks(directory: str | Path) -> Recording:
+    """Read a :class:`ParquetChunkSink` directory back into one :class:`Recording`.
+
+    Raises
+    ------
+    ConfigError
+        If ``meta.json`` is missing (not a simulator output directory).
+    """
+    from cnctwin.recording import CounterGap
+
+    d = Path(directory)
+    meta_path = d / "meta.json"
+    if not meta_path.exists():
+        raise ConfigError(f"{d} has no meta.json; pass a directory written by ParquetChunkSink")
+    doc = json.loads(meta_path.read_text(encoding="utf-8"))
+    frames = [pd.read_parquet(d / name) for name in doc["hf_files"]]
+    hf = pd.concat(frames, ignore_index=True).set_index("cycle")
+    meta = RecordingMeta(
+        machine=doc["machine"],
+        cycle_time_s=doc["cycle_time_s"],
+        axis_map={int(k): v for k, v in doc["axis_map"].items()},
+        source_files=[str(d / n) for n in doc["hf_files"]],
+        source_format=doc["source_format"],
+        time_anchors=[(int(c), pd.Timestamp(t)) for c, t in doc["time_anchors"]],
+        gaps=[CounterGap(int(a), int(b)) for a, b in doc["gaps"]],
+        attrs=doc["attrs"],
+    )
+    lf = pd.read_parquet(d / "lf.parquet") if (d / "lf.parquet").exists() else None
+    ev = pd.read_parquet(d / "events.parquet") if (d / "events.parquet").exists() else None
+    return Recording(hf, lf=lf, events=ev, meta=meta)
+
+
+class Capture4AnalysisSink:
+    """Stream the simulation into Capture4Analysis JSON (the edge device's format).
+
+    Parameters
+    ----------
+    path : str or path-like
+        First output file (``run.json``) or, with ``zip=True``, the archive.
+    max_file_mb : float, optional
+        Roll over to a chained file before this size [MB].
+    zip : bool, default False
+        Write the files into one zip archive.
+    timestamp_every_cycles : int, default 500
+        Write an ``HFTimestamp`` anchor every this many cycles (1 s at 2 ms).
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        max_file_mb: float | None = None,
+        zip: bool = False,
+        timestamp_every_cycles: int = 500,
+    ) -> None:
+        self.path = Path(path)
+        self.max_file_mb = max_file_mb
+        self.zip = zip
+        self.timestamp_every_cycles = timestamp_every_cycles
+        self._writer: Any = None
+        self._columns: list[str] = []
+        self._meta: RecordingMeta | None = None
+        self.files: list[Path] = []
+
+    def open(self, columns: list[str], meta: RecordingMeta) -> None:
+        """Create the writer (header with the HF signal list)."""
+        from cnctwin.iotools.capture4analysis import Capture4AnalysisWriter
+
+        self._columns = list(columns)
+        self._meta = meta
+        anchor = meta.time_anchors[0] if meta.time_anchors else None
+        self._writer = Capture4AnalysisWriter(
+            self.path, columns=self._columns, axis_map=meta.axis_map, machine=meta.machine,
+            cycle_time_s=meta.cycle_time_s, initial=anchor, max_file_mb=self.max_file_mb,
+            zip=self.zip,
+        )
+
+    def write(self, chunk: RecordedChunk) -> None:
+        """Write HF rows, timestamps, events and LF values of the chunk."""
+        assert self._writer is not None and self._meta is not None, "open() first"
+        c = chunk.cycles
+        if c.size:
+            values = np.column_stack([chunk.hf[k] for k in self._columns])
+            self._writer.write_hf(c, values)
+            marks = c[c % self.timestamp_every_cycles == 0]
+            if marks.size:
+                times = cycles_to_time(marks, self._meta.time_anchors,
+                                       cycle_time_s=self._meta.cycle_time_s)
+                for cyc, t in zip(marks, times, strict=True):
+                    self._writer.write_timestamp(int(cyc), t)
+        for row in chunk.events.to_dict("records"):
+            if row["kind"] == "call":
+                self._writer.write_call_event(
+                    int(row["cycle"]), channel=_int(row["channel"], 1),
+                    seek_offset=_int(row["seek_offset"], 0),
+                    call_stack_level=_int(row["call_stack_level"], 1), path=str(row["path"]),
+                )
+            else:
+                self._writer.write_block_event(
+                    int(row["cycle"]), channel=_int(row["channel"], 1),
+                    seek_offset=_int(row["seek_offset"], 0),
+                    selected_tool=_int(row["selected_tool"], 0),
+                    active_tool=_int(row["active_tool"], 0), gcode=str(row["gcode"]),
+                    ipo_gcode=str(row["ipo_gcode"]),
+                )
+        if len(chunk.lf):
+            lf = chunk.lf
+            self._writer.write_lf([
+                {"cycle": int(c), "time": t, "signal": str(s), "value": float(v),
+                 "value_type": "Double"}
+                for c, t, s, v in zip(lf["cycle"].to_numpy(), lf["time"], lf["signal"],
+                                      lf["value"].to_numpy(), strict=True)
+            ])
+
+    def close(self, meta: RecordingMeta) -> None:
+        """Close the files (footer with the file chain)."""
+        if self._writer is not None:
+            self.files = list(self._writer.close())
+        return None
+
+
+def _int(value: Any, default: int) -> int:
+    try:
+        if value is None or pd.isna(value):
+            return default
+        return int(value)
+    except (TypeError, ValueError):
+        return default
