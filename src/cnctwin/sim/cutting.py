@@ -204,7 +204,8 @@ class DrillingModel:
     chip_evacuation_per_diameter : float
         Relative torque growth per drill diameter of depth beyond 1 D (chip packing). 0.02
     margin_torque_nm : float
-        Margin rubbing torque while the body is in the hole and not cutting [Nm]. 0.05
+        Margin rubbing torque while the body is in the hole and not cutting (dwell,
+        retract) [Nm]. 0.05
     fluctuation : float
         Relative std of the random torque/thrust fluctuation (AR(1), ~5 ms correlation). 0.03
     lip_ripple : float
@@ -433,7 +434,9 @@ def drilling_load(
         fluct = fluct + mdl.lip_ripple * np.sin(d.flutes * ang)
     inside = z > 0.0
     torque = np.where(cutting, m_full * eng_torque * chip * fluct, 0.0)
-    torque = torque + np.where(inside & (z > d.cone_length_mm), mdl.margin_torque_nm, 0.0)
+    # margin rubbing is part of the fitted cutting torque; alone it shows while not cutting
+    rub = inside & ~cutting & (z > d.cone_length_mm)
+    torque = torque + np.where(rub, mdl.margin_torque_nm, 0.0)
     torque = torque * np.sign(np.where(n == 0.0, 1.0, n))
     thrust = np.where(cutting, f_full * eng_thrust * fluct_f, 0.0)
     wear_rel = np.clip(wear / mdl.walk_wear_ref_um, 0.0, 2.0)

@@ -651,7 +651,7 @@ def drilling_validation(
     *,
     seed: int = 0,
     overrides: Mapping[str, Any] | None = None,
-    depth_mm: float = 10.0,
+    depth_mm: float = 20.0,
     progress: ProgressFn | None = None,
 ) -> ScenarioResult:
     """The five thesis drilling cuts with the dynamometer attached (thesis §4.3, Table 4.1).
