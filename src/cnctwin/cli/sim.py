@@ -1,0 +1,79 @@
+"""Simulator subcommand: ``cnctwin simulate NAME --out DIR --seed N [--set key=value ...]``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from cnctwin.exceptions import ConfigError
+
+__all__ = ["register"]
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add ``simulate`` to the ``cnctwin`` command line."""
+    from cnctwin.sim.scenarios import SCENARIOS
+
+    p = sub.add_parser(
+        "simulate",
+        help="run a simulator scenario and write recordings + truth.json",
+        description="Run a thesis scenario of the physics simulator. Writes Capture4Analysis "
+        "JSON, external-sensor CSVs and truth.json (every true parameter) to --out.",
+    )
+    p.add_argument("name", choices=sorted(SCENARIOS), help="scenario")
+    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a parameter, e.g. spindle.kt_nm_per_a=1.1 or "
+        "material.aisi1045.kc1_n_per_mm2=1600 (repeatable)",
+    )
+    p.add_argument(
+        "--option",
+        dest="options",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="scenario option, e.g. n_holes=60 for tool_wear_run (repeatable)",
+    )
+    p.set_defaults(func=_cmd_simulate)
+
+
+def _parse_pairs(items: list[str], what: str) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        if not sep or not key:
+            raise ConfigError(f"{what} {item!r}: expected KEY=VALUE")
+        try:
+            out[key.strip()] = json.loads(raw)
+        except json.JSONDecodeError:
+            out[key.strip()] = raw
+    return out
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from rich.progress import Progress
+
+    from cnctwin.sim.scenarios import run_scenario
+
+    overrides = _parse_pairs(args.overrides, "--set")
+    options = _parse_pairs(args.options, "--option")
+    with Progress(transient=True) as bar:
+        task = bar.add_task(args.name, total=1.0)
+
+        def progress(fraction: float, text: str) -> None:
+            bar.update(task, completed=fraction, description=f"{args.name}: {text}")
+
+        res = run_scenario(
+            args.name, args.out, seed=args.seed, overrides=overrides, progress=progress, **options
+        )
+    for p in res.paths:
+        print(p)
+    return 0
