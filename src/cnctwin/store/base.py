@@ -496,7 +496,12 @@ class Store(abc.ABC):
 
 def index_result(frame: pd.DataFrame, *, single: bool) -> pd.DataFrame:
     """Set the :meth:`Store.query_signals` index on a frame with ``recording_id``/``cycle``."""
-    frame = frame.sort_values(["recording_id", "cycle"], kind="stable")
+    rid = frame["recording_id"].to_numpy()
+    cyc = frame["cycle"].to_numpy()
+    same = rid[1:] == rid[:-1]
+    ordered = bool(np.all((rid[1:] > rid[:-1]) | (same & (cyc[1:] > cyc[:-1]))))
+    if not ordered:
+        frame = frame.sort_values(["recording_id", "cycle"], kind="stable")
     if single:
         frame = frame.drop(columns="recording_id").set_index("cycle")
     else:

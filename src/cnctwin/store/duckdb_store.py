@@ -338,12 +338,23 @@ class DuckDBStore(Store):
         start: pd.Timestamp | str | None = None,
         end: pd.Timestamp | str | None = None,
     ) -> pd.DataFrame:
-        where, params = _catalog_filter(machine, to_utc(start), to_utc(end))
+        return self._recordings(CATALOG_COLUMNS, machine, to_utc(start), to_utc(end))
+
+    def _recordings(
+        self,
+        columns: Sequence[str],
+        machine: str | None,
+        start: pd.Timestamp | None,
+        end: pd.Timestamp | None,
+    ) -> pd.DataFrame:
+        where, params = _catalog_filter(machine, start, end)
         out = self._df(
-            f"SELECT {', '.join(CATALOG_COLUMNS)} FROM recordings {where} "
+            f"SELECT {', '.join(columns)} FROM recordings {where} "
             "ORDER BY start_time, recording_id",
             params,
         )
+        if "start_time" not in columns:
+            return out
         for col in ("start_time", "end_time"):
             out[col] = pd.to_datetime(out[col], utc=True)
         return out
@@ -375,7 +386,7 @@ class DuckDBStore(Store):
         recording_id: str | None = None,
     ) -> pd.DataFrame:
         t0, t1 = to_utc(start), to_utc(end)
-        cat = self.recordings(machine=machine, start=t0, end=t1)
+        cat = self._recordings(("recording_id", "columns"), machine, t0, t1)
         if recording_id is not None:
             if recording_id not in set(cat["recording_id"]):
                 self._catalog_entry(recording_id)  # raises if unknown

@@ -20,12 +20,14 @@ Why blocks of arrays and not one row per value: a machine produces 500 Hz x ~70 
 disk (24 B tuple header + 4 B line pointer + key columns + value; measured, reference
 physics-and-performance.md section 5: ~650 GB/day/machine) and the COPY rate is bound by
 rows (0.23 M rows/s from Python, 1.75 M rows/s server-side). A block of 1000 cycles (2 s) of
-one signal is one row of ~12 kB: per-row overhead is amortised over 1000 samples, so storage is
-~8 B/sample (the float64 itself; TOAST compresses where the values allow) and the COPY moves
-18 000 rows for 18 M samples. Keeping one signal per row (instead of one cycle per row with all
-signals) means a query for one signal reads only that signal's blocks, and recordings with
-different signal sets need no schema change. Blocks never cross a counter gap or a break of the
-linear time axis, so ``cycle = first_cycle + i`` and ``time = t0_ns + i * step_ns`` inside a block.
+one signal is one row of ~8 kB: per-row overhead is amortised over 1000 samples, so storage is
+<= 8 B/sample (the float64 itself; TOAST compresses where the values allow, with lz4 when the
+server has it) and the COPY moves 18 000 rows for 18 M samples (benchmarks/bench_store.py).
+Keeping one signal per row (instead of one cycle per row with all signals, ~4.3 B/sample with
+real[] in section 5) means a query for one signal reads only that signal's blocks, float64
+values round-trip exactly, and recordings with different signal sets need no schema change.
+Blocks never cross a counter gap or a break of the linear time axis, so
+``cycle = first_cycle + i`` and ``time = t0_ns + i * step_ns`` inside a block.
 
 Ingest runs in one transaction (delete the id, insert the catalog row, binary COPY of the blocks
 built with numpy); a query selects only the blocks of the wanted signals that overlap the time
@@ -338,6 +340,14 @@ class PostgresStore(Store):
             with self.conn.transaction():
                 self.conn.execute("SELECT pg_advisory_xact_lock(hashtext('cnctwin.ddl'))")
                 self.conn.execute(psql.SQL(_DDL).format(s=s))
+            try:  # lz4 TOAST compression: 2.7x the ingest rate of pglz at the same size
+                with self.conn.transaction():
+                    self.conn.execute(
+                        psql.SQL("ALTER TABLE {} ALTER COLUMN samples SET COMPRESSION lz4")
+                        .format(self._t("hf_block"))
+                    )
+            except psycopg.Error:  # pragma: no cover - server built without lz4
+                pass
         self.conn.execute(
             psql.SQL("SET search_path TO {s}, public").format(s=s)
         )
