@@ -4,14 +4,15 @@ Facts about the real file (``tests/data/real/capture4analysis/example_data_ff429
 max-scw/CaptureDataParser, MIT) were counted by hand with ``orjson.loads`` on the raw JSON
 (not with the reader): 127 HFData entries holding 3818 rows of 61 values; 78 HFBlockEvent,
 49 HFCallEvent, 47 HFTimestamp and 14 LFData entries (70 LF values, 14 per address); first
-cycle 5558098, last 5565774; one counter step of 3860 between rows 1493 and 1494 (0-based) of the
-sorted counter (5559591 -> 5563451, i.e. 3859 missing cycles); ``CURRENT|6`` in [-5.371338, 5.197021];
-``LOAD|2`` max 54.071045. The format is described in
+cycle 5558098, last 5565774; one counter step of 3860 between rows 1493 and 1494 (0-based)
+of the sorted counter (5559591 -> 5563451, i.e. 3859 missing cycles); ``CURRENT|6`` in
+[-5.371338, 5.197021]; ``LOAD|2`` max 54.071045. The format is described in
 ``/work/shared/reference/data-formats.md`` section 1.
 """
 
 from __future__ import annotations
 
+import itertools
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -37,7 +38,7 @@ def real(c4a_file: Path) -> Recording:
 
 @pytest.fixture(scope="module")
 def raw(c4a_file: Path) -> dict[str, Any]:
-    return orjson.loads(c4a_file.read_bytes())  # type: ignore[no-any-return]
+    return orjson.loads(c4a_file.read_bytes())
 
 
 # ---------------------------------------------------------------------------- real file
@@ -112,7 +113,7 @@ def test_real_values(real: Recording, raw: dict[str, Any]) -> None:
     cur = real.signal("CURRENT", "SP1")
     assert cur.min() == pytest.approx(-5.371338, abs=1e-9)
     assert cur.max() == pytest.approx(5.197021, abs=1e-9)
-    assert -5.38 <= cur.min() and cur.max() <= 5.20
+    assert cur.min() >= -5.38 and cur.max() <= 5.20
     assert real.signal("LOAD|Y1").max() == pytest.approx(54.071045, abs=1e-9)
     # spot check against the raw JSON: last row of the file, column LOAD|6
     names = [s["Address"] for s in raw["Header"]["SignalListHFData"]]
@@ -147,7 +148,7 @@ def test_chain_split_in_three(real: Recording, tmp_path: Path) -> None:
     assert chain[1]["Previous"] == "run.json" and chain[1]["Next"] == "run_3.json"
     assert chain[2]["Next"] is None and chain[2]["Index"] == 3
     # Siemens behaviour: the last block event of a file opens the next one
-    for prev, nxt in zip(docs, docs[1:], strict=False):
+    for prev, nxt in itertools.pairwise(docs):
         last = [p["HFBlockEvent"] for p in prev["Payload"] if "HFBlockEvent" in p][-1]
         assert nxt["Payload"][0] == {"HFBlockEvent": last}
     back = read_capture4analysis(files[0])
@@ -198,8 +199,9 @@ def _synthetic(n: int = 1000, start: int = 1000, *, seed: int = 1) -> Recording:
     rng = np.random.default_rng(seed)
     cycles = np.arange(start, start + n)
     cycles = np.delete(cycles, np.arange(300, 320))  # a gap of 20 cycles
-    sig = {f"{code}|{ax}": rng.standard_normal(cycles.size) * 10.0 ** rng.integers(-6, 4)
-           for code in ("CURRENT", "ENC_POS") for ax in ("X1", "Z1", "SP1")}
+    sig: dict[str, Any] = {
+        f"{code}|{ax}": rng.standard_normal(cycles.size) * 10.0 ** rng.integers(-6, 4)
+        for code in ("CURRENT", "ENC_POS") for ax in ("X1", "Z1", "SP1")}
     rec = Recording.from_arrays(cycles, sig, start_time="2024-05-01T10:00:00.123456789Z",
                                 machine="sim", axis_map={1: "X1", 3: "Z1", 6: "SP1"})
     rec.events = pd.DataFrame({
