@@ -1,0 +1,135 @@
+"""Physical behaviour of the spindle drive model (thesis ch. 3.2 and 4)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cnctwin.exceptions import ConfigError
+from cnctwin.sim.spindle import SpindleMotor, SpindleTrace, simulate_spindle
+
+MOTOR = SpindleMotor()
+
+
+def _steady_mean_currents(speeds: np.ndarray, seconds: float = 2.0) -> dict[str, np.ndarray]:
+    """Air cut at each speed (one continuous run, short enough to stay cold)."""
+    state = None
+    n = int(seconds / 0.002)
+    iq, iabs, idd = [], [], []
+    rng = np.random.default_rng(0)
+    for s in speeds:
+        tr = simulate_spindle(np.full(n, s), 0.0, MOTOR, state=state, rng=rng)
+        state = tr.state
+        sl = slice(n // 2, None)
+        iq.append(tr.current_a[sl].mean())
+        iabs.append(tr.current_abs_a[sl].mean())
+        idd.append(tr.id_a[sl].mean())
+    return {"iq": np.array(iq), "iabs": np.array(iabs), "id": np.array(idd)}
+
+
+@pytest.fixture(scope="module")
+def sweep() -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    speeds = np.array([200, 500, 1100, 1500, 2000, 2500, 3000, 3500, 4000, 4500, 5000,
+                       6000, 7000, 8000, 9000, 12000, 16000], dtype=float)
+    return speeds, _steady_mean_currents(speeds)
+
+
+def test_iq_linear_between_1100_and_5000_rpm(sweep: tuple) -> None:
+    # thesis §4.3 / Fig. 4.2: linear speed-current region 1100-5000 rpm, slope B/Kt = 8.1e-5
+    # A/rpm and intercept tau_f/Kt = 0.34 A (Eq. 4.2)
+    speeds, cur = sweep
+    sel = (speeds >= 1100) & (speeds <= 5000)
+    slope, icpt = np.polyfit(speeds[sel], cur["iq"][sel], 1)
+    fit = slope * speeds[sel] + icpt
+    ss_res = np.sum((cur["iq"][sel] - fit) ** 2)
+    ss_tot = np.sum((cur["iq"][sel] - cur["iq"][sel].mean()) ** 2)
+    assert 1 - ss_res / ss_tot > 0.99
+    assert slope == pytest.approx(8.1e-5, rel=0.10)
+    assert icpt == pytest.approx(0.34, abs=0.03)
+    # departs from the line at low speed (Stribeck, thesis §4.1) ...
+    line = np.polyval([slope, icpt], speeds)
+    assert cur["iq"][speeds == 200][0] - line[speeds == 200][0] > 0.03
+    # ... and above ~5000 rpm (current limitation / field weakening, Fig. 4.1, 3.8a)
+    for s in (7000, 9000, 12000):
+        assert line[speeds == s][0] - cur["iq"][speeds == s][0] > 0.05
+
+
+def test_field_weakening_id_and_abs_current(sweep: tuple) -> None:
+    # thesis Fig. 3.8c: |I| rises dramatically after the 7000 rpm field-weakening speed
+    speeds, cur = sweep
+    assert np.all(np.abs(cur["id"][speeds <= 6000]) < 0.05)
+    assert cur["id"][speeds == 8000][0] < -1.0
+    assert cur["iabs"][speeds == 9000][0] > 5 * cur["iabs"][speeds == 6000][0]
+    assert np.all(np.diff(cur["iabs"][speeds >= 7000]) > 0)
+
+
+def test_cutting_current_reproduces_thesis_eq_4_4() -> None:
+    # thesis §4.3: steel 2400 rpm, 3.97 Nm cutting torque -> 4.36 A mean current (Eq. 4.3/4.4)
+    n = 1500
+    tr = simulate_spindle(np.full(n, 2400.0), np.r_[np.zeros(500), np.full(1000, 3.97)], MOTOR,
+                          rng=np.random.default_rng(1))
+    assert tr.current_a[900:].mean() == pytest.approx(4.36, rel=0.02)
+
+
+def test_current_falls_while_motor_warms() -> None:
+    # thesis §4.2 / Fig. 4.4: 20+ min at 5000 rpm, temperature rises, current falls
+    n = 20 * 60 * 500
+    cmd = np.minimum(np.arange(n) * 20.0, 5000.0)
+    tr = simulate_spindle(cmd, 0.0, MOTOR, rng=np.random.default_rng(2))
+    minute = 30000
+    first = tr.current_a[minute:2 * minute].mean()
+    last = tr.current_a[-minute:].mean()
+    assert last < 0.97 * first
+    assert tr.motor_temperature_c[-1] - tr.motor_temperature_c[minute] > 5.0
+    assert tr.kt_nm_per_a[-1] < tr.kt_nm_per_a[minute]  # NdFeB flux falls with temperature
+
+
+@pytest.mark.parametrize(("poles", "speed", "alias_hz"), [(4, 9000.0, 200.0), (4, 3200.0, 106.67),
+                                                           (8, 5000.0, 166.67)])
+def test_stator_frequency_line_folds_about_250_hz(poles: int, speed: float,
+                                                  alias_hz: float) -> None:
+    # thesis Eq. 4.1 f = N poles / 120; physics-and-performance.md §2 alias table
+    motor = SpindleMotor(pole_count=poles, ripple_amplitude_a=0.1)
+    tr = simulate_spindle(np.full(12000, speed), 0.0, motor, rng=np.random.default_rng(3))
+    x = tr.current_a[4000:] - tr.current_a[4000:].mean()
+    f = np.fft.rfftfreq(x.size, 0.002)
+    p = np.abs(np.fft.rfft(x * np.hanning(x.size)))
+    assert f[np.argmax(p[5:]) + 5] == pytest.approx(alias_hz, abs=0.5)
+
+
+def test_chunked_equals_one_shot_and_seed_reproducible() -> None:
+    cmd = np.linspace(0, 9000, 3000)
+    load = np.r_[np.zeros(1500), np.full(1500, 2.0)]
+    one = simulate_spindle(cmd, load, MOTOR, rng=np.random.default_rng(5))
+    g = np.random.default_rng(5)
+    a = simulate_spindle(cmd[:1234], load[:1234], MOTOR, rng=g)
+    b = simulate_spindle(cmd[1234:], load[1234:], MOTOR, rng=g, state=a.state)
+    both = SpindleTrace.concatenate([a, b])
+    for name in ("current_a", "speed_rpm", "motor_temperature_c", "iq_smoothed_a"):
+        np.testing.assert_array_equal(getattr(one, name), getattr(both, name))
+    again = simulate_spindle(cmd, load, MOTOR, rng=np.random.default_rng(5))
+    np.testing.assert_array_equal(one.current_a, again.current_a)
+
+
+def test_rigid_tapping_follows_position_command() -> None:
+    n = 1500
+    pos = np.cumsum(np.r_[np.linspace(0, 2.4, 100), np.full(n - 100, 2.4)])  # deg per cycle
+    tr = simulate_spindle(np.zeros(n), 0.5, MOTOR, position_cmd_deg=pos, mode=1,
+                          rng=np.random.default_rng(4))
+    # 2.4 deg/2 ms = 200 rpm; with speed feedforward the lag is a few degrees at most
+    assert np.max(np.abs(tr.position_deg[200:] - pos[200:])) < 3.0
+    assert tr.speed_rpm[-200:].mean() == pytest.approx(200.0, rel=0.02)
+
+
+def test_lf_values_are_smoothed_and_consistent() -> None:
+    tr = simulate_spindle(np.full(3000, 3000.0), 0.0, MOTOR, rng=np.random.default_rng(6))
+    assert tr.speed_smoothed_rpm[-1] == pytest.approx(3000.0, abs=1.0)
+    assert np.std(tr.iq_smoothed_a[-500:]) < 0.2 * np.std(tr.current_a[-500:])
+    assert tr.load_pct[-1] == pytest.approx(100 * abs(tr.torque_setpoint_nm[-1]) / 25.0)
+
+
+def test_flux_linkage_consistent_with_kt() -> None:
+    m = SpindleMotor()
+    assert 1.5 * np.sqrt(2) * m.pole_pairs * m.flux_linkage_vs == pytest.approx(1.04)
+    with pytest.raises(ConfigError, match="pole_count"):
+        simulate_spindle([0.0], 0.0, SpindleMotor(pole_count=3))
