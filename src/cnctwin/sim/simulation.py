@@ -159,6 +159,11 @@ class SimulationResult:
         spindle truth, hook truth; only kept in memory mode).
     trajectory : dict
         Summary: ``n_cycles``, ``duration_s``, ``n_holes``, ``n_events``.
+
+    Notes
+    -----
+    ``truth["holes"]`` is the interpolator's hole table with its ``*cycle`` columns shifted to
+    real cycle numbers (``start_cycle`` added), like the recording's events.
     """
 
     recording: Recording | None
@@ -174,10 +179,9 @@ class _Chunk:
 
 
 def _slice_trajectory(traj: Any, lo: int, hi: int) -> Any:
-    """A view of cycles lo..hi of a whole trajectory, events re-based to the slice."""
+    """A view of cycles lo..hi of a whole trajectory (event cycles stay program offsets)."""
     ev = traj.events
-    ev = ev[(ev["cycle"] >= lo) & (ev["cycle"] < hi)].copy()
-    ev["cycle"] = ev["cycle"] - lo
+    ev = ev[(ev["cycle"] >= lo) & (ev["cycle"] < hi)]
     return _SimpleTrajectory(
         des_pos={k: np.asarray(v)[lo:hi] for k, v in traj.des_pos.items()},
         spindle_speed_cmd_rpm=np.asarray(traj.spindle_speed_cmd_rpm)[lo:hi],
@@ -209,7 +213,7 @@ def _n_cycles(traj: Any) -> int:
 
 
 def _chunks_from(program: Any, machine: Machine, chunk_cycles: int) -> Iterator[_Chunk]:
-    """Chunks with their 0-based offsets; events in each chunk are chunk-relative."""
+    """Chunks with their 0-based offsets; event cycles are offsets from the program start."""
     if hasattr(program, "des_pos"):  # one whole trajectory
         n = _n_cycles(program)
         for lo in range(0, max(n, 1), chunk_cycles):
@@ -237,38 +241,15 @@ def _chunks_from(program: Any, machine: Machine, chunk_cycles: int) -> Iterator[
 
 
 def _axis_limits(mod: Any, ax: Any) -> Any:
-    return mod.AxisLimits(**_fill(mod.AxisLimits, ax.max_velocity_mm_min,
-                                  ax.max_accel_mm_s2, ax.max_jerk_mm_s3))
-
-
-def _fill(cls: Any, v_mm_min: float, a_mm_s2: float, j_mm_s3: float) -> dict[str, float]:
-    import dataclasses
-
-    kw: dict[str, float] = {}
-    for f in dataclasses.fields(cls):
-        name = f.name.lower()
-        if "vel" in name or "speed" in name or "feed" in name:
-            kw[f.name] = v_mm_min if "min" in name else v_mm_min / 60.0
-        elif "acc" in name:
-            kw[f.name] = a_mm_s2
-        elif "jerk" in name:
-            kw[f.name] = j_mm_s3
-    return kw
+    return mod.AxisLimits(max_velocity_mm_min=ax.max_velocity_mm_min,
+                          max_accel_mm_s2=ax.max_accel_mm_s2, max_jerk_mm_s3=ax.max_jerk_mm_s3)
 
 
 def _spindle_limits(mod: Any, machine: Machine) -> Any:
-    import dataclasses
-
+    """Speed ramp from half the peak torque on the spindle inertia [rpm/s]."""
     sp = machine.spindle
     accel_rpm_s = sp.current_limit_a * sp.kt_nm_per_a * 0.5 / sp.inertia_kg_m2 * 60 / (2 * np.pi)
-    kw: dict[str, float] = {}
-    for f in dataclasses.fields(mod.SpindleLimits):
-        name = f.name.lower()
-        if "speed" in name or ("rpm" in name and "acc" not in name):
-            kw[f.name] = sp.max_speed_rpm
-        elif "acc" in name:
-            kw[f.name] = float(accel_rpm_s)
-    return mod.SpindleLimits(**kw)
+    return mod.SpindleLimits(max_speed_rpm=sp.max_speed_rpm, accel_rpm_s=float(accel_rpm_s))
 
 
 # ----------------------------------------------------------------------------- simulate
@@ -421,7 +402,7 @@ def simulate(
         # ---- events, real cycles
         ev = traj.events.copy() if len(traj.events) else pd.DataFrame(columns=EVENT_COLUMNS)
         if len(ev):
-            ev["cycle"] = ev["cycle"].astype(np.int64) + start_cycle + chunk.offset
+            ev["cycle"] = ev["cycle"].astype(np.int64) + start_cycle
         n_events += len(ev)
 
         # ---- dropped cycles
@@ -457,6 +438,9 @@ def simulate(
     meta.attrs["n_dropped_cycles"] = n_dropped
     recording = out_sink.close(meta)
     holes_df = pd.concat(holes, ignore_index=True) if holes else pd.DataFrame()
+    for col in holes_df.columns:  # hole cycle offsets -> real cycle numbers
+        if str(col).endswith("cycle"):
+            holes_df[col] = holes_df[col].astype(np.int64) + start_cycle
     truth: dict[str, Any] = {
         "machine": machine.to_dict(),
         "seed": seed,
