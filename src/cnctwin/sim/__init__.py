@@ -22,3 +22,34 @@ from cnctwin.sim.interpolator import (  # noqa: E402
 )
 
 __all__ += ["AxisLimits", "SpindleLimits", "Trajectory", "interpolate", "interpolate_chunks"]
+
+from cnctwin.sim.machine import FeedAxis, Machine  # noqa: E402
+from cnctwin.sim.recorder import (  # noqa: E402
+    Capture4AnalysisSink,
+    MemorySink,
+    ParquetChunkSink,
+    read_parquet_chunks,
+)
+from cnctwin.sim.servo import ServoState, ServoTrace, simulate_servo  # noqa: E402
+from cnctwin.sim.simulation import (  # noqa: E402
+    CuttingInput,
+    CuttingOutput,
+    SimulationResult,
+    simulate,
+)
+
+__all__ += [
+    "Capture4AnalysisSink",
+    "CuttingInput",
+    "CuttingOutput",
+    "FeedAxis",
+    "Machine",
+    "MemorySink",
+    "ParquetChunkSink",
+    "ServoState",
+    "ServoTrace",
+    "SimulationResult",
+    "read_parquet_chunks",
+    "simulate",
+    "simulate_servo",
+]
