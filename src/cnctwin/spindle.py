@@ -606,10 +606,11 @@ def linear_region(
 
     Lower limit: the dominant line of each plateau's current spectrum is compared with the
     folded stator frequency ``fold(N p / 120, fs)`` (Eq. 4.1, :func:`fold_frequency`),
-    tolerance 2.5 frequency bins; the region starts at the lowest speed from which
+    tolerance 1.5 frequency bins; the region starts at the lowest speed from which
     ``stator_consecutive`` plateaus in a row are stator-dominated (thesis: 1100 rpm). Without
     spectra the region is grown downwards as well, from the seed window that yields the
-    longest region with a positive slope.
+    longest region with a positive slope, then re-seeded twice on the middle half of the
+    region found and grown again.
     """
     if isinstance(speed_rpm, pd.DataFrame):
         stats = speed_rpm
@@ -641,7 +642,7 @@ def linear_region(
         segs = [np.asarray(segments[k], dtype=np.float64) for k in order]
         lines = [dominant_line(s, fs_hz=fs_hz, fmin_hz=fmin_hz) for s in segs]
         dom = np.array([ln.freq_hz for ln in lines])
-        tol = np.array([2.5 * fs_hz / max(s.size, 1) for s in segs])
+        tol = np.array([1.5 * fs_hz / max(s.size, 1) for s in segs])
         if poles is None:
             poles = estimate_poles(n, dom, fs_hz=fs_hz, candidates=pole_candidates, tol_hz=tol)
         alias = fold_frequency(stator_frequency_hz(n, poles), fs_hz)
@@ -701,6 +702,21 @@ def linear_region(
                 "more speeds or pass noise_a"
             )
         _, _, idx, reason_lo, reason_hi = best
+        # refine: re-seed on the middle half of the region (away from both curved ends) and
+        # grow again, so curvature picked up at one end does not tilt the line at the other
+        for _ in range(2):
+            lo_k, hi_k = min(idx), max(idx)
+            q = (hi_k - lo_k) // 4
+            mid = list(range(lo_k + q, hi_k - q + 1))
+            if len(mid) < min_points:
+                break
+            up, reason_hi = _grow(n, cur, mid, sigma, k_sigma=k_sigma,
+                                  n_consecutive=n_consecutive, direction=+1)
+            new, reason_lo = _grow(n, cur, up, sigma, k_sigma=k_sigma,
+                                   n_consecutive=n_consecutive, direction=-1)
+            if new == idx:
+                break
+            idx = new
         reason_lo = "without spectra: " + reason_lo
     in_region = np.zeros(n.size, dtype=bool)
     in_region[min(idx) : max(idx) + 1] = True

@@ -1,0 +1,337 @@
+"""cnctwin.spindle on synthetic recordings whose truth is generated here with numpy.
+
+The synthetic air-cut sweep follows thesis §3.2.2/§4.1 qualitatively: current linear in speed
+(Eq. 4.2 with a = 8.1e-5 A/rpm, b = 0.34 A) between a low-speed region where the stator line is
+not the dominant spectral line and a current-limitation bend (here at 5000 rpm, thesis Fig. 4.1),
+plus a Stribeck-like excess at low speed and a ripple at the folded stator frequency (Eq. 4.1).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from cnctwin.analysis.filters import fold_frequency, stator_frequency_hz
+from cnctwin.analysis.segments import cutting_regions, speed_plateaus
+from cnctwin.exceptions import ConfigError, IdentificationError
+from cnctwin.recording import ExternalChannel, Recording
+from cnctwin.spindle import (
+    CutMeasurement,
+    FrictionFit,
+    SpindleModel,
+    StreamingTorqueEstimator,
+    air_cut_correlation,
+    air_cut_statistics,
+    calibrate,
+    calibrate_from_recording,
+    fit_friction,
+    identify_inertia,
+    linear_region,
+    linear_region_from_recording,
+    measure_cut,
+    plot_air_cut,
+    plot_air_cut_correlation,
+    validation_table,
+)
+
+FS = 500.0
+A_TRUE, B_TRUE = 8.1e-5, 0.34  # thesis Eq. (4.2)
+N_BEND = 5000.0  # current limitation (thesis Fig. 4.1)
+POLES = 4
+SPEEDS = np.arange(300.0, 9001.0, 150.0)
+
+
+def _air_cut_current(n: np.ndarray) -> np.ndarray:
+    """Mean air-cut current: linear, Stribeck excess below ~900 rpm, flat above the bend."""
+    return A_TRUE * np.minimum(n, N_BEND) + B_TRUE + 0.05 * np.exp(-n / 300.0)
+
+
+def make_sweep(seed: int = 0, plateau_s: float = 2.0) -> Recording:
+    rng = np.random.default_rng(seed)
+    speed_parts, cur_parts = [], []
+    prev = 0.0
+    t_global = 0.0
+    for n in SPEEDS:
+        # ramp at 3000 rpm/s
+        n_ramp = max(2, int(abs(n - prev) / 3000.0 * FS))
+        ramp = np.linspace(prev, n, n_ramp, endpoint=False)
+        speed_parts.append(ramp)
+        cur_parts.append(_air_cut_current(ramp) + 0.3)  # inertia draws current on ramps
+        k = int(plateau_s * FS)
+        t = t_global + np.arange(k) / FS
+        f_alias = float(fold_frequency(stator_frequency_hz(n, POLES), FS))
+        ripple_amp = 0.005 + 0.03 / (1.0 + np.exp(-(n - 1100.0) / 30.0))
+        i = (
+            _air_cut_current(np.array([n]))[0]
+            + rng.normal(0.0, 0.003)  # plateau-to-plateau scatter of the mean
+            + ripple_amp * np.sin(2 * np.pi * f_alias * t + rng.uniform(0, 6.28))
+            + 0.02 * np.sin(2 * np.pi * 13.0 * t)  # fixed mechanical line
+            + rng.normal(0.0, 0.01, k)
+        )
+        speed_parts.append(np.full(k, n) + rng.normal(0, 0.2, k))
+        cur_parts.append(i)
+        t_global += (n_ramp + k) / FS
+        prev = n
+    speed = np.concatenate(speed_parts)
+    current = np.concatenate(cur_parts)
+    kt = 1.04
+    return Recording.from_arrays(
+        np.arange(speed.size) + 1000,
+        {
+            "CMD_SPEED|SP1": speed,
+            "CURRENT|SP1": current,
+            "TORQUE|SP1": kt * current,
+            "POWER|SP1": kt * current * speed * 2 * np.pi / 60,
+        },
+    )
+
+
+@pytest.fixture(scope="module")
+def sweep() -> Recording:
+    return make_sweep()
+
+
+def test_speed_plateaus_find_every_speed(sweep: Recording) -> None:
+    p = speed_plateaus(sweep)
+    assert len(p) == SPEEDS.size
+    np.testing.assert_allclose(p["speed_rpm"], SPEEDS, atol=0.5)
+    # 2 s plateaus minus 0.5 s settle minus half the 0.2 s window at each end of the steady
+    # run, which itself starts and ends half a window inside the plateau: 2 - 0.5 - 0.3 = 1.2
+    assert p["duration_s"].min() == pytest.approx(1.2, abs=0.01)
+
+
+def test_air_cut_statistics_and_figures(sweep: Recording) -> None:
+    stats = air_cut_statistics(sweep)
+    assert len(stats) == SPEEDS.size
+    for col in ("CURRENT|SP1 mean", "CURRENT|SP1 min", "TORQUE|SP1 max", "POWER|SP1 mean"):
+        assert col in stats
+    # the plateau means recover the generating curve within 4x the 0.003 A scatter
+    np.testing.assert_allclose(stats["current_a"], _air_cut_current(SPEEDS), atol=0.012)
+    corr = air_cut_correlation(stats)
+    assert corr.loc["CURRENT|SP1 mean", "TORQUE|SP1 mean"] == pytest.approx(1.0, abs=1e-9)
+    fig = plot_air_cut(stats)
+    assert len([a for a in fig.axes if a.get_visible()]) == 3
+    fig2 = plot_air_cut_correlation(stats)
+    assert fig2.axes
+
+
+def test_linear_region_with_spectra_recovers_limits_and_poles(sweep: Recording) -> None:
+    region = linear_region_from_recording(sweep)
+    # pole count estimated from the spectra (truth 4)
+    assert region.poles == POLES
+    # lower limit: the ripple overtakes the 13 Hz line at 1100 rpm; first plateau above is
+    # 1200 rpm (grid 150 rpm) -> exact within one grid step
+    assert 1100.0 <= region.lo_rpm <= 1250.0
+    # upper limit: bend at 5000 rpm; departure of 0.012 A per 150 rpm vs 0.003 A scatter
+    # -> within one grid step either side
+    assert 4850.0 <= region.hi_rpm <= 5150.0
+    assert "stator" in region.reason_lo and "departs" in region.reason_hi
+    assert region.table["stator_dominant"].iloc[:3].sum() == 0
+
+
+def test_linear_region_given_wrong_poles_fails_honestly(sweep: Recording) -> None:
+    with pytest.raises(IdentificationError):
+        linear_region_from_recording(sweep, poles=6)
+
+
+def test_linear_region_without_spectra(sweep: Recording) -> None:
+    stats = air_cut_statistics(sweep)
+    region = linear_region(stats)
+    assert region.poles is None
+    # Stribeck excess 0.05 exp(-n/300) exceeds 3 sigma (~0.009 A) below ~550 rpm
+    assert 450.0 <= region.lo_rpm <= 1050.0
+    assert 4850.0 <= region.hi_rpm <= 5150.0
+
+
+def test_fit_friction_recovers_eq_4_2_line(sweep: Recording) -> None:
+    stats = air_cut_statistics(sweep)
+    region = linear_region_from_recording(sweep)
+    fit = fit_friction(stats["speed_rpm"], stats["current_a"], region.lo_rpm, region.hi_rpm)
+    # standard errors: slope ~5e-7 A/rpm (0.7 %), offset ~0.002 A; tolerances ~4 sigma
+    assert fit.slope_a_per_rpm == pytest.approx(A_TRUE, rel=0.03)
+    assert fit.offset_a == pytest.approx(B_TRUE, abs=0.01)
+    assert fit.r2 > 0.99
+    assert fit.slope_std < 2e-6
+    assert fit.n_points == pytest.approx(26, abs=2)
+
+
+def test_fit_friction_statistics_on_exact_line() -> None:
+    n = np.array([1000.0, 2000.0, 3000.0, 4000.0])
+    i = 8.1e-5 * n + 0.34 + np.array([0.01, -0.01, -0.01, 0.01])
+    fit = fit_friction(n, i)
+    # residuals are orthogonal to [1, n] -> the line is exactly recovered, norm = 0.02
+    assert fit.slope_a_per_rpm == pytest.approx(8.1e-5, rel=1e-9)
+    assert fit.norm_residuals == pytest.approx(0.02, rel=1e-9)
+    with pytest.raises(IdentificationError):
+        fit_friction(n, i, lo_rpm=3500)
+
+
+# ------------------------------------------------------------------ drilling with dynamometer
+KT_TRUE = 1.12
+HOLES = [(3.0, 6.0), (10.0, 13.0), (17.0, 20.0)]  # cut start/end [s]
+DYN_OFFSET_S = 1.7345  # dynamometer own t=0 is 1.7345 s after the first HF cycle
+
+
+def make_drilling(seed: int = 1) -> tuple[Recording, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    t = np.arange(0, 24.0, 1 / FS)
+    n = np.full(t.size, 2400.0)
+    tau_c = np.zeros(t.size)
+    z = np.full(t.size, 5.0)
+    for s, e in HOLES:
+        m = (t >= s) & (t < e)
+        # torque builds up over 0.1 s while the drill point enters, then 3.97 Nm (thesis)
+        tau_c[m] = 3.97 * np.minimum(1.0, (t[m] - s) / 0.1) * (1 + 0.02 * (t[m] - s))
+        z[m] = -400.0 / 60.0 * (t[m] - s)
+        after = (t >= e) & (t < e + 1.0)
+        z[after] = np.linspace(z[m][-1], 5.0, after.sum())
+    b_nm = A_TRUE * KT_TRUE
+    tf = B_TRUE * KT_TRUE
+    current = (b_nm * n + tf + tau_c) / KT_TRUE + rng.normal(0, 0.03, t.size)
+    rec = Recording.from_arrays(
+        np.arange(t.size), {"CMD_SPEED|SP1": n, "CURRENT|SP1": current, "ENC_POS|Z1": z}
+    )
+    t_dyn = np.arange(0, 21.0, 1e-3)
+    tau_dyn = np.interp(t_dyn + DYN_OFFSET_S, t, tau_c) + rng.normal(0, 0.03, t_dyn.size)
+    rec.external["dynamometer"] = ExternalChannel(
+        name="dynamometer",
+        data=pd.DataFrame({"mz_nm": tau_dyn}, index=pd.Index(t_dyn, name="time_s")),
+        units={"mz_nm": "Nm"},
+        fs_hz=1000.0,
+    )
+    return rec, tau_c
+
+
+def test_cutting_regions_find_the_holes() -> None:
+    rec, _ = make_drilling()
+    reg = cutting_regions(rec)
+    assert len(reg) == len(HOLES)
+    # smoothing at 5 Hz and the Schmitt trigger delay the edges by < 60 ms
+    np.testing.assert_allclose(reg["start_s"], [h[0] for h in HOLES], atol=0.06)
+    np.testing.assert_allclose(reg["end_s"], [h[1] for h in HOLES], atol=0.1)
+    assert (reg["z_end_mm"] < reg["z_start_mm"]).all()
+
+
+def test_calibrate_from_recording_recovers_kt() -> None:
+    rec, _ = make_drilling()
+    fit = FrictionFit(A_TRUE, B_TRUE, 1.0, 0.0, 10, 0.0, 0.0, 1100.0, 5000.0)
+    model = calibrate_from_recording(fit, rec)
+    # per-sample relation is exact; noise 0.03 A / 0.03 Nm over 300 samples -> < 0.2 %;
+    # a 1-cycle alignment error during the 0.1 s ramp-in costs < 0.5 %
+    assert model.kt_nm_per_a == pytest.approx(KT_TRUE, rel=0.01)
+    assert model.b_nm_per_rpm == pytest.approx(A_TRUE * KT_TRUE, rel=0.01)
+    assert model.tau_f_nm == pytest.approx(B_TRUE * KT_TRUE, rel=0.01)
+
+
+def test_validation_on_the_other_holes() -> None:
+    rec, _ = make_drilling()
+    fit = FrictionFit(A_TRUE, B_TRUE, 1.0, 0.0, 10, 0.0, 0.0, 1100.0, 5000.0)
+    model = calibrate_from_recording(fit, rec)
+    from cnctwin.analysis.align import align_external
+
+    aligned = align_external(rec, "dynamometer")
+    assert aligned.external["dynamometer"].offset_s == pytest.approx(DYN_OFFSET_S, abs=0.002)
+    regions = cutting_regions(aligned)
+    cuts = [measure_cut(aligned, regions.iloc[k], workpiece="steel", feed_mm_per_rev=0.167)
+            for k in (1, 2)]
+    table = validation_table(cuts, model)
+    assert list(table.columns[:5]) == ["workpiece", "speed_rpm", "feed_mm_per_rev",
+                                       "current_a", "torque_nm"]
+    assert (table["error_pct"] < 1.0).all()
+
+
+def test_calibrate_rejects_air_cut_window() -> None:
+    fit = FrictionFit(A_TRUE, B_TRUE, 1.0, 0.0, 10, 0.0, 0.0, 1100.0, 5000.0)
+    with pytest.raises(IdentificationError, match="does not exceed"):
+        calibrate(fit, A_TRUE * 2400 + B_TRUE, 1.0, 2400.0)
+
+
+# ------------------------------------------------------------------ inertia, streaming, temp
+def _runup(j: float, seed: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    t = np.arange(0, 6.0, 1 / FS)
+    n = np.interp(t, [0, 0.5, 1.5, 3.0, 4.0, 5.0, 6.0], [0, 0, 3000, 3000, 1000, 1000, 1000])
+    w = n * 2 * np.pi / 60
+    acc = np.gradient(w, 1 / FS)
+    tau = j * acc + 8.42e-5 * n + 0.35 * np.sign(n) + rng.normal(0, 0.02, t.size)
+    return n, tau
+
+
+def test_identify_inertia_from_runup() -> None:
+    j_true = 0.012
+    n, tau = _runup(j_true)
+    # ramp 3000 rpm/s = 314 rad/s^2 -> J * 314 = 3.8 Nm against 0.02 Nm noise
+    assert identify_inertia(n, tau, fs_hz=FS) == pytest.approx(j_true, rel=0.03)
+    model = SpindleModel(1.04, 8.42e-5, 0.35)
+    assert identify_inertia(n, tau, fs_hz=FS, model=model) == pytest.approx(j_true, rel=0.03)
+    with pytest.raises(IdentificationError, match="run-ups"):
+        identify_inertia(np.full(1000, 2000.0), np.full(1000, 0.5), fs_hz=FS)
+
+
+def test_identify_inertia_from_recording() -> None:
+    n, tau = _runup(0.02)
+    rec = Recording.from_arrays(np.arange(n.size), {"CMD_SPEED|SP1": n, "TORQUE|SP1": tau})
+    assert identify_inertia(rec) == pytest.approx(0.02, rel=0.03)
+
+
+def test_cutting_torque_removes_inertia_on_runup() -> None:
+    n, tau_m = _runup(0.012, seed=3)
+    model = SpindleModel(1.0, 8.42e-5, 0.35, j_kgm2=0.012)
+    est = model.cutting_torque(tau_m / 1.0, n)
+    # no cut -> estimate is noise (0.02 Nm) except the ramp corners where the discrete
+    # derivative smears one sample
+    assert np.median(np.abs(est)) < 0.03
+    est_no_j = model.cutting_torque(tau_m, n, accel_term=False)
+    assert np.abs(est_no_j).max() > 3.0
+
+
+@pytest.mark.parametrize("chunk", [1, 2, 7, 50, 333])
+def test_streaming_equals_vectorized(chunk: int) -> None:
+    rng = np.random.default_rng(chunk)
+    n = 2400 + np.cumsum(rng.normal(0, 5, 2001))
+    i = rng.normal(4.0, 0.2, n.size)
+    temp = np.linspace(25, 45, n.size)
+    model = SpindleModel(1.04, 8.42e-5, 0.35, j_kgm2=0.01, kt_temp_coeff_per_k=-0.001,
+                         reference_temperature_c=25.0)
+    ref = model.cutting_torque(i, n, temperature_c=temp)
+    est = StreamingTorqueEstimator(model, fs_hz=500.0)
+    parts = [est.update(i[k:k + chunk], n[k:k + chunk], temp[k:k + chunk])
+             for k in range(0, n.size, chunk)]
+    out = np.concatenate([*parts, est.flush()])
+    np.testing.assert_array_equal(out, ref)
+    assert est.n_samples == 0  # flush resets
+
+
+def test_streaming_without_inertia_has_no_delay() -> None:
+    model = SpindleModel(1.04, 8.42e-5, 0.35)
+    est = StreamingTorqueEstimator(model)
+    assert est.delay_samples == 0
+    out = est.update([4.32], [2400.0])
+    assert out.size == 1 and est.flush().size == 0
+
+
+def test_temperature_compensation_of_kt() -> None:
+    # physics-and-performance.md §2: NdFeB ~ -0.1 %/K -> 40 K warm-up lowers Kt by ~4 %
+    model = SpindleModel(1.04, 8.42e-5, 0.35, kt_temp_coeff_per_k=-0.001,
+                         reference_temperature_c=20.0)
+    hot = float(model.cutting_torque(4.32, 2400.0, temperature_c=60.0))
+    cold = float(model.cutting_torque(4.32, 2400.0))
+    assert cold - hot == pytest.approx(0.04 * 1.04 * 4.32, rel=1e-9)
+    with pytest.raises(ConfigError, match="reference_temperature_c"):
+        SpindleModel(1.0, 0.0, 0.0, kt_temp_coeff_per_k=-0.001).cutting_torque(
+            1.0, 1.0, temperature_c=30.0)
+
+
+def test_validation_table_accepts_mappings_and_measurements() -> None:
+    model = SpindleModel(1.04, 8.42e-5, 0.35)
+    cuts = [
+        CutMeasurement("Steel", 3200.0, 0.125, 3.66, 3.18),
+        {"workpiece": "Cast iron", "speed_rpm": 2400.0, "current_a": 4.32, "torque_nm": 3.99},
+    ]
+    table = validation_table(cuts, model)
+    assert table["predicted_torque_nm"].round(2).tolist() == [3.19, 3.94]  # Table 4.1
+    with pytest.raises(ConfigError):
+        validation_table([{"speed_rpm": 1.0}], model)
+    with pytest.raises(KeyError, match="valid"):
+        SpindleModel.from_parameters("nope")
