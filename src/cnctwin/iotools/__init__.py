@@ -25,6 +25,7 @@ from cnctwin.iotools.edge_dataobject import (
     read_edge_dataobject,
 )
 from cnctwin.iotools.flat_csv import read_flat_csv
+from cnctwin.iotools.mqtt import MqttRecorder, subscribe_data_recorder, subscribe_databus
 from cnctwin.iotools.parquet import read_parquet, write_parquet
 from cnctwin.iotools.sinumerik_trace import read_sinumerik_trace
 from cnctwin.iotools.thermal import read_thermal_camera_csv
@@ -43,6 +44,7 @@ __all__ += [  # readers of the non-Capture4Analysis sources
     "DatabusDecoder",
     "DatabusValue",
     "EdgeDataobjectAssembler",
+    "MqttRecorder",
     "attach_external",
     "parse_edge_dataobject",
     "read_dynamometer_csv",
@@ -54,4 +56,6 @@ __all__ += [  # readers of the non-Capture4Analysis sources
     "read_umich",
     "read_umich_dataset",
     "read_umich_labels",
+    "subscribe_data_recorder",
+    "subscribe_databus",
 ]

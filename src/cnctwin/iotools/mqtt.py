@@ -1,0 +1,473 @@
+"""MQTT streaming: Industrial Edge Databus and SINUMERIK Data Recorder (needs ``paho-mqtt`` 2.x).
+
+* :class:`MqttRecorder` / :func:`subscribe_databus`: subscribe to a Databus connector's metadata
+  topic first (retained; e.g. ``ie/m/j/simatic/v1/s7c1/dp``), then to the data topics the
+  metadata announces (or the given ones), feed a :class:`~cnctwin.iotools.databus.DatabusDecoder`
+  and hand out :class:`~cnctwin.recording.Recording` objects per window or on request. A new
+  metadata message (reconfiguration) replaces the id map and adds newly announced topics.
+* :func:`subscribe_data_recorder`: SINUMERIK Data Recorder MQTT streaming, where every message
+  is one complete Capture4Analysis JSON document (or a zip of it); each message becomes one
+  recording through :func:`cnctwin.iotools.capture4analysis.read_capture4analysis`.
+
+The paho network loop runs in its own thread and only puts ``(topic, payload)`` into a bounded
+queue; decoding happens in the caller's thread. Messages lost because the queue was full are
+counted in the next recording's ``meta.issues``. Every wait is bounded by a timeout.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import queue
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Iterator
+from types import TracebackType
+from typing import Any
+
+from cnctwin.exceptions import FormatError
+from cnctwin.iotools.databus import DatabusDecoder
+from cnctwin.recording import Recording
+
+__all__ = [
+    "MqttRecorder",
+    "parse_data_recorder_message",
+    "subscribe_data_recorder",
+    "subscribe_databus",
+]
+
+
+def _paho() -> Any:
+    try:
+        import paho.mqtt.client as mqtt
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError("MQTT streaming needs paho-mqtt 2.x: pip install 'cnctwin[mqtt]'"
+                          ) from exc
+    return mqtt
+
+
+class _Client:
+    """A paho client whose callbacks feed a bounded queue."""
+
+    def __init__(self, host: str, port: int, *, client_id: str, username: str | None,
+                 password: str | None, keepalive_s: int, max_queue: int) -> None:
+        mqtt = _paho()
+        self.host, self.port, self.keepalive_s = host, port, keepalive_s
+        self.queue: queue.Queue[tuple[str, bytes]] = queue.Queue(maxsize=max_queue)
+        self.dropped = 0
+        self.connected = threading.Event()
+        self.connect_rc: Any = None
+        self.subacks: set[int] = set()
+        self._sub_lock = threading.Lock()
+        self.client = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2,
+                                  client_id=client_id)
+        if username is not None:
+            self.client.username_pw_set(username, password)
+        self.client.on_connect = self._on_connect
+        self.client.on_message = self._on_message
+        self.client.on_subscribe = self._on_subscribe
+
+    def _on_connect(self, client: Any, userdata: Any, flags: Any, rc: Any,
+                    properties: Any = None) -> None:
+        self.connect_rc = rc
+        self.connected.set()
+
+    def _on_subscribe(self, client: Any, userdata: Any, mid: int, rcs: Any,
+                      properties: Any = None) -> None:
+        with self._sub_lock:
+            self.subacks.add(mid)
+
+    def _on_message(self, client: Any, userdata: Any, msg: Any) -> None:
+        try:
+            self.queue.put_nowait((msg.topic, bytes(msg.payload)))
+        except queue.Full:
+            self.dropped += 1
+
+    def start(self, timeout_s: float) -> None:
+        try:
+            self.client.connect(self.host, self.port, keepalive=self.keepalive_s)
+        except OSError as exc:
+            raise ConnectionError(f"cannot connect to MQTT broker {self.host}:{self.port}: "
+                                  f"{exc}") from exc
+        self.client.loop_start()
+        if not self.connected.wait(timeout_s):
+            self.stop()
+            raise TimeoutError(f"no CONNACK from {self.host}:{self.port} within {timeout_s} s")
+        if getattr(self.connect_rc, "is_failure", False):
+            self.stop()
+            raise ConnectionError(f"broker {self.host}:{self.port} refused the connection: "
+                                  f"{self.connect_rc}")
+
+    def subscribe(self, topic: str, qos: int) -> int:
+        _, mid = self.client.subscribe(topic, qos=qos)
+        return int(mid)
+
+    def acked(self, mid: int) -> bool:
+        with self._sub_lock:
+            return mid in self.subacks
+
+    def stop(self) -> None:
+        with contextlib.suppress(Exception):
+            self.client.disconnect()
+        with contextlib.suppress(Exception):
+            self.client.loop_stop()
+
+
+class MqttRecorder:
+    """Record Industrial Edge Databus values from an MQTT broker.
+
+    Parameters
+    ----------
+    host : str
+        Broker host (on an Industrial Edge device: ``ie-databus``).
+    port : int, default 1883
+        Broker port.
+    metadata_topic : str
+        Metadata topic of the connector (``ie/m/j/simatic/v1/<instance>/dp``).
+    data_topics : list of str, optional
+        Data topics; default all topics the metadata announces.
+    name_map : dict, optional
+        Datapoint name -> recording column (``{"Axis_X_Load": "LOAD|X1"}``).
+    cycle_time_s : float, default 0.002
+        Cycle base of the recordings [s].
+    username, password : str, optional
+        Broker credentials (Databus users are set up in the Databus configurator).
+    client_id : str, optional
+        MQTT client id; default a random one.
+    qos : int, default 1
+        Subscription QoS.
+    salvage : bool, default False
+        Keep values with unknown ids (see :class:`~cnctwin.iotools.databus.DatabusDecoder`).
+    max_queue : int, default 100000
+        Messages buffered between the network thread and the decoder.
+
+    Examples
+    --------
+    >>> with MqttRecorder("127.0.0.1", 1883,
+    ...                   metadata_topic="ie/m/j/simatic/v1/s7c1/dp") as rec:  # doctest: +SKIP
+    ...     rec.wait_ready(timeout_s=10)
+    ...     recording = rec.collect(duration_s=5)
+    """
+
+    def __init__(
+        self,
+        host: str,
+        port: int = 1883,
+        *,
+        metadata_topic: str,
+        data_topics: list[str] | None = None,
+        name_map: dict[str, str] | None = None,
+        cycle_time_s: float = 0.002,
+        username: str | None = None,
+        password: str | None = None,
+        client_id: str = "",
+        qos: int = 1,
+        salvage: bool = False,
+        max_queue: int = 100_000,
+    ) -> None:
+        self.metadata_topic = metadata_topic
+        self.fixed_topics = list(data_topics) if data_topics else None
+        self.qos = qos
+        self.decoder = DatabusDecoder(name_map=name_map, cycle_time_s=cycle_time_s,
+                                      salvage=salvage)
+        self._client = _Client(host, port, client_id=client_id, username=username,
+                               password=password, keepalive_s=30, max_queue=max_queue)
+        self._subscribed: dict[str, int] = {}
+        self._dropped_reported = 0
+        self._errors: list[str] = []
+        self.messages = 0
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self, *, timeout_s: float = 10.0) -> MqttRecorder:
+        """Connect and subscribe to the metadata topic."""
+        self._client.start(timeout_s)
+        self._client.subscribe(self.metadata_topic, self.qos)
+        return self
+
+    def stop(self) -> None:
+        """Disconnect and stop the network thread."""
+        self._client.stop()
+
+    def __enter__(self) -> MqttRecorder:
+        return self.start()
+
+    def __exit__(self, et: type[BaseException] | None, ev: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.stop()
+
+    # ------------------------------------------------------------------ processing
+    def _subscribe_data(self) -> None:
+        topics = self.fixed_topics or self.decoder.data_topics
+        for t in topics:
+            if t not in self._subscribed:
+                self._subscribed[t] = self._client.subscribe(t, self.qos)
+
+    def poll(self, timeout_s: float = 0.1) -> int:
+        """Decode the messages that arrived; wait up to ``timeout_s`` for the first one.
+
+        Returns
+        -------
+        int
+            Number of messages processed.
+        """
+        n = 0
+        deadline = time.monotonic() + timeout_s
+        while True:
+            remaining = deadline - time.monotonic()
+            try:
+                topic, payload = self._client.queue.get(timeout=max(remaining, 0.0)) \
+                    if n == 0 and remaining > 0 else self._client.queue.get_nowait()
+            except queue.Empty:
+                return n
+            n += 1
+            self.messages += 1
+            if topic == self.metadata_topic or (
+                    self.metadata_topic.endswith("#")
+                    and topic.startswith(self.metadata_topic[:-1])):
+                self.decoder.update_metadata(payload, topic=topic)
+                self._subscribe_data()
+            else:
+                try:
+                    self.decoder.decode(payload, topic=topic)
+                except FormatError as exc:
+                    # a bad message must not stop the stream: keep the error as an issue
+                    self.decoder.issues.append(f"message skipped: {exc}")
+
+    @property
+    def ready(self) -> bool:
+        """Metadata received and every data subscription acknowledged by the broker."""
+        return bool(self._subscribed) and all(self._client.acked(m)
+                                              for m in self._subscribed.values())
+
+    def wait_ready(self, *, timeout_s: float = 10.0) -> None:
+        """Block until the metadata arrived and the data topics are subscribed.
+
+        Raises
+        ------
+        TimeoutError
+            If no metadata arrives on ``metadata_topic`` within ``timeout_s``.
+        """
+        deadline = time.monotonic() + timeout_s
+        while not self.ready:
+            if time.monotonic() > deadline:
+                raise TimeoutError(
+                    f"no metadata on {self.metadata_topic!r} (or no SUBACK for the data "
+                    f"topics) within {timeout_s} s; check the topic and the broker user's ACL")
+            self.poll(0.05)
+
+    def _recording(self) -> Recording:
+        rec = self.decoder.recording(clear=True)
+        dropped = self._client.dropped - self._dropped_reported
+        if dropped:
+            rec.meta.issues.append(f"{dropped} MQTT messages dropped: the receive queue was "
+                                   "full (decode faster or raise max_queue)")
+            rec.meta.partial = True
+            self._dropped_reported = self._client.dropped
+        return rec
+
+    def collect(
+        self,
+        *,
+        duration_s: float | None = None,
+        until: Callable[[DatabusDecoder], bool] | None = None,
+        timeout_s: float = 60.0,
+    ) -> Recording:
+        """Decode messages for ``duration_s`` or until ``until(decoder)`` is true.
+
+        Parameters
+        ----------
+        duration_s : float, optional
+            Collect for this long [s].
+        until : callable, optional
+            Stop as soon as it returns True (e.g. ``lambda d: len(d.values) >= 100``).
+        timeout_s : float, default 60
+            Upper bound on the wait [s]; reaching it returns what was collected (with an
+            issue) when ``until`` was given.
+
+        Returns
+        -------
+        Recording
+            The values collected (the decoder is cleared).
+        """
+        start = time.monotonic()
+        limit = min(duration_s if duration_s is not None else timeout_s, timeout_s)
+        while time.monotonic() - start < limit:
+            self.poll(0.05)
+            if until is not None and until(self.decoder):
+                break
+        else:
+            if until is not None:
+                self.decoder.issues.append(f"collect: condition not met within {limit} s")
+        return self._recording()
+
+    def windows(self, window_s: float, *, max_windows: int | None = None,
+                timeout_s: float | None = None) -> Iterator[Recording]:
+        """Yield one recording per ``window_s`` of arrival time (windows without values are
+        skipped).
+
+        Parameters
+        ----------
+        window_s : float
+            Window length on the receiving clock [s].
+        max_windows : int, optional
+            Stop after this many recordings.
+        timeout_s : float, optional
+            Stop after this long in total [s].
+        """
+        t_start = time.monotonic()
+        count = 0
+        while max_windows is None or count < max_windows:
+            w_end = time.monotonic() + window_s
+            while time.monotonic() < w_end:
+                self.poll(min(0.05, max(w_end - time.monotonic(), 0.0)))
+            if self.decoder.values:
+                count += 1
+                yield self._recording()
+            if timeout_s is not None and time.monotonic() - t_start > timeout_s:
+                return
+
+
+def subscribe_databus(
+    host: str,
+    port: int = 1883,
+    *,
+    metadata_topic: str,
+    data_topics: list[str] | None = None,
+    window_s: float = 1.0,
+    max_windows: int | None = None,
+    timeout_s: float | None = None,
+    name_map: dict[str, str] | None = None,
+    cycle_time_s: float = 0.002,
+    username: str | None = None,
+    password: str | None = None,
+) -> Iterator[Recording]:
+    """Stream Databus values as one recording per window (see :class:`MqttRecorder`).
+
+    Parameters
+    ----------
+    host, port : str, int
+        Broker.
+    metadata_topic : str
+        Connector metadata topic (subscribed first).
+    data_topics : list of str, optional
+        Data topics; default those in the metadata.
+    window_s : float, default 1.0
+        Window length [s].
+    max_windows : int, optional
+        Stop after this many windows.
+    timeout_s : float, optional
+        Stop after this long [s].
+    name_map : dict, optional
+        Datapoint name -> column.
+    cycle_time_s : float, default 0.002
+        Cycle base [s].
+    username, password : str, optional
+        Broker credentials.
+
+    Yields
+    ------
+    Recording
+    """
+    with MqttRecorder(host, port, metadata_topic=metadata_topic, data_topics=data_topics,
+                      name_map=name_map, cycle_time_s=cycle_time_s, username=username,
+                      password=password) as rec:
+        yield from rec.windows(window_s, max_windows=max_windows, timeout_s=timeout_s)
+
+
+def parse_data_recorder_message(payload: bytes, *, topic: str = "<mqtt>",
+                                salvage: bool = False) -> Recording:
+    """One SINUMERIK Data Recorder MQTT message (Capture4Analysis JSON, or a zip) -> Recording.
+
+    ``cnctwin.iotools.capture4analysis`` reads files only, so the payload is written to a
+    temporary file and read with ``read_capture4analysis(..., follow_chain=False)``.
+    """
+    from cnctwin.iotools.capture4analysis import read_capture4analysis
+
+    suffix = ".zip" if payload[:4] == b"PK\x03\x04" else ".json"
+    fd, name = tempfile.mkstemp(prefix="cnctwin-dr-", suffix=suffix)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(payload)
+        rec = read_capture4analysis(name, salvage=salvage, follow_chain=False)
+    except FormatError as exc:
+        raise FormatError(exc.message, path=topic, position=exc.position,
+                          field=exc.field) from None
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(name)
+    rec.meta.source_files = [topic]
+    return rec
+
+
+def subscribe_data_recorder(
+    host: str,
+    port: int = 1883,
+    topic: str = "#",
+    *,
+    max_messages: int | None = None,
+    timeout_s: float | None = None,
+    salvage: bool = False,
+    username: str | None = None,
+    password: str | None = None,
+    qos: int = 1,
+    ready: threading.Event | None = None,
+) -> Iterator[Recording]:
+    """Stream SINUMERIK Data Recorder messages, one recording per message.
+
+    Parameters
+    ----------
+    host, port : str, int
+        Broker.
+    topic : str, default '#'
+        Data Recorder topic (global topic + optional job sub-topic, e.g. ``MACHINE_A/#``).
+    max_messages : int, optional
+        Stop after this many recordings.
+    timeout_s : float, optional
+        Stop when no message arrived for this long [s].
+    salvage : bool, default False
+        Passed to the Capture4Analysis reader. A message that still fails is skipped and
+        listed in the next recording's ``meta.issues``.
+    username, password : str, optional
+        Broker credentials.
+    qos : int, default 1
+        Subscription QoS.
+    ready : threading.Event, optional
+        Set once the subscription is acknowledged (lets a test publish afterwards).
+
+    Yields
+    ------
+    Recording
+    """
+    client = _Client(host, port, client_id="", username=username, password=password,
+                     keepalive_s=30, max_queue=1000)
+    client.start(10.0 if timeout_s is None else timeout_s)
+    try:
+        mid = client.subscribe(topic, qos)
+        count = 0
+        pending: list[str] = []
+        last = time.monotonic()
+        while max_messages is None or count < max_messages:
+            if ready is not None and not ready.is_set() and client.acked(mid):
+                ready.set()
+            try:
+                t, payload = client.queue.get(timeout=0.05)
+            except queue.Empty:
+                if timeout_s is not None and time.monotonic() - last > timeout_s:
+                    return
+                continue
+            last = time.monotonic()
+            try:
+                rec = parse_data_recorder_message(payload, topic=t, salvage=salvage)
+            except FormatError as exc:
+                pending.append(f"a Data Recorder message on {t} was skipped: {exc}")
+                continue
+            rec.meta.issues[:0] = pending
+            pending = []
+            if client.dropped:
+                rec.meta.issues.append(f"{client.dropped} MQTT messages dropped (queue full)")
+                client.dropped = 0
+            count += 1
+            yield rec
+    finally:
+        client.stop()

@@ -1,0 +1,144 @@
+"""Live MQTT tests: a private mosquitto broker on a free loopback port.
+
+The broker is started by the fixture (``mosquitto -p PORT``, mosquitto 2.x listens on loopback
+only without a config file) and stopped by its pid. Databus payloads are hand-written
+(same as in ``test_databus.py``; documented structure, data-formats.md section 2); the Data
+Recorder message is the real Capture4Analysis file (3818 HF rows, first CYCLE 5558098,
+78 block events; counted by hand with python json).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import subprocess
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from cnctwin.iotools.mqtt import MqttRecorder, subscribe_data_recorder
+
+pytestmark = pytest.mark.mqtt
+META_TOPIC = "ie/m/j/simatic/v1/s7c1/dp"
+TOPIC = "ie/d/j/simatic/v1/s7c1/dp/r/PLC_1/default"
+
+
+def metadata() -> dict[str, Any]:
+    return {"seq": 1, "hashVersion": 123, "applicationName": "S7 Connector", "connections": [
+        {"name": "PLC_1", "type": "s7", "dataPoints": [
+            {"name": "default", "topic": TOPIC, "publishType": "bulk",
+             "dataPointDefinitions": [
+                 {"name": "Axis_X_Load", "id": "101", "dataType": "LReal"},
+                 {"name": "Counter", "id": "102", "dataType": "LInt"},
+                 {"name": "State", "id": "103", "dataType": "String"}]}]}]}
+
+
+def bulk(seq: int) -> bytes:
+    return json.dumps({"seq": seq, "vals": [
+        {"id": "101", "qc": 3, "ts": "2021-03-10T22:23:04.146Z", "val": 80},
+        {"id": "102", "qc": 3, "ts": "2021-03-10T22:23:04.146Z", "val": "9007199254740993"},
+        {"id": "101", "qc": 0, "ts": "2021-03-10T22:23:04.156Z", "val": "81.5"},
+        {"id": "103", "qc": 2, "ts": "2021-03-10T22:23:04.156Z", "val": "RUN"},
+    ]}).encode()
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def broker() -> Iterator[int]:
+    exe = shutil.which("mosquitto") or (
+        "/usr/sbin/mosquitto" if os.path.exists("/usr/sbin/mosquitto") else None)
+    if exe is None:
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail("mosquitto is required in CI for the live MQTT tests")
+        pytest.skip("install mosquitto (apt-get install mosquitto) to run live MQTT tests")
+    port = _free_port()
+    proc = subprocess.Popen([exe, "-p", str(port)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    try:
+        for _ in range(100):  # up to 5 s
+            try:
+                with socket.create_connection(("127.0.0.1", port), timeout=0.2):
+                    break
+            except OSError:
+                time.sleep(0.05)
+        else:
+            pytest.fail(f"mosquitto did not listen on 127.0.0.1:{port} within 5 s")
+        yield port
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=5)
+
+
+def _publisher(port: int) -> Any:
+    import paho.mqtt.client as mqtt
+
+    c = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2)
+    c.connect("127.0.0.1", port)
+    c.loop_start()
+    return c
+
+
+def test_databus_metadata_then_data(broker: int) -> None:
+    pub = _publisher(broker)
+    try:
+        # retained metadata published before the recorder subscribes (as connectors do)
+        pub.publish(META_TOPIC, json.dumps(metadata()).encode(), qos=1,
+                    retain=True).wait_for_publish(timeout=5)
+        with MqttRecorder("127.0.0.1", broker, metadata_topic=META_TOPIC,
+                          name_map={"Axis_X_Load": "LOAD|X1"}) as rec:
+            rec.wait_ready(timeout_s=10)
+            assert TOPIC in rec.decoder.data_topics
+            pub.publish(TOPIC, bulk(1), qos=1).wait_for_publish(timeout=5)
+            pub.publish(TOPIC, bulk(2), qos=1).wait_for_publish(timeout=5)
+            out = rec.collect(until=lambda d: len(d.values) >= 8, timeout_s=10)
+        assert out.signal("LOAD|X1").tolist() == [80.0, 81.5]  # same timestamps twice
+        assert len(out.meta.attrs["databus_values"]) == 8
+        assert any("shared a cycle" in i for i in out.meta.issues)
+        assert out.lf["text"].tolist() == ["RUN", "RUN"]
+    finally:
+        pub.loop_stop()
+        pub.disconnect()
+
+
+def test_data_recorder_stream(broker: int, c4a_file: Path) -> None:
+    pytest.importorskip("cnctwin.iotools.capture4analysis")
+    topic = "MACHINE_A/tapping/M8-40"
+    ready = threading.Event()
+    results: list[Any] = []
+
+    def consume() -> None:
+        results.extend(subscribe_data_recorder("127.0.0.1", broker, "MACHINE_A/#",
+                                               max_messages=1, timeout_s=20, ready=ready))
+
+    th = threading.Thread(target=consume, daemon=True)
+    th.start()
+    assert ready.wait(10), "Data Recorder subscription not acknowledged within 10 s"
+    pub = _publisher(broker)
+    try:
+        pub.publish(topic, c4a_file.read_bytes(), qos=1).wait_for_publish(timeout=10)
+        th.join(timeout=30)
+    finally:
+        pub.loop_stop()
+        pub.disconnect()
+    assert not th.is_alive()
+    assert len(results) == 1
+    rec = results[0]
+    assert rec.n_cycles == 3818
+    assert rec.cycles[0] == 5558098 and rec.cycles[-1] == 5565774
+    assert (rec.events["kind"] == "block").sum() == 78
+    assert rec.meta.source_files == [topic]
