@@ -509,6 +509,11 @@ class _Reader:
         truncated = not scan.complete
         if truncated:
             where = _line_col(data, len(data))
+            open_key = "the top-level object"
+            if len(scan.members) and scan.members[-1, 3] < 0:
+                k0, k1 = int(scan.members[-1, 0]), int(scan.members[-1, 1])
+                open_key = bytes(mv[k0:k1]).decode("utf-8", "replace")
+            where += f" inside {open_key}"
             if not self.salvage:
                 raise TruncatedFileError(
                     "the JSON ends early (truncated file: "

@@ -1,0 +1,218 @@
+"""Damaged and odd Capture4Analysis input: clear errors by default, flagged partial data with
+``salvage=True`` (project rule: nothing accepted is silently dropped)."""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import orjson
+import pytest
+
+from cnctwin.exceptions import FormatError, TruncatedFileError
+from cnctwin.iotools import _detect, read_capture4analysis, read_recording
+
+
+def _doc(rows: list[Any], **extra: Any) -> dict[str, Any]:
+    doc: dict[str, Any] = {
+        "Header": {
+            "CycleTimeMs": 2,
+            "Initial": {"HFProbeCounter": 100, "Time": "2024-01-01T00:00:00.000Z"},
+            "SignalListHFData": [
+                {"Name": "CYCLE", "Type": "INTEGER", "Axis": "Cycle", "Address": "CYCLE"},
+                {"Name": "CURRENT|6", "Type": "DOUBLE", "Axis": "SP1", "Address": "CURRENT|6"},
+                {"Name": "LOAD|6", "Type": "DOUBLE", "Axis": "SP1", "Address": "LOAD|6"},
+            ],
+        },
+        "Payload": [{"HFData": rows}],
+        "Footer": {"ErrorMessages": [], "FilePathChain": {"Previous": None, "Next": None}},
+    }
+    doc.update(extra)
+    return doc
+
+
+def _write(tmp_path: Path, doc: dict[str, Any] | bytes, name: str = "a.json") -> Path:
+    p = tmp_path / name
+    p.write_bytes(doc if isinstance(doc, bytes) else orjson.dumps(doc))
+    return p
+
+
+# ---------------------------------------------------------------------------- truncation
+def test_truncated_real_file(c4a_file: Path, tmp_path: Path) -> None:
+    data = c4a_file.read_bytes()
+    p = _write(tmp_path, data[:1_000_000], "cut.json")
+    with pytest.raises(TruncatedFileError) as info:
+        read_capture4analysis(p)
+    assert info.value.path == str(p)
+    assert info.value.position is not None and "byte 1000000" in info.value.position
+    assert "salvage=True" in str(info.value)
+
+    rec = read_capture4analysis(p, salvage=True)
+    assert rec.meta.partial
+    # complete payload entries before the cut are kept; rows after it are lost
+    assert 0 < rec.n_cycles < 3818
+    full = read_capture4analysis(c4a_file)
+    np.testing.assert_array_equal(
+        rec.hf[rec.columns].to_numpy(), full.hf.loc[rec.cycles, rec.columns].to_numpy())
+    assert int(rec.cycles[0]) == 5558098
+    assert any("truncated at byte 1000000" in i and "complete payload entries" in i
+               for i in rec.meta.issues)
+
+
+def test_truncated_inside_header(c4a_file: Path, tmp_path: Path) -> None:
+    p = _write(tmp_path, c4a_file.read_bytes()[:3000], "cut.json")
+    for salvage in (False, True):
+        with pytest.raises(TruncatedFileError, match="Header"):
+            read_capture4analysis(p, salvage=salvage)
+
+
+# ---------------------------------------------------------------------------- structure
+def test_missing_header(tmp_path: Path) -> None:
+    doc = _doc([[100, 1.0, 2.0]])
+    del doc["Header"]
+    with pytest.raises(FormatError, match="no complete Header") as info:
+        read_capture4analysis(_write(tmp_path, doc))
+    assert info.value.position == "Header"
+
+
+def test_hf_data_without_signal_list(tmp_path: Path) -> None:
+    doc = _doc([[100, 1.0, 2.0]])
+    del doc["Header"]["SignalListHFData"]
+    with pytest.raises(FormatError, match="no SignalListHFData") as info:
+        read_capture4analysis(_write(tmp_path, doc))
+    assert info.value.position == "Payload[0].HFData"
+
+
+def test_missing_cycle_column(tmp_path: Path) -> None:
+    doc = _doc([[1.0, 2.0]])
+    doc["Header"]["SignalListHFData"].pop(0)
+    with pytest.raises(FormatError, match="no CYCLE entry"):
+        read_capture4analysis(_write(tmp_path, doc))
+
+
+def test_missing_address(tmp_path: Path) -> None:
+    doc = _doc([[100, 1.0, 2.0]])
+    del doc["Header"]["SignalListHFData"][1]["Address"]
+    p = _write(tmp_path, doc)
+    with pytest.raises(FormatError) as info:
+        read_capture4analysis(p)
+    assert info.value.field == "Address"
+    assert info.value.position == "Header.SignalListHFData[1]"
+    rec = read_capture4analysis(p, salvage=True)
+    assert "CURRENT|SP1" in rec.columns and rec.meta.partial
+
+
+def test_not_an_object(tmp_path: Path) -> None:
+    with pytest.raises(FormatError, match="not a JSON object"):
+        read_capture4analysis(_write(tmp_path, b"[1, 2, 3]"))
+
+
+def test_syntax_error_in_payload_entry(tmp_path: Path) -> None:
+    good = orjson.dumps(_doc([[100, 1.0, 2.0]]))
+    # a second payload entry with a broken number
+    bad = good.replace(b'"Payload":[', b'"Payload":[{"HFData":[[101,1.0.0,2.0]]},')
+    p = _write(tmp_path, bad)
+    with pytest.raises(FormatError) as info:
+        read_capture4analysis(p)
+    assert info.value.position is not None
+    assert info.value.position.startswith("Payload[0], byte ")
+    rec = read_capture4analysis(p, salvage=True)
+    assert rec.cycles.tolist() == [100]
+    assert rec.meta.partial and any("entry dropped" in i for i in rec.meta.issues)
+
+
+# ---------------------------------------------------------------------------- values
+def test_wrong_type_non_numeric_string(tmp_path: Path) -> None:
+    p = _write(tmp_path, _doc([[100, 1.0, 2.0], [101, "abc", 2.0]]))
+    with pytest.raises(FormatError) as info:
+        read_capture4analysis(p)
+    assert info.value.position == "Payload[0].HFData[1][1]"
+    assert info.value.field == "CURRENT|SP1"
+    rec = read_capture4analysis(p, salvage=True)
+    assert rec.meta.partial
+    assert np.isnan(rec.signal("CURRENT|SP1").iloc[1])
+    assert rec.signal("LOAD|SP1").tolist() == [2.0, 2.0]
+
+
+def test_boolean_is_wrong_type(tmp_path: Path) -> None:
+    with pytest.raises(FormatError, match="where a number is required"):
+        read_capture4analysis(_write(tmp_path, _doc([[100, True, 2.0]])))
+
+
+def test_non_integer_cycle(tmp_path: Path) -> None:
+    with pytest.raises(FormatError, match="not an integer") as info:
+        read_capture4analysis(_write(tmp_path, _doc([[100.5, 1.0, 2.0]])))
+    assert info.value.field == "CYCLE"
+
+
+def test_row_of_wrong_length(tmp_path: Path) -> None:
+    p = _write(tmp_path, _doc([[100, 1.0, 2.0], [101, 1.0], [102, 3.0, 4.0]]))
+    with pytest.raises(FormatError, match="2 values, SignalListHFData declares 3") as info:
+        read_capture4analysis(p)
+    assert info.value.position == "Payload[0].HFData[1]"
+    rec = read_capture4analysis(p, salvage=True)
+    assert rec.cycles.tolist() == [100, 102]
+    assert rec.meta.partial and any("row dropped" in i for i in rec.meta.issues)
+
+
+def test_unknown_payload_key_kept(tmp_path: Path) -> None:
+    doc = _doc([[100, 1.0, 2.0]])
+    doc["Payload"].append({"ExternalData": {"id": "ET200", "values": [1, 2]}})
+    rec = read_capture4analysis(_write(tmp_path, doc))
+    assert not rec.meta.partial
+    assert rec.meta.attrs["payload_other"]["ExternalData"] == [
+        {"id": "ET200", "values": [1, 2]}]
+    assert any("'ExternalData' (1 entries) not interpreted" in i for i in rec.meta.issues)
+
+
+def test_footer_error_messages_reported(tmp_path: Path) -> None:
+    doc = _doc([[100, 1.0, 2.0]])
+    doc["Footer"]["ErrorMessages"] = ["buffer overflow"]
+    rec = read_capture4analysis(_write(tmp_path, doc))
+    assert any("buffer overflow" in i for i in rec.meta.issues)
+
+
+# ---------------------------------------------------------------------------- zip
+def test_broken_zip(c4a_file: Path, tmp_path: Path) -> None:
+    good = tmp_path / "good.zip"
+    with zipfile.ZipFile(good, "w", zipfile.ZIP_DEFLATED) as zf:
+        zf.write(c4a_file, "run.json")
+    data = good.read_bytes()
+    bad = _write(tmp_path, data[: len(data) // 2], "bad.zip")
+    with pytest.raises(TruncatedFileError, match="broken zip") as info:
+        read_capture4analysis(bad)
+    assert info.value.path == str(bad)
+    rec = read_capture4analysis(bad, salvage=True)
+    assert rec.meta.partial
+    assert 0 < rec.n_cycles < 3818
+    assert any("broken zip archive" in i for i in rec.meta.issues)
+    garbage = _write(tmp_path, b"PK\x03\x04 not really a zip", "junk.zip")
+    with pytest.raises(TruncatedFileError):
+        read_capture4analysis(garbage, salvage=True)
+
+
+def test_zip_without_json(tmp_path: Path) -> None:
+    p = tmp_path / "empty.zip"
+    with zipfile.ZipFile(p, "w") as zf:
+        zf.writestr("readme.txt", "nothing")
+    with pytest.raises(FormatError, match=r"no \.json"):
+        read_capture4analysis(p)
+
+
+# ---------------------------------------------------------------------------- detection
+def test_unknown_format_lists_supported(tmp_path: Path) -> None:
+    p = _write(tmp_path, b"hello", "x.bin")
+    with pytest.raises(FormatError, match=r"supported: .*Capture4Analysis"):
+        read_recording(p)
+    with pytest.raises(FormatError, match="file not found"):
+        read_recording(tmp_path / "missing.json")
+
+
+def test_missing_reader_module(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(_detect.SUPPORTED_FORMATS, "edge_dataobject",
+                        ("cnctwin.iotools._no_such_reader", "read_x", "Edge dataobject"))
+    p = _write(tmp_path, b'{"header": {"key": "dataobject"}, "body": {"datapoint": []}}')
+    with pytest.raises(FormatError, match="reader is not available"):
+        read_recording(p)
