@@ -1,0 +1,1103 @@
+"""Identification of an axis' cascade position loop from production HF data.
+
+Pure fitting functions first (:func:`fit_setpoint_chain`, :func:`fit_speed_loop`,
+:func:`fit_position_controller`, :func:`fit_friction`), then the orchestrator
+:func:`identify_axis`, which uses whatever signals a recording has and lists what it could not
+identify and why (``AxisIdentification.not_identified``).
+
+Loop structure (thesis Fig. 3.1; physics-and-performance.md §1.2)::
+
+    DES_POS -> jerk filter (MD32402/MD32410) -> delay + PT1 (dynamic response adaptation
+    MD32910, feedforward balancing) -> CTRL_POS
+    CMD_SPEED = Kv * (CTRL_POS - ENC_POS) + w * VEL_FFW         (MD32200, MD32610/MD32620)
+    actual speed = g * PT1_Teq(delay(CMD_SPEED))                (MD32810 equivalent time)
+    ENC_POS = integral of the actual speed
+
+Kv is reported in 1/s and in (m/min)/mm (1 (m/min)/mm = 1000/60 1/s = 16.667 1/s, MD10230).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import optimize
+
+from cnctwin.exceptions import IdentificationError
+from cnctwin.recording import Recording
+from cnctwin.servo._common import (
+    AxisData,
+    FloatArray,
+    axis_data,
+    delay,
+    derivative,
+    detect_velocity_unit,
+    informative_segments,
+    moving_average,
+    pt1,
+    pt2,
+    quantum,
+)
+
+__all__ = [
+    "JERK_FILTER_TYPES",
+    "KV_PER_S_PER_M_MIN_MM",
+    "AxisIdentification",
+    "Estimate",
+    "FrictionFit",
+    "PositionControllerFit",
+    "SetpointChainFit",
+    "SpeedLoopFit",
+    "apply_setpoint_chain",
+    "constant_velocity_runs",
+    "fit_friction",
+    "fit_position_controller",
+    "fit_setpoint_chain",
+    "fit_speed_loop",
+    "identify_axis",
+]
+
+KV_PER_S_PER_M_MIN_MM = 1000.0 / 60.0
+"""1 (m/min)/mm in 1/s (MD10230 SCALING_FACTORS_USER_DEF[9] = 16.666667)."""
+
+JERK_FILTER_TYPES: tuple[str, ...] = ("none", "moving_average", "pt2", "double_moving_average")
+"""Setpoint-filter models, simplest first (MD32402: 1 = PT2, 2 = MA, 4 = double MA)."""
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """One identified parameter.
+
+    Attributes
+    ----------
+    value : float
+        Estimate [unit].
+    stderr : float
+        Standard error [unit] (method in ``method``); NaN when not available.
+    unit : str
+        Unit.
+    method : str
+        How it was obtained.
+    """
+
+    value: float
+    stderr: float
+    unit: str
+    method: str
+
+
+# ---------------------------------------------------------------------------- helpers
+def _ess_inflation(resid: FloatArray) -> float:
+    """Variance inflation n/n_eff for AR(1)-correlated residuals (>= 1)."""
+    r = resid[np.isfinite(resid)]
+    if r.size < 10 or float(r @ r) == 0.0:
+        return 1.0
+    rho = float(r[1:] @ r[:-1]) / float(r @ r)
+    rho = min(max(rho, 0.0), 0.999)
+    return (1.0 + rho) / (1.0 - rho)
+
+
+def _hessian_se(cost: Callable[[FloatArray], float], p: FloatArray, n: int, inflation: float,
+                steps: FloatArray) -> FloatArray:
+    """Standard errors of a least-squares fit from the numerical Hessian of the SSE."""
+    k = p.size
+    f0 = cost(p)
+    h = np.zeros((k, k))
+    for i in range(k):
+        for j in range(i, k):
+            ei = np.zeros(k)
+            ej = np.zeros(k)
+            ei[i] = steps[i]
+            ej[j] = steps[j]
+            fpp = cost(p + ei + ej)
+            fpm = cost(p + ei - ej)
+            fmp = cost(p - ei + ej)
+            fmm = cost(p - ei - ej)
+            h[i, j] = h[j, i] = (fpp - fpm - fmp + fmm) / (4 * steps[i] * steps[j])
+    sigma2 = f0 / max(n - k, 1)
+    try:
+        cov = np.linalg.inv(h / 2.0) * sigma2 * inflation
+        se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    except np.linalg.LinAlgError:
+        se = np.full(k, np.nan)
+    return se
+
+
+def _segment_mask(n: int, segs: list[slice], warmup: int) -> np.ndarray:
+    m = np.zeros(n, dtype=bool)
+    for s in segs:
+        m[s.start + warmup : s.stop] = True
+    return m
+
+
+# ---------------------------------------------------------------------------- setpoint chain
+@dataclass(frozen=True)
+class SetpointChainFit:
+    """DES_POS -> CTRL_POS model: jerk filter, then delay, then PT1.
+
+    Attributes
+    ----------
+    jerk_type : str
+        One of :data:`JERK_FILTER_TYPES`.
+    jerk_time_s : float
+        Jerk-filter time (MA window, PT2 time constant, first MA window) [s].
+    jerk_time2_s : float
+        Second MA window (double MA only) [s].
+    jerk_damping : float
+        PT2 damping [-] (PT2 only).
+    delay_s : float
+        Pure delay after the jerk filter (dynamic response adaptation, dead-time balancing) [s].
+    pt1_s : float
+        First-order lag after the jerk filter (PT1 balancing / adaptation) [s].
+    rms : float
+        Residual RMS of CTRL_POS [position unit].
+    rms_by_model : dict
+        Residual RMS of every model tried.
+    stderr : dict
+        Standard errors of the parameters above [s] or [-].
+    """
+
+    jerk_type: str
+    jerk_time_s: float
+    jerk_time2_s: float
+    jerk_damping: float
+    delay_s: float
+    pt1_s: float
+    rms: float
+    rms_by_model: dict[str, float]
+    stderr: dict[str, float]
+
+
+def _jerk(x: FloatArray, jerk_type: str, p: FloatArray) -> FloatArray:
+    if jerk_type == "none":
+        return x
+    if jerk_type == "moving_average":
+        return moving_average(x, max(p[0], 0.0))
+    if jerk_type == "double_moving_average":
+        return moving_average(moving_average(x, max(p[0], 0.0)), max(p[1], 0.0))
+    if jerk_type == "pt2":
+        return pt2(x, max(p[0], 0.0), min(max(p[1], 0.05), 5.0))
+    raise IdentificationError(f"unknown jerk filter {jerk_type!r}; use one of {JERK_FILTER_TYPES}")
+
+
+_N_JERK = {"none": 0, "moving_average": 1, "double_moving_average": 2, "pt2": 2}
+
+
+def apply_setpoint_chain(
+    des: FloatArray, *, jerk_type: str, jerk_cycles: tuple[float, ...], delay_cycles: float,
+    pt1_cycles: float,
+) -> FloatArray:
+    """Jerk filter -> delay -> PT1 on one contiguous setpoint run (parameters in cycles)."""
+    y = _jerk(des, jerk_type, np.asarray(jerk_cycles, dtype=float))
+    return pt1(delay(y, max(delay_cycles, 0.0)), max(pt1_cycles, 0.0))
+
+
+def fit_setpoint_chain(
+    des: FloatArray, ctrl: FloatArray, segs: list[slice], *, cycle_time_s: float,
+    models: tuple[str, ...] = JERK_FILTER_TYPES, rel_tol: float = 0.1,
+) -> SetpointChainFit:
+    """Fit the setpoint filters between DES_POS and CTRL_POS by least squares.
+
+    Every jerk-filter model is fitted (grid start, then Nelder-Mead) together with a delay and a
+    PT1; the simplest model whose residual RMS is within ``1 + rel_tol`` of the best is chosen.
+
+    Parameters
+    ----------
+    des, ctrl : numpy.ndarray
+        DES_POS and CTRL_POS [mm or deg].
+    segs : list of slice
+        Contiguous runs of the cycle counter.
+    cycle_time_s : float
+        Cycle time [s].
+    models : tuple of str
+        Models to try (:data:`JERK_FILTER_TYPES`).
+    rel_tol : float, default 0.1
+        Relative RMS margin for preferring a simpler model.
+
+    Returns
+    -------
+    SetpointChainFit
+
+    Notes
+    -----
+    Moving average: ``y(t) = 1/T int_{t-T}^t x``; double MA: two in series (MD32410,
+    MD32411); PT2: ``1/(T^2 s^2 + 2 D T s + 1)`` (MD32402 types 2, 4, 1; B2 function manual).
+    Standard errors from the SSE Hessian, inflated for AR(1) residual correlation.
+    """
+    full_mask = _segment_mask(des.size, segs, 5) & np.isfinite(des) & np.isfinite(ctrl)
+    if full_mask.sum() < 50:
+        raise IdentificationError(
+            "too few samples with DES_POS and CTRL_POS to fit the jerk filter")
+    if float(np.ptp(des[full_mask])) == 0.0:
+        raise IdentificationError("DES_POS does not move; the setpoint filters cannot be fitted")
+    all_segs = segs
+    segs, mask = informative_segments(des, all_segs)
+    mask &= np.isfinite(des) & np.isfinite(ctrl)
+    if mask.sum() < 50:
+        segs, mask = all_segs, full_mask
+
+    def model_of(jt: str, p: FloatArray) -> FloatArray:
+        nj = _N_JERK[jt]
+        out = np.full(des.shape, np.nan)
+        for s in segs:
+            if s.stop - s.start < 3:
+                continue
+            out[s] = apply_setpoint_chain(des[s], jerk_type=jt, jerk_cycles=tuple(p[:nj]),
+                                          delay_cycles=p[nj], pt1_cycles=p[nj + 1])
+        return out
+
+    def cost_of(jt: str) -> Callable[[FloatArray], float]:
+        def cost(p: FloatArray) -> float:
+            if np.any(p < -1e-9) or (jt == "pt2" and p[1] <= 0.05):
+                return 1e30
+            r = (ctrl - model_of(jt, p))[mask]
+            return float(r @ r)
+
+        return cost
+
+    fits: dict[str, tuple[FloatArray, float]] = {}
+    for jt in models:
+        cost = cost_of(jt)
+        tj = [1.0, 2.0, 4.0, 6.0, 9.0, 13.0, 18.0]
+        taus = [0.0, 1.0, 3.0]
+        t1s = [0.0, 1.5, 4.0]
+        if jt == "none":
+            grid = [np.array([tau, t1]) for tau in [*taus, 6.0] for t1 in [*t1s, 10.0]]
+        elif jt == "moving_average":
+            grid = [np.array([t, tau, t1]) for t in tj for tau in taus for t1 in t1s]
+        elif jt == "double_moving_average":
+            grid = [np.array([t, t, tau, t1]) for t in tj for tau in taus for t1 in t1s]
+        else:
+            grid = [np.array([t / 2.0, dmp, tau, t1]) for t in tj for dmp in (0.7, 1.0)
+                    for tau in taus for t1 in t1s]
+        start = min(grid, key=cost)
+        res = optimize.minimize(cost, start, method="Nelder-Mead",
+                                options={"xatol": 1e-3, "fatol": 0.0, "maxiter": 500,
+                                         "adaptive": True})
+        res2 = optimize.minimize(cost, res.x, method="Nelder-Mead",
+                                 options={"xatol": 1e-4, "fatol": 0.0, "maxiter": 250,
+                                          "adaptive": True})
+        fits[jt] = (np.asarray(res2.x, dtype=float), float(res2.fun))
+    n = int(mask.sum())
+    rms_by = {jt: math.sqrt(f[1] / n) for jt, f in fits.items()}
+    best = min(rms_by.values())
+    floor = max(best * (1.0 + rel_tol), 1e-9)
+    chosen = next(jt for jt in models if rms_by[jt] <= floor)
+    p = fits[chosen][0]
+    nj = _N_JERK[chosen]
+    cost = cost_of(chosen)
+    resid = (ctrl - model_of(chosen, p))[mask]
+    steps = np.maximum(np.abs(p) * 1e-3, 1e-3)
+    se = _hessian_se(cost, p, n, _ess_inflation(resid), steps) if fits[chosen][1] > 0 else (
+        np.zeros(p.size))
+    dt = cycle_time_s
+    names = {"none": [], "moving_average": ["jerk_time_s"], "pt2": ["jerk_time_s", "jerk_damping"],
+             "double_moving_average": ["jerk_time_s", "jerk_time2_s"]}[chosen]
+    names = [*names, "delay_s", "pt1_s"]
+    stderr = {nm: float(se[i]) * (1.0 if nm == "jerk_damping" else dt)
+              for i, nm in enumerate(names)}
+    jt1 = float(p[0]) * dt if nj >= 1 else 0.0
+    jt2 = float(p[1]) * dt if chosen == "double_moving_average" else 0.0
+    dmp = float(p[1]) if chosen == "pt2" else float("nan")
+    if chosen == "double_moving_average" and jt2 > jt1:  # order is irrelevant; larger first
+        jt1, jt2 = jt2, jt1
+        se1, se2 = stderr["jerk_time_s"], stderr["jerk_time2_s"]
+        stderr["jerk_time_s"], stderr["jerk_time2_s"] = se2, se1
+    return SetpointChainFit(chosen, jt1, jt2, dmp, max(float(p[nj]), 0.0) * dt,
+                            max(float(p[nj + 1]), 0.0) * dt, rms_by[chosen], rms_by, stderr)
+
+
+# ---------------------------------------------------------------------------- speed loop
+@dataclass(frozen=True)
+class SpeedLoopFit:
+    """CMD_SPEED -> actual speed model ``v = g * PT1_T(delay_tau(u))``.
+
+    Attributes
+    ----------
+    gain : float
+        Steady-state ratio actual speed / speed command g [-] (1 when CMD_SPEED is in load
+        units and the speed controller has integral action).
+    time_s, delay_s : float
+        PT1 time constant and pure delay [s]; ``equivalent_time_s = time_s + delay_s``
+        corresponds to MD32810 EQUIV_SPEEDCTRL_TIME. The one-cycle hold of the position
+        controller output (CMD_SPEED of cycle k acts during cycle k, the encoder of cycle k+1
+        sees it) is not part of ``delay_s``.
+    model_delay_cycles, model_time_cycles : float
+        The fitted model parameters as used by the prediction (delay including the hold).
+    stderr : dict
+        Standard errors of gain, time_s, delay_s.
+    rms : float
+        Residual RMS [position unit/s].
+    """
+
+    gain: float
+    time_s: float
+    delay_s: float
+    stderr: dict[str, float]
+    rms: float
+    model_delay_cycles: float = 1.0
+    model_time_cycles: float = 0.0
+
+    @property
+    def equivalent_time_s(self) -> float:
+        """Equivalent time constant of the closed speed loop, T + delay [s]."""
+        return self.time_s + self.delay_s
+
+
+def fit_speed_loop(
+    cmd_per_s: FloatArray, v_act_backward: FloatArray, segs: list[slice], *, cycle_time_s: float
+) -> SpeedLoopFit:
+    """Fit first order + delay from the speed command to the actual speed.
+
+    Parameters
+    ----------
+    cmd_per_s : numpy.ndarray
+        Speed command converted to position units per second.
+    v_act_backward : numpy.ndarray
+        ``(ENC_POS[k] - ENC_POS[k-1]) / dt`` (the mean speed of the last cycle, half a cycle
+        late; the fit corrects that half cycle) [unit/s].
+    segs : list of slice
+        Contiguous runs.
+    cycle_time_s : float
+        Cycle time [s].
+
+    Returns
+    -------
+    SpeedLoopFit
+    """
+    u = np.nan_to_num(cmd_per_s)
+    mask = _segment_mask(u.size, segs, 5) & np.isfinite(v_act_backward) & np.isfinite(cmd_per_s)
+    if mask.sum() < 50 or float(np.std(v_act_backward[mask])) == 0.0:
+        raise IdentificationError("the axis does not move; the speed loop cannot be fitted")
+    win, wmask = informative_segments(np.cumsum(u), segs, pad=60, warm=30)
+    wmask &= mask
+    if wmask.sum() >= 50:
+        segs, mask = win, wmask
+    y = v_act_backward
+
+    def shaped(p: FloatArray) -> FloatArray:
+        out = np.full(u.shape, np.nan)
+        for s in segs:
+            if s.stop - s.start < 3:
+                continue
+            # the backward difference is the mean over [k-1, k]: a MA of one cycle
+            out[s] = moving_average(pt1(delay(u[s], max(p[0], 0.0)), max(p[1], 0.0)), 1.0)
+        return out
+
+    def cost_g(p: FloatArray) -> tuple[float, float]:
+        if np.any(p < -1e-9) or p[0] < 1.0:
+            return 1e30, 1.0
+        x = shaped(p)[mask]
+        yy = y[mask]
+        den = float(x @ x)
+        g = float(x @ yy) / den if den > 0 else 1.0
+        r = yy - g * x
+        return float(r @ r), g
+
+    def cost(p: FloatArray) -> float:
+        return cost_g(p)[0]
+
+    grid = [np.array([tau, t]) for tau in (1.0, 1.5, 2.0, 3.0, 4.0)
+            for t in (0.0, 0.5, 1.0, 2.0, 4.0)]
+    start = min(grid, key=cost)
+    res = optimize.minimize(cost, start, method="Nelder-Mead",
+                            options={"xatol": 1e-4, "fatol": 0.0, "maxiter": 600})
+    p = np.maximum(res.x, 0.0)
+    sse, g = cost_g(p)
+    n = int(mask.sum())
+    resid = y[mask] - g * shaped(p)[mask]
+
+    def cost3(q: FloatArray) -> float:
+        x = shaped(q[1:])[mask]
+        r = y[mask] - q[0] * x
+        return float(r @ r)
+
+    q = np.array([g, *p])
+    se = _hessian_se(cost3, q, n, _ess_inflation(resid), np.maximum(np.abs(q) * 1e-3, 1e-3))
+    dt = cycle_time_s
+    return SpeedLoopFit(g, float(p[1]) * dt, (float(p[0]) - 1.0) * dt,
+                        {"gain": float(se[0]), "time_s": float(se[2]) * dt,
+                         "delay_s": float(se[1]) * dt}, math.sqrt(sse / n),
+                        model_delay_cycles=float(p[0]), model_time_cycles=float(p[1]))
+
+
+# ---------------------------------------------------------------------------- P controller
+@dataclass(frozen=True)
+class PositionControllerFit:
+    """Least-squares fit of ``cmd = a * diff + c * ffw + offset``.
+
+    Attributes
+    ----------
+    a, c, offset : float
+        Coefficients (``c`` is NaN without a feedforward regressor).
+    se_a, se_c : float
+        Block-bootstrap standard errors.
+    rms : float
+        Residual RMS [cmd unit].
+    n_used, n_excluded : int
+        Samples used; samples dropped as outliers (> 6 MAD, e.g. speed-mode or saturation).
+    """
+
+    a: float
+    c: float
+    offset: float
+    se_a: float
+    se_c: float
+    rms: float
+    n_used: int
+    n_excluded: int
+
+
+def fit_position_controller(
+    cmd: FloatArray, diff: FloatArray, ffw: FloatArray | None, *, block_cycles: int = 100,
+    n_bootstrap: int = 200, seed: int = 0, extra: FloatArray | None = None,
+) -> PositionControllerFit:
+    """Regress the speed command on the controller difference and the velocity feedforward.
+
+    Parameters
+    ----------
+    cmd : numpy.ndarray
+        Speed command [unit/s].
+    diff : numpy.ndarray
+        Controller difference (CTRL_DIFF2, or the following error as a proxy) [mm or deg].
+    ffw : numpy.ndarray or None
+        Velocity feedforward [unit/s]; None for FFW off.
+    block_cycles : int, default 100
+        Block length of the moving-block bootstrap [cycles].
+    n_bootstrap : int, default 200
+        Bootstrap resamples.
+    seed : int, default 0
+        Random seed of the bootstrap.
+    extra : numpy.ndarray, optional
+        Additional regressor columns (n x m), e.g. setpoint differences that absorb an
+        unrecorded setpoint filter.
+
+    Returns
+    -------
+    PositionControllerFit
+
+    Notes
+    -----
+    P position controller with speed feedforward (MD32200, MD32620):
+    ``n_set = Kv * e + w * v_ffw``. Outliers beyond 6 MAD (speed-controlled spindle, saturation)
+    are excluded in two passes and counted.
+    """
+    cols = [diff] if ffw is None else [diff, ffw]
+    if extra is not None:
+        cols += [extra[:, j] for j in range(extra.shape[1])]
+    a_mat = np.column_stack([*cols, np.ones_like(diff)])
+    m = np.isfinite(a_mat).all(axis=1) & np.isfinite(cmd)
+    n_total = int(m.sum())
+    if n_total < 20:
+        raise IdentificationError(
+            "fewer than 20 samples with the speed command and controller difference")
+    if float(np.std(diff[m])) == 0.0:
+        raise IdentificationError("the controller difference is constant; Kv is not identifiable")
+    coef = np.zeros(a_mat.shape[1])
+    for _ in range(3):
+        coef, *_ = np.linalg.lstsq(a_mat[m], cmd[m], rcond=None)
+        r = cmd - a_mat @ coef
+        mad = float(np.median(np.abs(r[m] - np.median(r[m])))) * 1.4826
+        if mad == 0:
+            break
+        new = m & (np.abs(r) <= 6 * mad + 1e-12)
+        if new.sum() == m.sum() or new.sum() < 20:
+            break
+        m = new
+    idx = np.flatnonzero(m)
+    rng = np.random.default_rng(seed)
+    nb = max(1, idx.size // block_cycles)
+    boots = []
+    for _ in range(n_bootstrap):
+        starts = rng.integers(0, max(idx.size - block_cycles, 1), nb)
+        sel = idx[(starts[:, None] + np.arange(min(block_cycles, idx.size))[None, :]).ravel()]
+        cb, *_ = np.linalg.lstsq(a_mat[sel], cmd[sel], rcond=None)
+        boots.append(cb)
+    b = np.asarray(boots)
+    se = b.std(axis=0, ddof=1) if len(boots) > 1 else np.full(coef.size, np.nan)
+    resid = cmd[m] - a_mat[m] @ coef
+    return PositionControllerFit(
+        float(coef[0]), float(coef[1]) if ffw is not None else float("nan"), float(coef[-1]),
+        float(se[0]), float(se[1]) if ffw is not None else float("nan"),
+        float(np.sqrt(np.mean(resid**2))), int(m.sum()), n_total - int(m.sum()),
+    )
+
+
+# ---------------------------------------------------------------------------- friction
+@dataclass(frozen=True)
+class FrictionFit:
+    """``tau = Fc sign(v) + b v (+ offset)`` from constant-velocity runs.
+
+    Attributes
+    ----------
+    coulomb, viscous, offset : float
+        Coulomb level [signal unit], viscous slope [signal unit per unit/s], constant
+        (weight/gravity) offset [signal unit] (0 if not fitted).
+    se_coulomb, se_viscous, se_offset : float
+        Standard errors (bootstrap over runs).
+    n_runs : int
+        Constant-velocity runs used.
+    signal : str
+        ``"CURRENT"`` or ``"TORQUE"``.
+    unit : str
+        Signal unit.
+    """
+
+    coulomb: float
+    viscous: float
+    offset: float
+    se_coulomb: float
+    se_viscous: float
+    se_offset: float
+    n_runs: int
+    signal: str
+    unit: str
+
+
+def constant_velocity_runs(
+    v_per_s: FloatArray, segs: list[slice], *, min_cycles: int = 40, rel_tol: float = 0.02,
+    min_speed_frac: float = 0.02,
+) -> list[slice]:
+    """Runs where the setpoint velocity is constant and non-zero.
+
+    A run keeps cycles whose velocity stays within ``rel_tol`` of the run median and is above
+    ``min_speed_frac`` of the largest speed; the first quarter of each run (transient) is
+    dropped.
+    """
+    vmax = float(np.nanmax(np.abs(v_per_s))) if np.isfinite(v_per_s).any() else 0.0
+    if vmax == 0.0:
+        return []
+    runs: list[slice] = []
+    for s in segs:
+        v = v_per_s[s]
+        k = 0
+        n = v.size
+        while k < n:
+            if not np.isfinite(v[k]) or abs(v[k]) < min_speed_frac * vmax:
+                k += 1
+                continue
+            j = k
+            ref = v[k]
+            while j < n and np.isfinite(v[j]) and abs(v[j] - ref) <= rel_tol * abs(ref):
+                j += 1
+            if j - k >= min_cycles:
+                start = k + (j - k) // 4
+                runs.append(slice(s.start + start, s.start + j))
+            k = max(j, k + 1)
+    return runs
+
+
+def fit_friction(
+    v_per_s: FloatArray, effort: FloatArray, runs: list[slice], *, signal: str, unit: str,
+    n_bootstrap: int = 200, seed: int = 0,
+) -> FrictionFit:
+    """Fit Coulomb + viscous friction to run means of CURRENT or TORQUE.
+
+    Parameters
+    ----------
+    v_per_s : numpy.ndarray
+        Actual velocity [unit/s].
+    effort : numpy.ndarray
+        CURRENT [A] or TORQUE [N or Nm].
+    runs : list of slice
+        Constant-velocity runs (:func:`constant_velocity_runs`).
+    signal, unit : str
+        Name and unit of ``effort`` (for the result).
+    n_bootstrap : int, default 200
+        Resamples of the bootstrap over runs.
+    seed : int, default 0
+        Random seed.
+
+    Notes
+    -----
+    ``tau = Fc sign(v) + b v + c``; ``c`` (weight compensation of a vertical axis) is fitted
+    only when both directions occur. Run means average out the cutting-free ripple.
+    """
+    vm = np.array([np.nanmean(v_per_s[r]) for r in runs])
+    tm = np.array([np.nanmean(effort[r]) for r in runs])
+    ok = np.isfinite(vm) & np.isfinite(tm)
+    vm, tm = vm[ok], tm[ok]
+    both = bool((vm > 0).any() and (vm < 0).any())
+    p = 3 if both else 2
+    if vm.size < p + 1 or np.unique(np.round(np.abs(vm), 9)).size < 2:
+        raise IdentificationError(
+            f"friction needs >= {p + 1} constant-velocity runs at >= 2 speeds; found {vm.size}")
+
+    def design(v: FloatArray) -> FloatArray:
+        cols = [np.sign(v), v]
+        if both:
+            cols.append(np.ones_like(v))
+        return np.column_stack(cols)
+
+    coef, *_ = np.linalg.lstsq(design(vm), tm, rcond=None)
+    rng = np.random.default_rng(seed)
+    boots = []
+    for _ in range(n_bootstrap):
+        sel = rng.integers(0, vm.size, vm.size)
+        if np.unique(np.round(np.abs(vm[sel]), 9)).size < 2 or (
+                both and not ((vm[sel] > 0).any() and (vm[sel] < 0).any())):
+            continue
+        cb, *_ = np.linalg.lstsq(design(vm[sel]), tm[sel], rcond=None)
+        boots.append(cb)
+    se = np.asarray(boots).std(axis=0, ddof=1) if len(boots) > 2 else np.full(p, np.nan)
+    return FrictionFit(
+        float(coef[0]), float(coef[1]), float(coef[2]) if both else 0.0, float(se[0]),
+        float(se[1]), float(se[2]) if both else float("nan"), int(vm.size), signal, unit,
+    )
+
+
+# ---------------------------------------------------------------------------- orchestration
+@dataclass
+class AxisIdentification:
+    """What could be identified about one axis' position loop, and what not.
+
+    Attributes
+    ----------
+    axis : str
+        Axis name.
+    params : dict
+        Parameter name -> :class:`Estimate`. Names: ``kv_1_s``, ``kv_m_min_mm``,
+        ``ffw_weight``, ``apparent_ffw_weight``, ``jerk_time_s``, ``jerk_time2_s``,
+        ``jerk_damping``, ``setpoint_delay_s``, ``setpoint_pt1_s``, ``ffw_delay_s``,
+        ``speed_loop_time_s``, ``speed_loop_delay_s``, ``speed_loop_equiv_time_s``,
+        ``speed_gain``, ``coulomb_<signal>``, ``viscous_<signal>``, ``offset_<signal>``,
+        ``reversal_error``.
+    ffw_mode : str
+        ``"none"``, ``"speed"``, ``"torque"`` or ``"unknown"``.
+    jerk_type : str or None
+        Chosen jerk-filter model (:data:`JERK_FILTER_TYPES`), None if not identified.
+    not_identified : dict
+        Parameter -> reason.
+    units : dict
+        Velocity unit findings per signal (declared, detected, ratio).
+    notes : list of str
+        Findings worth reading (unit mismatches, outliers excluded, assumptions).
+    setpoint : SetpointChainFit or None
+    speed_loop : SpeedLoopFit or None
+    controller : PositionControllerFit or None
+    cycle_time_s : float
+        Cycle time [s].
+    position_unit : str
+        ``"mm"`` or ``"deg"``.
+    """
+
+    axis: str
+    params: dict[str, Estimate] = field(default_factory=dict)
+    ffw_mode: str = "unknown"
+    jerk_type: str | None = None
+    not_identified: dict[str, str] = field(default_factory=dict)
+    units: dict[str, dict[str, Any]] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    setpoint: SetpointChainFit | None = None
+    speed_loop: SpeedLoopFit | None = None
+    controller: PositionControllerFit | None = None
+    cycle_time_s: float = 0.002
+    position_unit: str = "mm"
+
+    def value(self, name: str) -> float:
+        """Value of a parameter; raises IdentificationError with the reason if missing."""
+        if name in self.params:
+            return self.params[name].value
+        reason = self.not_identified.get(name, "not a parameter of this identification")
+        raise IdentificationError(f"{self.axis}: {name} not identified: {reason}")
+
+    def rows(self) -> list[tuple[str, float, float, str, str]]:
+        """(parameter, value, stderr, unit, method) rows for tables."""
+        return [(k, e.value, e.stderr, e.unit, e.method) for k, e in self.params.items()]
+
+
+def _velocity_factor(d: AxisData, code: str, ref: FloatArray, ident: AxisIdentification) -> float:
+    vu = detect_velocity_unit(d.signals[code], ref, declared=d.units.get(code, ""), kind=d.kind)
+    ident.units[code] = {"declared": vu.declared, "detected": vu.detected, "ratio": vu.ratio,
+                         "decided_by_data": vu.decided_by_data, "lag_cycles": vu.lag_cycles}
+    if vu.decided_by_data and vu.detected != vu.declared:
+        ident.notes.append(
+            f"{code}|{d.axis} is declared in {vu.declared or '?'} but behaves as {vu.detected} "
+            f"(ratio {vu.ratio:.4g} to the reference velocity in unit/s); {vu.detected} is used.")
+    return vu.factor
+
+
+def identify_axis(
+    recording: Recording,
+    axis: str,
+    *,
+    jerk_models: tuple[str, ...] = JERK_FILTER_TYPES,
+    n_bootstrap: int = 200,
+    block_cycles: int = 100,
+    seed: int = 0,
+    fir_cycles: int = 40,
+) -> AxisIdentification:
+    """Identify the cascade position loop of one axis from production data.
+
+    Parameters
+    ----------
+    recording : Recording
+        Any recording with at least DES_POS and ENC_POS of the axis.
+    axis : str
+        Axis name.
+    jerk_models : tuple of str
+        Jerk-filter models to try (:data:`JERK_FILTER_TYPES`).
+    n_bootstrap : int, default 200
+        Bootstrap resamples for regression uncertainties.
+    block_cycles : int, default 100
+        Bootstrap block length [cycles].
+    seed : int, default 0
+        Random seed (results are reproducible).
+    fir_cycles : int, default 40
+        Without CTRL_POS: length of the setpoint-difference regressors that absorb the
+        unrecorded setpoint filter in the Kv regression [cycles].
+
+    Returns
+    -------
+    AxisIdentification
+
+    Raises
+    ------
+    IdentificationError
+        If DES_POS or ENC_POS is missing or the axis never moves.
+
+    Notes
+    -----
+    * Kv: with CTRL_DIFF2 (or CTRL_POS): ``CMD_SPEED = a CTRL_DIFF2 + c VEL_FFW``;
+      ``Kv = g a`` with the speed-loop gain ``g`` (actual speed / command), ``w = g c k`` with
+      ``k`` = VEL_FFW / setpoint velocity. Without CTRL_POS the following error stands in and
+      ``c`` mixes the weight with the setpoint lag, so only an apparent weight is reported.
+      Without CMD_SPEED and with FFW off: ``v = Kv e`` on constant-velocity runs.
+    * Jerk filter, delay and PT1: :func:`fit_setpoint_chain` on DES_POS -> CTRL_POS.
+    * Speed loop: :func:`fit_speed_loop` on CMD_SPEED -> d(ENC_POS)/dt.
+    * Friction: :func:`fit_friction` on CURRENT and TORQUE.
+    """
+    d = axis_data(recording, axis)
+    for code in ("DES_POS", "ENC_POS"):
+        if not d.has(code):
+            raise IdentificationError(
+                f"{code}|{axis} is not in the recording; identification needs DES_POS and "
+                f"ENC_POS (it has: {', '.join(sorted(d.signals)) or 'nothing for this axis'})")
+    dt = d.cycle_time_s
+    sig = d.signals
+    pos_u = "mm" if d.kind == "linear" else "deg"
+    ident = AxisIdentification(axis=axis, cycle_time_s=dt, position_unit=pos_u)
+    P = ident.params
+    NI = ident.not_identified
+    segs = d.segments
+    des, enc = sig["DES_POS"], sig["ENC_POS"]
+    v_des = derivative(des, segs, dt, kind="central")
+    v_act_b = derivative(enc, segs, dt, kind="backward")
+    v_act_c = derivative(enc, segs, dt, kind="central")
+    if not np.isfinite(v_des).any() or float(np.nanmax(np.abs(v_des))) == 0.0:
+        raise IdentificationError(f"DES_POS|{axis} never moves; nothing to identify")
+    has_ctrl = d.has("CTRL_POS")
+    ctrl = sig["CTRL_POS"] if has_ctrl else None
+    if d.has("CTRL_DIFF2"):
+        diff: FloatArray | None = sig["CTRL_DIFF2"]
+        diff_name = "CTRL_DIFF2"
+    elif ctrl is not None:
+        diff = ctrl - enc
+        diff_name = "CTRL_POS - ENC_POS"
+    else:
+        diff = None
+        diff_name = ""
+
+    # --- setpoint chain (jerk filter, DRA delay, balancing PT1)
+    chain: SetpointChainFit | None = None
+    if ctrl is not None:
+        try:
+            chain = fit_setpoint_chain(des, ctrl, segs, cycle_time_s=dt, models=jerk_models)
+        except IdentificationError as exc:
+            for nm in ("jerk_time_s", "setpoint_delay_s", "setpoint_pt1_s"):
+                NI[nm] = str(exc)
+    else:
+        for nm in ("jerk_time_s", "setpoint_delay_s", "setpoint_pt1_s"):
+            NI[nm] = ("CTRL_POS is not recorded: the jerk filter, dynamic response adaptation "
+                      "and balancing act between DES_POS and CTRL_POS and cannot be separated "
+                      "from the loop lag without it")
+    if chain is not None:
+        ident.setpoint = chain
+        ident.jerk_type = chain.jerk_type
+        meth = (f"least squares DES_POS->CTRL_POS, models {'/'.join(chain.rms_by_model)}; "
+                f"chosen {chain.jerk_type} (rms {chain.rms:.3g} {pos_u})")
+        P["jerk_time_s"] = Estimate(chain.jerk_time_s, chain.stderr.get("jerk_time_s", 0.0), "s",
+                                    meth)
+        if chain.jerk_type == "double_moving_average":
+            P["jerk_time2_s"] = Estimate(chain.jerk_time2_s, chain.stderr["jerk_time2_s"], "s",
+                                         meth)
+        if chain.jerk_type == "pt2":
+            P["jerk_damping"] = Estimate(chain.jerk_damping, chain.stderr["jerk_damping"], "-",
+                                         meth)
+        P["setpoint_delay_s"] = Estimate(chain.delay_s, chain.stderr["delay_s"], "s", meth)
+        P["setpoint_pt1_s"] = Estimate(chain.pt1_s, chain.stderr["pt1_s"], "s", meth)
+
+    # --- velocity units
+    f_ffw = 1.0
+    has_ffw = d.has("VEL_FFW")
+    if has_ffw:
+        f_ffw = _velocity_factor(d, "VEL_FFW", v_des, ident)
+    has_cmd = d.has("CMD_SPEED")
+    f_cmd = 1.0
+    if has_cmd:
+        f_cmd = _velocity_factor(d, "CMD_SPEED", v_act_c, ident)
+
+    # --- speed loop
+    sl: SpeedLoopFit | None = None
+    if has_cmd:
+        try:
+            sl = fit_speed_loop(sig["CMD_SPEED"] * f_cmd, v_act_b, segs, cycle_time_s=dt)
+        except IdentificationError as exc:
+            NI["speed_loop_equiv_time_s"] = str(exc)
+    else:
+        NI["speed_loop_equiv_time_s"] = "CMD_SPEED is not recorded"
+    if sl is not None:
+        ident.speed_loop = sl
+        meth = "least squares CMD_SPEED -> d(ENC_POS)/dt, first order + delay"
+        P["speed_gain"] = Estimate(sl.gain, sl.stderr["gain"], "-", meth)
+        P["speed_loop_time_s"] = Estimate(sl.time_s, sl.stderr["time_s"], "s", meth)
+        P["speed_loop_delay_s"] = Estimate(sl.delay_s, sl.stderr["delay_s"], "s", meth)
+        P["speed_loop_equiv_time_s"] = Estimate(
+            sl.equivalent_time_s, math.hypot(sl.stderr["time_s"], sl.stderr["delay_s"]), "s",
+            meth + " (T + delay)")
+        if abs(sl.gain - 1.0) > 0.03:
+            ident.notes.append(
+                f"CMD_SPEED|{axis} is {1 / sl.gain:.4g} x the actual speed in steady state: its "
+                f"scale differs from the load velocity (drive normalisation or gear); Kv and the "
+                f"weight are referred to the actual speed.")
+
+    # --- FFW velocity timing and scale k (VEL_FFW vs setpoint velocity)
+    k_ffw = 1.0
+    if has_ffw:
+        ffw_s = sig["VEL_FFW"] * f_ffw
+        base = des
+        if chain is not None and ctrl is not None:
+            base = np.full(des.shape, np.nan)
+            for s in segs:
+                if s.stop - s.start >= 3:
+                    base[s] = _jerk(des[s], chain.jerk_type,
+                                    np.array([chain.jerk_time_s / dt,
+                                              chain.jerk_time2_s / dt if chain.jerk_type
+                                              == "double_moving_average" else chain.jerk_damping]))
+        v_base = derivative(base, segs, dt, kind="central")
+        vb = np.nan_to_num(v_base)
+        m = np.isfinite(v_base) & np.isfinite(ffw_s)
+
+        def ffw_cost(tau: float) -> float:
+            x = delay(vb, tau)[m]
+            den = float(x @ x)
+            if den == 0:
+                return 1e30
+            return float(np.sum((ffw_s[m] - (x @ ffw_s[m]) / den * x) ** 2))
+
+        taus = np.arange(-2.0, 12.0, 0.5)
+        t0 = float(taus[int(np.argmin([ffw_cost(t) for t in taus]))])
+        res = optimize.minimize_scalar(ffw_cost, bounds=(t0 - 0.5, t0 + 0.5), method="bounded",
+                                       options={"xatol": 1e-4})
+        tau_f = float(res.x)
+        x = delay(vb, tau_f)[m]
+        k_ffw = float(x @ ffw_s[m]) / float(x @ x) if float(x @ x) > 0 else float("nan")
+        P["ffw_delay_s"] = Estimate(tau_f * dt, float("nan"), "s",
+                                    "lag of VEL_FFW behind d(jerk-filtered DES_POS)/dt")
+
+    # --- Kv and weight
+    g = sl.gain if sl is not None else 1.0
+    se_g = sl.stderr["gain"] if sl is not None else 0.0
+    if has_cmd:
+        cmd_s = sig["CMD_SPEED"] * f_cmd
+        ffw_reg = sig["VEL_FFW"] * f_ffw if has_ffw else None
+        if ffw_reg is not None and not np.any(np.abs(np.nan_to_num(ffw_reg)) > 0):
+            ffw_reg = None
+        use_diff = diff if diff is not None else des - enc
+        extra = None
+        if diff is None:
+            # CTRL_POS unknown: DES - CTRL is a linear filter of DES; absorb it with setpoint
+            # differences DES[k] - DES[k-j], j = 1..fir_cycles (VEL_FFW is such a combination
+            # too, so it is left out; Kv stays identified, the weight does not)
+            extra = _setpoint_differences(des, segs, fir_cycles)
+            ffw_reg_fit = None
+        else:
+            ffw_reg_fit = ffw_reg
+        try:
+            pc = fit_position_controller(cmd_s, use_diff, ffw_reg_fit, block_cycles=block_cycles,
+                                         n_bootstrap=n_bootstrap, seed=seed, extra=extra)
+        except IdentificationError as exc:
+            NI["kv_1_s"] = str(exc)
+            pc = None
+        if pc is not None:
+            ident.controller = pc
+            kv = g * pc.a
+            se_kv = abs(kv) * math.hypot(pc.se_a / pc.a if pc.a else 0.0, se_g / g if g else 0.0)
+            if diff is not None:
+                meth = (f"regression CMD_SPEED = a*({diff_name})"
+                        f"{' + c*VEL_FFW' if ffw_reg is not None else ''}; Kv = g*a, "
+                        f"g = speed gain; block bootstrap SE")
+            else:
+                meth = (f"regression CMD_SPEED = a*(DES_POS-ENC_POS) + sum_j h_j*(DES[k]-DES[k-j]),"
+                        f" j=1..{fir_cycles} (absorbs the unrecorded setpoint filter); Kv = g*a; "
+                        f"block bootstrap SE")
+            P["kv_1_s"] = Estimate(kv, se_kv, "1/s", meth)
+            P["kv_m_min_mm"] = Estimate(kv / KV_PER_S_PER_M_MIN_MM, se_kv / KV_PER_S_PER_M_MIN_MM,
+                                        "(m/min)/mm", meth)
+            if pc.n_excluded:
+                ident.notes.append(
+                    f"{pc.n_excluded} of {pc.n_used + pc.n_excluded} samples left out of the Kv "
+                    f"regression as outliers (> 6 MAD: speed-controlled spindle, saturation).")
+            if ffw_reg is not None:
+                w = g * pc.c * k_ffw
+                se_w = abs(w) * math.hypot(pc.se_c / pc.c if pc.c else 0.0,
+                                           se_g / g if g else 0.0)
+                if diff is not None:
+                    P["ffw_weight"] = Estimate(w, se_w, "-",
+                                               "g*c*k from the CMD_SPEED regression (k = "
+                                               "VEL_FFW/setpoint velocity)")
+                else:
+                    NI["ffw_weight"] = (
+                        "CTRL_POS/CTRL_DIFF2 not recorded: the regression on the following error "
+                        "gives w - Kv*T_setpoint, the weight and the setpoint lag cannot be "
+                        "separated")
+            elif diff is not None and ctrl is not None:
+                # no VEL_FFW recorded: use the setpoint velocity as FFW regressor
+                v_ctrl = derivative(ctrl, segs, dt, kind="central")
+                pc2 = fit_position_controller(cmd_s, diff, v_ctrl, block_cycles=block_cycles,
+                                              n_bootstrap=n_bootstrap, seed=seed)
+                w = g * pc2.c
+                P["ffw_weight"] = Estimate(w, abs(g) * pc2.se_c, "-",
+                                           "regression on d(CTRL_POS)/dt (VEL_FFW not recorded)")
+                P["kv_1_s"] = Estimate(g * pc2.a, abs(g) * pc2.se_a, "1/s", meth)
+                P["kv_m_min_mm"] = Estimate(g * pc2.a / KV_PER_S_PER_M_MIN_MM,
+                                            abs(g) * pc2.se_a / KV_PER_S_PER_M_MIN_MM,
+                                            "(m/min)/mm", meth)
+            else:
+                NI["ffw_weight"] = "neither VEL_FFW nor CTRL_POS recorded"
+    else:
+        # FFW must be off for v = Kv e; steady runs of the actual speed
+        runs = constant_velocity_runs(v_act_c, segs, rel_tol=0.01)
+        if has_ffw and np.any(np.abs(np.nan_to_num(sig["VEL_FFW"])) > 0):
+            NI["kv_1_s"] = ("CMD_SPEED is not recorded and velocity feedforward is on: the "
+                            "steady following error does not reveal Kv")
+        elif len(runs) < 2:
+            NI["kv_1_s"] = "CMD_SPEED not recorded and fewer than 2 constant-velocity runs"
+        else:
+            e = diff if diff is not None else des - enc
+            em = np.array([np.nanmean(e[r]) for r in runs])
+            vm = np.array([np.nanmean(v_act_c[r]) for r in runs])
+            kv_i = vm / em
+            kv = float(np.sum(vm * em) / np.sum(em * em))
+            se = float(np.std(kv_i, ddof=1) / math.sqrt(kv_i.size))
+            meth = "steady state v = Kv*e on constant-velocity runs (FFW off assumed)"
+            P["kv_1_s"] = Estimate(kv, se, "1/s", meth)
+            P["kv_m_min_mm"] = Estimate(kv / KV_PER_S_PER_M_MIN_MM, se / KV_PER_S_PER_M_MIN_MM,
+                                        "(m/min)/mm", meth)
+            ident.notes.append("Kv from v = Kv*e assumes feedforward off (no VEL_FFW/CMD_SPEED).")
+        NI.setdefault("ffw_weight", "CMD_SPEED is not recorded")
+    if "kv_1_s" in NI:
+        NI.setdefault("kv_m_min_mm", NI["kv_1_s"])
+
+    # --- steady-state lag: following error per velocity on steady runs (always identifiable)
+    v_steady = np.where(np.abs(v_act_c - v_des) <= 0.01 * np.abs(v_des), v_act_c, np.nan)
+    runs_ss = constant_velocity_runs(v_steady, segs, rel_tol=0.01)
+    if len(runs_ss) >= 1:
+        fe_all = des - enc
+        lag_i = np.array([np.nanmean(fe_all[r]) / np.nanmean(v_act_c[r]) for r in runs_ss])
+        lag = float(np.median(lag_i))
+        se_lag = (float(np.std(lag_i, ddof=1) / math.sqrt(lag_i.size)) if lag_i.size > 1
+                  else float("nan"))
+        P["lag_time_s"] = Estimate(
+            lag, se_lag, "s", f"steady following error / velocity on {lag_i.size} runs "
+            f"(= (1-w)/Kv + setpoint lag; 1/Kv with FFW off)")
+        if "kv_1_s" in P and "ffw_weight" not in P and has_ffw:
+            kv_v = P["kv_1_s"].value
+            P["apparent_ffw_weight"] = Estimate(
+                1.0 - kv_v * lag, abs(kv_v) * se_lag if se_lag == se_lag else float("nan"), "-",
+                "1 - Kv*lag_time: the weight minus Kv times the setpoint lag (jerk filter, "
+                "balancing), not separable without CTRL_POS")
+    else:
+        NI["lag_time_s"] = "no run at steady velocity"
+
+    # --- FFW mode
+    tq = sig.get("TORQUE_FFW")
+    torque_on = tq is not None and bool(np.nanmax(np.abs(np.nan_to_num(tq))) > 0)
+    if torque_on:
+        ident.ffw_mode = "torque"
+    elif "ffw_weight" in P:
+        ident.ffw_mode = "speed" if P["ffw_weight"].value > 0.05 else "none"
+    elif has_ffw:
+        ident.ffw_mode = ("speed" if np.any(np.abs(np.nan_to_num(sig["VEL_FFW"])) > 0)
+                          else "none")
+    elif "apparent_ffw_weight" in P:
+        ident.ffw_mode = "speed"
+    if d.has("TORQUE_FFW") and not torque_on:
+        ident.notes.append(f"TORQUE_FFW|{axis} is recorded and zero: torque feedforward is off.")
+
+    # --- friction: runs where the *actual* speed is steady (no inertia term left)
+    v_steady = np.where(np.abs(v_act_c - v_des) <= 0.01 * np.abs(v_des), v_act_c, np.nan)
+    runs = constant_velocity_runs(v_steady, segs, rel_tol=0.01)
+    for code in ("CURRENT", "TORQUE"):
+        if not d.has(code):
+            NI[f"coulomb_{code.lower()}"] = f"{code}|{axis} is not recorded"
+            continue
+        try:
+            ff = fit_friction(v_act_c, sig[code], runs, signal=code, unit=d.units.get(code, ""),
+                              n_bootstrap=n_bootstrap, seed=seed)
+        except IdentificationError as exc:
+            NI[f"coulomb_{code.lower()}"] = str(exc)
+            continue
+        u = ff.unit
+        meth = f"{code} = Fc*sign(v) + b*v{' + c' if ff.se_offset == ff.se_offset else ''} on " \
+               f"{ff.n_runs} constant-velocity runs; bootstrap over runs"
+        P[f"coulomb_{code.lower()}"] = Estimate(ff.coulomb, ff.se_coulomb, u, meth)
+        P[f"viscous_{code.lower()}"] = Estimate(ff.viscous, ff.se_viscous, f"{u}/({pos_u}/s)",
+                                                 meth)
+        if ff.se_offset == ff.se_offset:
+            P[f"offset_{code.lower()}"] = Estimate(ff.offset, ff.se_offset, u, meth)
+
+    # --- reversal (backlash-like) error from CONT_DEV
+    if d.has("CONT_DEV"):
+        peaks = _reversal_peaks(v_des, sig["CONT_DEV"], segs, dt)
+        if peaks.size >= 1:
+            se = float(np.std(peaks, ddof=1) / math.sqrt(peaks.size)) if peaks.size > 1 else (
+                float("nan"))
+            P["reversal_error"] = Estimate(float(np.mean(peaks)), se, pos_u,
+                                           f"mean peak |CONT_DEV| within 100 ms after "
+                                           f"{peaks.size} velocity reversals")
+        else:
+            NI["reversal_error"] = "no velocity reversal in the recording"
+    else:
+        NI["reversal_error"] = "CONT_DEV is not recorded"
+    q = quantum(enc)
+    if q > 0:
+        ident.notes.append(f"ENC_POS|{axis} is quantized in steps of {q:.3g} {pos_u}.")
+    return ident
+
+
+def _setpoint_differences(des: FloatArray, segs: list[slice], m: int) -> FloatArray:
+    out = np.full((des.size, m), np.nan)
+    for s in segs:
+        x = des[s]
+        for j in range(1, m + 1):
+            if x.size > j:
+                col = np.full(x.size, np.nan)
+                col[j:] = x[j:] - x[:-j]
+                out[s.start : s.stop, j - 1] = col
+    return out
+
+
+def _reversal_peaks(
+    v: FloatArray, cont_dev: FloatArray, segs: list[slice], dt: float
+) -> FloatArray:
+    vmax = float(np.nanmax(np.abs(v)))
+    thr = 0.05 * vmax
+    win = max(round(0.1 / dt), 1)
+    peaks = []
+    for s in segs:
+        vs = np.nan_to_num(v[s])
+        sign = np.where(vs > thr, 1, np.where(vs < -thr, -1, 0))
+        nz = np.flatnonzero(sign)
+        for i, j in itertools.pairwise(nz):
+            if sign[i] != sign[j] and j - i < int(0.5 / dt):
+                lo = s.start + i
+                hi = min(s.start + j + win, s.stop)
+                seg = cont_dev[lo:hi]
+                if np.isfinite(seg).any():
+                    peaks.append(float(np.nanmax(np.abs(seg))))
+    return np.asarray(peaks)
