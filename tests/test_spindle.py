@@ -325,7 +325,7 @@ def test_temperature_compensation_of_kt() -> None:
 
 def test_validation_table_accepts_mappings_and_measurements() -> None:
     model = SpindleModel(1.04, 8.42e-5, 0.35)
-    cuts = [
+    cuts: list[CutMeasurement | dict[str, object]] = [
         CutMeasurement("Steel", 3200.0, 0.125, 3.66, 3.18),
         {"workpiece": "Cast iron", "speed_rpm": 2400.0, "current_a": 4.32, "torque_nm": 3.99},
     ]
