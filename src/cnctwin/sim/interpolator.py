@@ -576,9 +576,12 @@ class _Builder:
         kappa = r_mean * (dth / length) ** 2
         c = self.c_share
         v_lim = min(self._feed_mm_s(blk), v_xy, math.sqrt(c * a_xy / kappa),
-                    (c * j_xy / (kappa * kappa * r_mean)) ** (1.0 / 3.0))  # fmt: skip
+                    (c * j_xy / (kappa * kappa)) ** (1.0 / 3.0))  # fmt: skip
         nz = np.abs(u) > 1e-12
-        a_lim, j_lim = (1 - c) * a_xy, (1 - c) * j_xy
+        # jerk vector on a circle: (j_t - v^3 k^2) t + 3 v a_t k n; keep
+        # v^3 k^2 <= c j (above) and j_t + 3 v a_t k <= (1 - c) j
+        a_lim = min((1 - c) * a_xy, (1 - c) * j_xy / (6.0 * v_lim * kappa))
+        j_lim = (1 - c) * j_xy - 3.0 * v_lim * a_lim * kappa
         if np.any(nz):
             v_lim = min(v_lim, float(np.min(self.vmax[nz] / np.abs(u[nz]))))
             a_lim = min(a_lim, float(np.min(self.amax[nz] / np.abs(u[nz]))))
@@ -800,12 +803,17 @@ def _plan_velocities(
         if s.kind == _SEG_HOLD or vj[k + 1] <= 0:
             continue
         vj[k + 1] = min(vj[k + 1], _max_reachable(vj[k], s.length, s.a_lim, s.j_lim, vj[k + 1]))
-    # profiles
+    # profiles. Every motion that starts from standstill and every hold starts on the cycle
+    # grid (the NC interpolates in whole IPO cycles), so exact-stop points appear in DES_POS
+    # exactly; the standstill before it lasts < 1 cycle. Holds last whole cycles.
     t = 0.0
     cache: dict[tuple[float, ...], tuple[tuple[float, ...], tuple[float, ...]]] = {}
     for k, s in enumerate(segs):
+        if s.kind == _SEG_HOLD or vj[k] <= 0:
+            t = math.ceil(t / dt - 1e-9) * dt
         s.t0 = t
         if s.kind == _SEG_HOLD:
+            s.duration = math.ceil(s.duration / dt - 1e-9) * dt
             s.phases_t = (s.duration, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
             s.phases_j = (0.0,) * 7
             t += s.duration
@@ -819,7 +827,7 @@ def _plan_velocities(
         s.phases_t, s.phases_j = prof
         s.duration = float(sum(s.phases_t))
         t += s.duration
-    return t
+    return math.ceil(t / dt - 1e-9) * dt
 
 
 def _eval_profile(
