@@ -132,7 +132,8 @@ class ParquetChunkSink:
         Output directory (created). Files: ``hf_000000.parquet`` ... (columns ``cycle``,
         ``time``, ``CODE|AXIS``), ``lf.parquet``, ``events.parquet``, ``meta.json``.
     compression : str, default 'zstd'
-        Parquet compression codec.
+        Parquet compression codec (zstd at level 1 for the HF files: fast, and the many
+        constant columns of idle axes compress well anyway).
 
     Notes
     -----
@@ -173,7 +174,8 @@ class ParquetChunkSink:
         arrays = [pa.array(c), pa.array(time)] + [pa.array(chunk.hf[k]) for k in self._columns]
         table = pa.Table.from_arrays(arrays, names=["cycle", "time", *self._columns])
         path = self.directory / f"hf_{len(self.files):06d}.parquet"
-        pq.write_table(table, path, compression=self.compression)
+        pq.write_table(table, path, compression=self.compression,
+                       compression_level=1 if self.compression == "zstd" else None)
         self.files.append(path)
         if len(chunk.lf):
             self._lf.append(chunk.lf)
