@@ -11,14 +11,13 @@ from __future__ import annotations
 import json
 import os
 import uuid
-import warnings
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
-from store_helpers import read_c4a_local
 
+from cnctwin.iotools import read_capture4analysis
 from cnctwin.recording import Recording
 from cnctwin.store import Store
 from cnctwin.store import open as open_store
@@ -92,18 +91,8 @@ def store(store_url: str) -> Iterator[Store]:
 
 @pytest.fixture(scope="session")
 def c4a_rec(c4a_file: Path) -> Recording:
-    """The real C4A recording, read by the project reader if present, else by the helper."""
-    try:
-        from cnctwin.iotools import read_capture4analysis
-    except ImportError:
-        warnings.warn(
-            "cnctwin.iotools.read_capture4analysis is not available; the store tests read the "
-            "real C4A file with the local test helper",
-            stacklevel=1,
-        )
-        return read_c4a_local(c4a_file)
-    rec: Recording = read_capture4analysis(c4a_file)
-    return rec
+    """The real C4A recording, read by the project reader."""
+    return read_capture4analysis(c4a_file)
 
 
 @pytest.fixture(scope="session")

@@ -1,11 +1,7 @@
-"""Synthetic recordings with closed-form values and an independent reader of the real C4A JSON
-for the store tests (a plain module so test files can import it: ``import store_helpers``)."""
+"""Synthetic recordings with closed-form values for the store tests (a plain module so test
+files can import it: ``import store_helpers``)."""
 
 from __future__ import annotations
-
-import json
-from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -14,9 +10,6 @@ from numpy.typing import ArrayLike
 from cnctwin.recording import (
     ExternalChannel,
     Recording,
-    RecordingMeta,
-    find_gaps,
-    unwrap_cycles,
 )
 
 # ---------------------------------------------------------------------------- synthetic data
@@ -104,65 +97,3 @@ def make_recording(
             source="dyn.csv",
         )
     return rec
-
-
-# ---------------------------------------------------------------------------- real C4A file
-def read_c4a_local(path: Path) -> Recording:
-    """A minimal independent Capture4Analysis JSON -> Recording, used only if
-    ``cnctwin.iotools.read_capture4analysis`` is not there yet.
-
-    Columns ``CODE|<Axis>`` from ``Header.SignalListHFData`` (``Axis`` field), rows from
-    ``Payload[*].HFData`` (first value CYCLE), time anchors from ``HFTimestamp`` entries,
-    events from ``HFBlockEvent``/``HFCallEvent``, LF from ``LFData``.
-    """
-    doc: dict[str, Any] = json.loads(path.read_text())
-    header = doc["Header"]
-    names = []
-    for s in header["SignalListHFData"][1:]:
-        code = s["Address"].split("|")[0]
-        names.append(f"{code}|{s['Axis']}")
-    rows: list[list[float]] = []
-    anchors: list[tuple[int, pd.Timestamp]] = []
-    events: list[dict[str, Any]] = []
-    lf: list[dict[str, Any]] = []
-    for item in doc["Payload"]:
-        if "HFData" in item:
-            rows.extend(item["HFData"])
-        elif "HFTimestamp" in item:
-            ts = item["HFTimestamp"]
-            anchors.append((int(ts["HFProbeCounter"]), pd.Timestamp(ts["Time"])))
-        elif "HFBlockEvent" in item:
-            e = item["HFBlockEvent"]
-            events.append(
-                {"cycle": e["HFProbeCounter"], "kind": "block", "channel": e["Channel"],
-                 "seek_offset": e["SeekOffset"], "gcode": e["GCode"], "ipo_gcode": e["IpoGC"],
-                 "selected_tool": e["SelectedTool"], "active_tool": e["ActiveTool"]}
-            )
-        elif "HFCallEvent" in item:
-            e = item["HFCallEvent"]
-            events.append(
-                {"cycle": e["HFProbeCounter"], "kind": "call", "channel": e["Channel"],
-                 "seek_offset": e["SeekOffset"], "path": e["Path"],
-                 "call_stack_level": e["CallStackLevel"]}
-            )
-        elif "LFData" in item:
-            for v in item["LFData"]:
-                try:
-                    value = float(v["value"])
-                except ValueError:
-                    value = np.nan
-                lf.append({"cycle": v["HFProbeCounter"], "time": pd.Timestamp(v["timestamp"]),
-                           "signal": v["address"], "value": value, "text": v["value"]})
-    arr = np.asarray(rows, dtype=np.float64)
-    cycles, wraps = unwrap_cycles(arr[:, 0].astype(np.int64))
-    meta = RecordingMeta(
-        machine=header["MachineInfo"]["MachineName"],
-        cycle_time_s=float(header["CycleTimeMs"]) / 1000.0,
-        source_files=[str(path)],
-        source_format="capture4analysis-test-helper",
-        time_anchors=anchors,
-        gaps=find_gaps(cycles),
-        wraps=wraps,
-    )
-    hf = pd.DataFrame(arr[:, 1:], columns=names, index=pd.Index(cycles, name="cycle"))
-    return Recording(hf, lf=pd.DataFrame(lf), events=pd.DataFrame(events), meta=meta)

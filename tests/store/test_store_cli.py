@@ -101,15 +101,9 @@ def test_query_missing_store(tmp_path: Path, capsys: pytest.CaptureFixture[str])
 
 
 def test_ingest_real_c4a_file(
-    tmp_path: Path, c4a_file: Path, c4a_rec: Recording, capsys: pytest.CaptureFixture[str],
-    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path, c4a_file: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """The real file through ``read_recording`` (the project reader when it is registered)."""
-    try:
-        cnctwin.iotools.read_recording(c4a_file)
-    except Exception:  # format not registered in read_recording yet: use the test reader
-        monkeypatch.setattr(cnctwin.iotools, "read_recording",
-                            lambda path, *, salvage=False: c4a_rec.copy())
+    """The real file through ``read_recording`` (format detection + the C4A reader)."""
     url = str(tmp_path / "store")
     assert main(["ingest", str(c4a_file), "--store", url]) == 0
     rid = _ids(capsys.readouterr().out)[0]
