@@ -509,7 +509,9 @@ def _drill_holes(
     zs = z_state
     for j in range(n_holes):
         hole = first_hole + j
-        n_spin = round(0.6 / ct) if (j == 0 and (st is None or st.speed_rpm < 1)) else 0
+        v0 = st.speed_rpm if st is not None else 0.0
+        # spin up (4000 rpm/s) and settle 0.5 s before the first approach
+        n_spin = round((abs(speed_rpm - v0) / 4000.0 + 0.5) / ct) if j == 0 else 0
         n_app = round(clearance / rapid_mm_s / ct) + 1
         n_cut = round((depth_mm + clearance * 0.5) / feed_mm_s / ct)
         n_dwell = round(0.1 / ct)

@@ -1,0 +1,45 @@
+"""External sensors: own clocks, CSV formats readable by cnctwin.iotools."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cnctwin.iotools.dynamometer import read_dynamometer_csv
+from cnctwin.iotools.thermal import read_thermal_camera_csv
+from cnctwin.sim.sensors import (
+    Dynamometer,
+    ThermalCamera,
+    dynamometer_channel,
+    thermal_camera_channel,
+    write_dynamometer_csv,
+    write_thermal_camera_csv,
+)
+
+
+def test_dynamometer_clock_and_csv_roundtrip(tmp_path: Path) -> None:
+    t = np.arange(0, 20, 0.002)
+    mz = np.where((t > 5) & (t < 8), 4.0, 0.0)
+    sensor = Dynamometer(clock_offset_s=-1.7, clock_drift_ppm=500.0, torque_noise_nm=0.0,
+                         torque_drift_nm_per_s=0.0)
+    ch = dynamometer_channel(t, mz, 1000 * mz, sensor=sensor)
+    assert not ch.aligned and ch.offset_s == 0.0
+    own = np.asarray(ch.data.index)
+    # the step at recording time 5 s appears at own time (5 + 1.7) / (1 + 500e-6)
+    first = own[np.argmax(ch.data["mz_nm"].to_numpy() > 2.0)]
+    assert first == pytest.approx((5.0 + 1.7) / (1 + 500e-6), abs=1.5e-3)
+    assert np.median(np.diff(own)) == pytest.approx(1e-3)
+    back = read_dynamometer_csv(write_dynamometer_csv(ch, tmp_path / "dyn.csv"))
+    assert list(back.data.columns)[:4] == ["fx_n", "fy_n", "fz_n", "mz_nm"]
+    np.testing.assert_allclose(back.data["mz_nm"].to_numpy(), ch.data["mz_nm"].to_numpy(),
+                               rtol=1e-5, atol=1e-6)
+
+
+def test_thermal_camera_csv_roundtrip(tmp_path: Path) -> None:
+    ch = thermal_camera_channel([10.0, 16.0], [0, 1], [120.0, 180.0],
+                                camera=ThermalCamera(noise_c=0.0))
+    back = read_thermal_camera_csv(write_thermal_camera_csv(ch, tmp_path / "cam.csv"))
+    np.testing.assert_allclose(back.data["temperature_c"].to_numpy(), [120.0, 180.0])
+    np.testing.assert_allclose(back.data["hole"].to_numpy(), [0, 1])
