@@ -92,7 +92,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
         shown = m.issues if args.max_issues <= 0 else m.issues[: args.max_issues]
         console.print(f"[bold]issues[/bold] ({len(m.issues)}):")
         for issue in shown:
-            console.print(f"  - {issue}", markup=False, highlight=False)
+            console.print(f"  - {issue}", markup=False, highlight=False, soft_wrap=True)
         if len(shown) < len(m.issues):
             console.print(f"  ... {len(m.issues) - len(shown)} more (--max-issues 0)")
     return 0
