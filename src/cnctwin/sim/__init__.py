@@ -53,3 +53,41 @@ __all__ += [
     "simulate",
     "simulate_servo",
 ]
+
+from cnctwin.sim.cutting import (  # noqa: E402
+    MATERIALS,
+    CuttingLoad,
+    DrillingModel,
+    Material,
+    drilling_load,
+    milling_load,
+    tapping_load,
+)
+from cnctwin.sim.faults import Chatter, HardnessChange, LooseTool, ToolBreakage  # noqa: E402
+from cnctwin.sim.scenarios import SCENARIOS, ScenarioResult, run_scenario  # noqa: E402
+from cnctwin.sim.sensors import Dynamometer, ThermalCamera  # noqa: E402
+from cnctwin.sim.tool import Drill, EndMill, Tap, flank_wear_um, tool_temperature  # noqa: E402
+
+__all__ += [
+    "MATERIALS",
+    "SCENARIOS",
+    "Chatter",
+    "CuttingLoad",
+    "Drill",
+    "DrillingModel",
+    "Dynamometer",
+    "EndMill",
+    "HardnessChange",
+    "LooseTool",
+    "Material",
+    "ScenarioResult",
+    "Tap",
+    "ThermalCamera",
+    "ToolBreakage",
+    "drilling_load",
+    "flank_wear_um",
+    "milling_load",
+    "run_scenario",
+    "tapping_load",
+    "tool_temperature",
+]
