@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
+from numpy.typing import ArrayLike
 
 from cnctwin.recording import Recording
 from cnctwin.store import open as open_store
@@ -53,7 +54,7 @@ def synthetic(n_cycles: int, n_signals: int, *, seed: int = 7) -> Recording:
     rng = np.random.default_rng(seed)
     cycles = np.arange(10_000_000, 10_000_000 + n_cycles, dtype=np.int64)
     t = (cycles - cycles[0]) * 0.002
-    signals: dict[str, np.ndarray] = {}
+    signals: dict[str, ArrayLike] = {}
     names = [f"{c}|{a}" for c in CODES for a in AXES][:n_signals]
     for i, name in enumerate(names):
         kind = i % 6
