@@ -259,6 +259,7 @@ def cutting_regions(
     accel_limit_rpm_per_s: float = 200.0,
     merge_gap_s: float = 0.1,
     require_z_down: bool = True,
+    min_z_depth_mm: float = 0.01,
 ) -> pd.DataFrame:
     """Cutting regions: spindle current above its air-cut level while the spindle turns.
 
@@ -291,8 +292,11 @@ def cutting_regions(
     merge_gap_s : float, default 0.1
         Regions separated by less than this are merged [s].
     require_z_down : bool, default True
-        If the Z position is recorded, keep only regions during which Z moves down
-        (negative mean velocity) -- drilling into the part.
+        If the Z position is recorded, keep only regions during which Z moves down into the
+        part: the lowest Z inside the region is at least ``min_z_depth_mm`` below the Z at
+        its start (a retract at the end does not matter).
+    min_z_depth_mm : float, default 0.01
+        Smallest downward Z travel that confirms a cut [mm].
 
     Returns
     -------
@@ -366,8 +370,9 @@ def cutting_regions(
         if e - s + 1 < n_min:
             continue
         if z is not None and require_z_down:
-            dz = z[e] - z[s]
-            if not dz < 0:
+            seg_z = z[s : e + 1]
+            depth = z[s] - np.nanmin(seg_z) if np.isfinite(seg_z).any() else 0.0
+            if not depth > min_z_depth_mm:
                 continue
         keep.append((s, e))
     arr = np.asarray(keep, dtype=np.int64).reshape(-1, 2)

@@ -1,0 +1,119 @@
+"""cnctwin.analysis.segments: Schmitt trigger, speed plateaus and cutting regions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from cnctwin.analysis.segments import (
+    cutting_regions,
+    hysteresis_mask,
+    runs,
+    speed_plateaus,
+    spindle_speed_rpm,
+)
+from cnctwin.exceptions import SignalNotFoundError
+from cnctwin.recording import EVENT_COLUMNS, Recording
+
+FS = 500.0
+
+
+def test_hysteresis_ignores_chatter_between_thresholds() -> None:
+    x = np.array([0, 0.6, 1.2, 0.6, 1.1, 0.3, 0.6, 0.9, 1.05, 0.2])
+    m = hysteresis_mask(x, high=1.0, low=0.5)
+    assert m.tolist() == [False, False, True, True, True, False, False, False, True, False]
+    assert runs(m).tolist() == [[2, 4], [8, 8]]
+    assert runs(np.zeros(0, bool)).shape == (0, 2)
+
+
+def _steps(levels: list[float], seconds: float = 2.0, noise: float = 0.0) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    parts = []
+    prev = 0.0
+    for lv in levels:
+        parts.append(np.linspace(prev, lv, int(0.3 * FS), endpoint=False))  # run-up
+        parts.append(np.full(int(seconds * FS), lv))
+        prev = lv
+    s = np.concatenate(parts)
+    return s + rng.normal(0, noise, s.size) if noise else s
+
+
+def test_speed_plateaus_excludes_ramps_and_splits_at_gaps() -> None:
+    speed = _steps([1000.0, 2000.0, 2000.0 + 50.0, 0.0], seconds=3.0)
+    cycles = np.arange(speed.size)
+    cycles[2500:] += 100  # counter gap in the middle of the 2000 rpm plateau (1800-3300)
+    rec = Recording.from_arrays(cycles, {"CMD_SPEED|SP1": speed})
+    p = speed_plateaus(rec, min_duration_s=0.3)
+    # 1000; 2000 split by the gap into two; 2050 (a jump of 50 rpm > tolerance); 0 dropped
+    np.testing.assert_allclose(p["speed_rpm"], [1000, 2000, 2000, 2050])
+    assert p.attrs["speed_source"] == "CMD_SPEED|SP1"
+    # no plateau row contains a ramp sample
+    for _, row in p.iterrows():
+        seg = rec.hf.loc[row["start_cycle"]:row["end_cycle"], "CMD_SPEED|SP1"]
+        assert seg.max() - seg.min() <= 5.0
+
+
+def test_speed_from_lf_when_no_hf_speed() -> None:
+    n = 3000
+    rec = Recording.from_arrays(np.arange(n), {"CURRENT|SP1": np.ones(n)})
+    lf_cycles = np.arange(0, n, 50)
+    rec.lf = pd.DataFrame({
+        "cycle": lf_cycles, "time": pd.NaT, "signal": "SPEED_SMOOTHED|SP1",
+        "value": np.where(lf_cycles < 1500, 1200.0, 2400.0), "text": "",
+    })
+    speed, source = spindle_speed_rpm(rec)
+    assert "LF" in source and speed[0] == 1200.0 and speed[-1] == 2400.0
+    p = speed_plateaus(rec, min_duration_s=1.0)
+    np.testing.assert_allclose(p["speed_rpm"], [1200.0, 2400.0])
+    rec2 = Recording.from_arrays(np.arange(10), {"CURRENT|SP1": np.ones(10)})
+    with pytest.raises(SignalNotFoundError, match="SPEED_SMOOTHED"):
+        spindle_speed_rpm(rec2)
+
+
+def _drilling(with_z: bool = True) -> tuple[Recording, list[tuple[float, float]]]:
+    rng = np.random.default_rng(5)
+    t = np.arange(0, 30.0, 1 / FS)
+    speed = np.interp(t, [0, 1, 30], [0, 2400, 2400])  # run-up in the first second
+    current = 0.53 + rng.normal(0, 0.05, t.size) + 0.02 * np.sin(2 * np.pi * 80 * t)
+    current[t < 1.2] += 1.5  # inertia current during run-up: must not count as a cut
+    holes = [(4.0, 7.0), (12.0, 15.5), (21.0, 24.0)]
+    z = np.full(t.size, 2.0)
+    for s, e in holes:
+        m = (t >= s) & (t < e)
+        current[m] += 3.8 * np.minimum(1, (t[m] - s) / 0.05)
+        z[m] = -(t[m] - s) * 6.0
+    # an air move with the spindle on and Z going down but no cut (no current rise)
+    z[(t >= 26) & (t < 27)] = -np.linspace(0, 5, int(FS))
+    signals = {"CMD_SPEED|SP1": speed, "CURRENT|SP1": current}
+    if with_z:
+        signals["ENC_POS|Z1"] = z
+    rec = Recording.from_arrays(np.arange(t.size), signals)
+    ev = pd.DataFrame({c: [None] * 3 for c in EVENT_COLUMNS})
+    ev["cycle"] = [int(3.9 * FS), int(11.9 * FS), int(20.9 * FS)]
+    ev["kind"] = "block"
+    ev["gcode"] = ["N10 G1 Z-18", "N20 G1 Z-21", "N30 G1 Z-18"]
+    rec.events = ev
+    return rec, holes
+
+
+def test_cutting_regions_match_the_holes() -> None:
+    rec, holes = _drilling()
+    reg = cutting_regions(rec)
+    assert len(reg) == 3
+    # 5 Hz smoothing + hysteresis: edges within 60 ms (start) / 100 ms (end)
+    np.testing.assert_allclose(reg["start_s"], [h[0] for h in holes], atol=0.06)
+    np.testing.assert_allclose(reg["end_s"], [h[1] for h in holes], atol=0.1)
+    assert reg["block"].tolist() == ["N10 G1 Z-18", "N20 G1 Z-21", "N30 G1 Z-18"]
+    np.testing.assert_allclose(reg["speed_rpm"], 2400.0)
+    assert reg["baseline_a"].iloc[0] == pytest.approx(0.53, abs=0.05)
+    assert reg.attrs["threshold_a"] > 0.2
+
+
+def test_cutting_regions_without_z_and_fixed_threshold() -> None:
+    rec, _ = _drilling(with_z=False)
+    reg = cutting_regions(rec, current_threshold=1.0)
+    assert len(reg) == 3
+    assert reg["z_start_mm"].isna().all()
+    # a threshold above the cut current finds nothing (and says so with an empty frame)
+    assert cutting_regions(rec, current_threshold=10.0).empty
