@@ -91,3 +91,7 @@ __all__ += [
     "tapping_load",
     "tool_temperature",
 ]
+
+from cnctwin.sim import programs  # noqa: E402
+
+__all__ += ["programs"]
