@@ -58,9 +58,10 @@ def test_quantum_and_moving_average() -> None:
     x = np.round(np.sin(np.linspace(0, 6, 5000)) * 1e4) / 1e4
     assert quantum(x) == pytest.approx(1e-4, rel=1e-6)
     assert quantum(np.random.default_rng(0).normal(size=1000)) == 0.0
-    # MA of a ramp lags by half the window (y = x - v*T/2 after settling)
+    # integer window = mean of the last W samples; fractional: weight f on sample k-m
     ramp = np.arange(100.0)
-    assert moving_average(ramp, 6.5)[50] == pytest.approx(50 - 3.25)
+    assert moving_average(ramp, 6.5)[50] == pytest.approx((sum(range(45, 51)) + 0.5 * 44) / 6.5)
+    assert moving_average(ramp, 4.0)[50] == pytest.approx(np.mean(ramp[47:51]))
 
 
 def test_missing_axis_signals() -> None:

@@ -46,13 +46,15 @@ _UNIT_TO_PER_S: dict[str, float] = {
 
 
 def informative_segments(
-    x: FloatArray, segs: list[slice], *, pad: int = 120, warm: int = 60
+    x: FloatArray, segs: list[slice], *, pad: int = 120, warm: int = 60,
+    max_samples: int = 6000,
 ) -> tuple[list[slice], NDArray[np.bool_]]:
     """Windows around the changes of the velocity of ``x`` (where filters reveal themselves).
 
     Constant-velocity stretches carry no information on filter shapes, only cost time. Each
     window starts ``warm + pad`` cycles before a change so the filters have settled; the
-    returned mask excludes the first ``warm`` cycles of each window.
+    returned mask excludes the first ``warm`` cycles of each window. When the windows hold more
+    than ``max_samples`` cycles, an evenly spread subset of them is kept (0 keeps all).
 
     Returns
     -------
@@ -81,6 +83,13 @@ def informative_segments(
         local = np.cumsum(diff[:-1]) > 0
         keep[s] = local
     windows = [slice(w.start, w.stop) for w in segments_of_mask(keep)]
+    total = sum(w.stop - w.start for w in windows)
+    if max_samples and total > max_samples and len(windows) > 1:
+        # parameters are constant: a spread-out subset of the windows is enough
+        step = total / max_samples
+        keep_idx = sorted({min(int(i * step), len(windows) - 1)
+                           for i in range(int(len(windows) / step) + 1)})
+        windows = [windows[i] for i in keep_idx]
     mask = np.zeros(n, dtype=bool)
     for w in windows:
         mask[w.start + warm : w.stop] = True
@@ -355,31 +364,30 @@ def detect_velocity_unit(
 
 # ---------------------------------------------------------------------------- filters
 def moving_average(x: FloatArray, window: float) -> FloatArray:
-    """Causal moving average over ``window`` cycles of the piecewise-linear signal.
+    """Causal moving average over ``window`` samples, fractional windows allowed.
 
-    ``y(k) = (1/W) * integral_{k-W}^{k} x(t) dt`` with ``x`` linear between samples, so any
-    real window works (MD32402 type 2 with MD32410 = W * cycle). The signal is taken constant
-    before its first sample.
+    ``y[k] = (sum_{j=0}^{m-1} x[k-j] + f x[k-m]) / W`` with ``m = floor(W)``, ``f = W - m``:
+    the mean of the last ``W`` samples for integer ``W`` (MD32402 type 2 with
+    MD32410 = W cycles), continuous in ``W`` in between. Group delay about ``(W - 1) / 2``
+    cycles. The signal is taken constant before its first sample.
 
     Parameters
     ----------
     x : numpy.ndarray
         Samples.
     window : float
-        Window length [cycles]; below 1e-6 returns ``x``.
+        Window length [cycles]; at or below 1 returns ``x``.
     """
-    if window < 1e-6:
+    if window <= 1.0 + 1e-9:
         return x.copy()
-    pad = math.ceil(window) + 2
+    m = math.floor(window)
+    f = window - m
+    pad = m + 2
     xp = np.concatenate([np.full(pad, x[0]), x])
-    integ = np.concatenate([[0.0], np.cumsum(0.5 * (xp[1:] + xp[:-1]))])
-    k = np.arange(pad, xp.size, dtype=np.float64)
-    t0 = k - window
-    i0 = np.floor(t0).astype(np.int64)
-    f = t0 - i0
-    # integral from 0 to t0 of the linear interpolant
-    i_t0 = integ[i0] + f * xp[i0] + 0.5 * f * f * (xp[i0 + 1] - xp[i0])
-    return (integ[pad:] - i_t0) / window
+    cs = np.concatenate([[0.0], np.cumsum(xp)])
+    k = np.arange(pad, xp.size)
+    s = cs[k + 1] - cs[k + 1 - m] + f * xp[k - m]
+    return np.asarray(s / window, dtype=np.float64)
 
 
 def delay(x: FloatArray, cycles: float) -> FloatArray:

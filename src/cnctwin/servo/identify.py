@@ -262,24 +262,31 @@ def fit_setpoint_chain(
     fits: dict[str, tuple[FloatArray, float]] = {}
     for jt in models:
         cost = cost_of(jt)
-        tj = [1.0, 2.0, 4.0, 6.0, 9.0, 13.0, 18.0]
-        taus = [0.0, 1.0, 3.0]
-        t1s = [0.0, 1.5, 4.0]
+        wins = [float(w) for w in range(1, 21)] + [24.0, 28.0, 32.0]
+        taus = [0.0, 1.0, 2.0, 3.0, 4.0]
+        t1s = [0.0, 1.0, 2.0, 4.0]
         if jt == "none":
-            grid = [np.array([tau, t1]) for tau in [*taus, 6.0] for t1 in [*t1s, 10.0]]
+            grid = [np.array([tau, t1]) for tau in [*taus, 6.0, 8.0]
+                    for t1 in [*t1s, 8.0, 12.0]]
         elif jt == "moving_average":
-            grid = [np.array([t, tau, t1]) for t in tj for tau in taus for t1 in t1s]
+            grid = [np.array([w, tau, t1]) for w in wins for tau in taus for t1 in t1s]
         elif jt == "double_moving_average":
-            grid = [np.array([t, t, tau, t1]) for t in tj for tau in taus for t1 in t1s]
+            grid = [np.array([w, w2, tau, t1]) for w in wins[:16]
+                    for w2 in sorted({max(round(w / 2), 2.0), w}) for tau in taus for t1 in t1s]
         else:
-            grid = [np.array([t / 2.0, dmp, tau, t1]) for t in tj for dmp in (0.7, 1.0)
-                    for tau in taus for t1 in t1s]
-        start = min(grid, key=cost)
-        res = optimize.minimize(cost, start, method="Nelder-Mead",
-                                options={"xatol": 1e-3, "fatol": 0.0, "maxiter": 500,
-                                         "adaptive": True})
-        res2 = optimize.minimize(cost, res.x, method="Nelder-Mead",
-                                 options={"xatol": 1e-4, "fatol": 0.0, "maxiter": 250,
+            grid = [np.array([t, dmp, tau, t1]) for t in np.arange(0.5, 12.5, 0.5)
+                    for dmp in (0.5, 0.7, 1.0) for tau in taus for t1 in t1s]
+        costs = np.array([cost(g) for g in grid])
+        best_fit: tuple[FloatArray, float] | None = None
+        for i in np.argsort(costs)[:3]:
+            res = optimize.minimize(cost, grid[int(i)], method="Nelder-Mead",
+                                    options={"xatol": 1e-4, "fatol": 0.0, "maxiter": 400,
+                                             "adaptive": True})
+            if best_fit is None or res.fun < best_fit[1]:
+                best_fit = (np.asarray(res.x, dtype=float), float(res.fun))
+        assert best_fit is not None
+        res2 = optimize.minimize(cost, best_fit[0], method="Nelder-Mead",
+                                 options={"xatol": 1e-5, "fatol": 0.0, "maxiter": 200,
                                           "adaptive": True})
         fits[jt] = (np.asarray(res2.x, dtype=float), float(res2.fun))
     n = int(mask.sum())
@@ -323,9 +330,10 @@ class SpeedLoopFit:
         units and the speed controller has integral action).
     time_s, delay_s : float
         PT1 time constant and pure delay [s]; ``equivalent_time_s = time_s + delay_s``
-        corresponds to MD32810 EQUIV_SPEEDCTRL_TIME. The one-cycle hold of the position
-        controller output (CMD_SPEED of cycle k acts during cycle k, the encoder of cycle k+1
-        sees it) is not part of ``delay_s``.
+        is the equivalent time of the speed loop as seen by the position controller
+        (MD32810 EQUIV_SPEEDCTRL_TIME). ``delay_s`` includes the hold of the position
+        controller output (CMD_SPEED of cycle k acts during cycle k: one cycle); with DSC the
+        drive closes the loop itself every speed-controller cycle and the delay can be shorter.
     model_delay_cycles, model_time_cycles : float
         The fitted model parameters as used by the prediction (delay including the hold).
     stderr : dict
@@ -389,7 +397,7 @@ def fit_speed_loop(
         return out
 
     def cost_g(p: FloatArray) -> tuple[float, float]:
-        if np.any(p < -1e-9) or p[0] < 1.0:
+        if np.any(p < -1e-9):
             return 1e30, 1.0
         x = shaped(p)[mask]
         yy = y[mask]
@@ -401,7 +409,7 @@ def fit_speed_loop(
     def cost(p: FloatArray) -> float:
         return cost_g(p)[0]
 
-    grid = [np.array([tau, t]) for tau in (1.0, 1.5, 2.0, 3.0, 4.0)
+    grid = [np.array([tau, t]) for tau in (0.0, 0.5, 1.0, 1.5, 2.0, 3.0)
             for t in (0.0, 0.5, 1.0, 2.0, 4.0)]
     start = min(grid, key=cost)
     res = optimize.minimize(cost, start, method="Nelder-Mead",
@@ -419,7 +427,7 @@ def fit_speed_loop(
     q = np.array([g, *p])
     se = _hessian_se(cost3, q, n, _ess_inflation(resid), np.maximum(np.abs(q) * 1e-3, 1e-3))
     dt = cycle_time_s
-    return SpeedLoopFit(g, float(p[1]) * dt, (float(p[0]) - 1.0) * dt,
+    return SpeedLoopFit(g, float(p[1]) * dt, float(p[0]) * dt,
                         {"gain": float(se[0]), "time_s": float(se[2]) * dt,
                          "delay_s": float(se[1]) * dt}, math.sqrt(sse / n),
                         model_delay_cycles=float(p[0]), model_time_cycles=float(p[1]))

@@ -81,7 +81,7 @@ class AxisLoopModel:
     ffw_delay_s : float
         Delay of the feedforward behind d(jerk-filtered DES_POS)/dt [s].
     speed_delay_cycles, speed_time_cycles : float
-        Speed-loop model (delay incl. the one-cycle output hold, >= 1; PT1) [cycles].
+        Speed-loop model (delay incl. the output hold; PT1) [cycles].
     cycle_time_s : float, default 0.002
         Position-control cycle [s].
     """
@@ -174,7 +174,7 @@ class AxisLoopModel:
         if n > 1:
             v_jf[-1] = v_jf[-2]
         vff = self.ffw_weight * delay(v_jf, self.ffw_delay_s / dt)
-        tau = max(self.speed_delay_cycles, 1.0)
+        tau = max(self.speed_delay_cycles, 0.0)
         a = math.exp(-1.0 / self.speed_time_cycles) if self.speed_time_cycles > 1e-6 else 0.0
         enc = np.empty(n)
         u = np.zeros(n)
@@ -183,17 +183,26 @@ class AxisLoopModel:
         kv = self.kv_1_s
         i_tau = math.floor(tau)
         frac = tau - i_tau
+        half = 0.5 * dt
         for k in range(n):
             u[k] = kv * (ctrl[k] - enc[k]) + vff[k]
             if k + 1 >= n:
                 break
-            # delayed input at k+1: u at time k+1-tau (linear interpolation, 0 before start)
+            # delayed input at k+1: u at time k+1-tau, linear interpolation (0 before start)
             j = k + 1 - i_tau
-            u_hi = u[j] if j >= 0 else 0.0
-            u_lo = u[j - 1] if j - 1 >= 0 else 0.0
-            ud = (1.0 - frac) * u_hi + frac * u_lo
-            z[k + 1] = a * z[k] + (1.0 - a) * ud
-            enc[k + 1] = enc[k] + dt * 0.5 * (z[k] + z[k + 1])
+            if i_tau >= 1:
+                u_hi = u[j] if j >= 0 else 0.0
+                u_lo = u[j - 1] if j - 1 >= 0 else 0.0
+                ud = (1.0 - frac) * u_hi + frac * u_lo
+                z[k + 1] = a * z[k] + (1.0 - a) * ud
+            else:
+                # tau < 1: u[k+1] depends on enc[k+1]; the step is linear, solve it
+                alpha = 1.0 - frac  # weight of u[k+1]
+                beta = (1.0 - a) * alpha
+                base = a * z[k] + (1.0 - a) * frac * u[k]
+                rhs = base + beta * (kv * (ctrl[k + 1] - enc[k] - half * z[k]) + vff[k + 1])
+                z[k + 1] = rhs / (1.0 + beta * kv * half)
+            enc[k + 1] = enc[k] + half * (z[k] + z[k + 1])
         return Prediction(ctrl, enc, des - enc, ctrl - enc, u, vff)
 
 
