@@ -335,3 +335,22 @@ def test_validation_table_accepts_mappings_and_measurements() -> None:
         validation_table([{"speed_rpm": 1.0}], model)
     with pytest.raises(KeyError, match="valid"):
         SpindleModel.from_parameters("nope")
+
+
+# ------------------------------------------------------------------ real recording
+def test_real_capture4analysis_spindle(c4a_file) -> None:  # type: ignore[no-untyped-def]
+    """docs/real-data-spindle.md: a tool change, no rotation -> nothing to calibrate on."""
+    from cnctwin.analysis.correlation import correlation_matrix
+    from cnctwin.iotools import read_capture4analysis
+
+    rec = read_capture4analysis(c4a_file)
+    assert speed_plateaus(rec).empty
+    assert cutting_regions(rec).empty
+    with pytest.raises(IdentificationError, match="plateau"):
+        air_cut_statistics(rec)
+    mats = correlation_matrix(rec.hf[["CURRENT|SP1", "TORQUE|SP1"]], fs_hz=rec.fs_hz)
+    assert mats["raw"].iloc[0, 1] == pytest.approx(0.9986, abs=5e-4)
+    i = rec.hf["CURRENT|SP1"].to_numpy()
+    t = rec.hf["TORQUE|SP1"].to_numpy()
+    slope = float(np.polyfit(i, t, 1)[0])
+    assert slope == pytest.approx(1.369, abs=0.002)  # torque setpoint / actual Iq, not Kt
