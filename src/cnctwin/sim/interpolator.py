@@ -165,8 +165,8 @@ class Trajectory:
     spindle_mode : numpy.ndarray of int8
         0 speed control, 1 position control (rigid tapping).
     spindle_pos_cmd_deg : numpy.ndarray
-        Spindle angle set point [deg]: the coupled angle in mode 1; in mode 0 the integral of
-        the speed set point, modulo 360.
+        Spindle angle set point [deg]: the coupled angle in mode 1 (not wrapped: POSS plus the
+        turns of the thread); in mode 0 the integral of the speed set point, modulo 360.
     block_index : numpy.ndarray of int32
         Index into ``program.blocks`` of the block executing in each cycle.
     tool : numpy.ndarray of int32
