@@ -10,11 +10,12 @@ from pathlib import Path
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
-from store_helpers import make_recording
 
 from cnctwin.exceptions import ConfigError, StoreError
 from cnctwin.store import DuckDBStore
 from cnctwin.store import open as open_store
+
+from .store_helpers import make_recording
 
 
 def test_open_url_forms(tmp_path: Path) -> None:

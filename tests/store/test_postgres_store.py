@@ -7,11 +7,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from store_helpers import make_recording
 
 from cnctwin.exceptions import ConfigError, StoreError
 from cnctwin.store import open as open_store
 from cnctwin.store.postgres_store import DEFAULT_SCHEMA, PostgresStore, parse_pg_url
+
+from .store_helpers import make_recording
 
 pytestmark = pytest.mark.postgres
 

@@ -12,13 +12,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pytest
-from store_helpers import current_a, make_recording, position_mm
 
 from cnctwin.exceptions import SignalNotFoundError, StoreError
 from cnctwin.recording import Recording
 from cnctwin.store import Store
 from cnctwin.store import open as open_store
 from cnctwin.store.base import normalize_events, normalize_lf
+
+from .store_helpers import current_a, make_recording, position_mm
 
 STEP = pd.Timedelta("2ms")
 

@@ -7,11 +7,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from store_helpers import current_a, make_recording
 
 import cnctwin.iotools
 from cnctwin.cli import main
 from cnctwin.recording import Recording
+
+from .store_helpers import current_a, make_recording
 
 
 @pytest.fixture
