@@ -544,6 +544,60 @@ def _grow(
     return idx, reason
 
 
+def _longest_linear(
+    n: NDArray[np.float64],
+    cur: NDArray[np.float64],
+    sigma: float,
+    *,
+    k_sigma: float,
+    n_consecutive: int,
+    min_points: int,
+    min_slope_t: float = 5.0,
+) -> tuple[list[int], str, str]:
+    """Longest run of points on one rising line (indices into n), with the end reasons."""
+    best: tuple[int, list[int], str, str] | None = None
+    for s in range(0, n.size - min_points + 1):
+        seed = list(range(s, s + min_points))
+        a, b, *_ = _Line(n, cur, seed).fit()
+        res = cur[seed] - (a * n[seed] + b)
+        if a <= 0 or np.any(np.abs(res) > k_sigma * sigma):
+            continue
+        up, r_hi = _grow(n, cur, seed, sigma, k_sigma=k_sigma,
+                         n_consecutive=n_consecutive, direction=+1)
+        both, r_lo = _grow(n, cur, up, sigma, k_sigma=k_sigma,
+                           n_consecutive=n_consecutive, direction=-1)
+        a2, _, _, sxx, _ = _Line(n, cur, both).fit()
+        # the line must rise significantly (friction grows with speed): a flat or falling
+        # stretch (current limitation, field weakening) is not the friction line
+        if sxx <= 0 or a2 * math.sqrt(sxx) / sigma < min_slope_t:
+            continue
+        span = max(both) - min(both)
+        if best is None or span > best[0]:
+            best = (span, both, r_lo, r_hi)
+    if best is None:
+        raise IdentificationError(
+            "no run of plateaus where the mean current rises linearly with speed; record "
+            "more speeds or pass noise_a"
+        )
+    _, idx, reason_lo, reason_hi = best
+    # refine: re-seed on the middle half of the region (away from both curved ends) and
+    # grow again, so curvature picked up at one end does not tilt the line at the other
+    for _ in range(2):
+        lo_k, hi_k = min(idx), max(idx)
+        q = (hi_k - lo_k) // 4
+        mid = list(range(lo_k + q, hi_k - q + 1))
+        if len(mid) < min_points:
+            break
+        up, reason_hi = _grow(n, cur, mid, sigma, k_sigma=k_sigma,
+                              n_consecutive=n_consecutive, direction=+1)
+        new, reason_lo = _grow(n, cur, up, sigma, k_sigma=k_sigma,
+                               n_consecutive=n_consecutive, direction=-1)
+        if new == idx:
+            break
+        idx = new
+    return idx, reason_lo, reason_hi
+
+
 def linear_region(
     speed_rpm: ArrayLike | pd.DataFrame,
     current_a: ArrayLike | None = None,
@@ -599,18 +653,22 @@ def linear_region(
 
     Notes
     -----
-    Upper limit: starting from the lower limit, a line is fitted to the first ``min_points``
-    plateaus and grown one plateau at a time while the next plateau's mean current lies within
-    ``k_sigma`` prediction standard errors of the line; ``n_consecutive`` departures end it
-    (current limitation / field weakening bends the curve, thesis Fig. 4.1: 5000 rpm).
+    Linearity: a line is fitted to ``min_points`` consecutive plateaus and grown one plateau
+    at a time (up, then down) while the next plateau's mean current lies within ``k_sigma``
+    prediction standard errors of the line; ``n_consecutive`` departures end it (upwards:
+    current limitation / field weakening bends the curve, thesis Fig. 4.1: 5000 rpm;
+    downwards: low-speed friction). Every seed window is tried, the longest rising run wins,
+    and it is re-seeded twice on its middle half and grown again. A run counts only if its
+    slope is positive by at least 5 standard errors (flat or falling stretches above the
+    current limit are not the friction line).
 
     Lower limit: the dominant line of each plateau's current spectrum is compared with the
     folded stator frequency ``fold(N p / 120, fs)`` (Eq. 4.1, :func:`fold_frequency`),
     tolerance 1.5 frequency bins; the region starts at the lowest speed from which
-    ``stator_consecutive`` plateaus in a row are stator-dominated (thesis: 1100 rpm). Without
-    spectra the region is grown downwards as well, from the seed window that yields the
-    longest region with a positive slope, then re-seeded twice on the middle half of the
-    region found and grown again.
+    ``stator_consecutive`` plateaus in a row are stator-dominated (thesis: 1100 rpm). The
+    linearity search then runs on the plateaus from there up, so the region starts at the
+    higher of the two limits (a stator line that dominates already in the low-speed friction
+    region does not drag the line). Without spectra only the linearity criterion is used.
     """
     if isinstance(speed_rpm, pd.DataFrame):
         stats = speed_rpm
@@ -667,57 +725,24 @@ def linear_region(
             f"plateaus ({dom[lo_idx]:.1f} Hz vs {alias[lo_idx]:.1f} Hz)"
             + (f"; below it the dominant line is elsewhere ({'; '.join(below)})" if below else "")
         )
-    if lo_idx is not None:
-        if n.size - lo_idx < min_points:
-            raise IdentificationError(
-                f"only {n.size - lo_idx} plateaus above the lower limit {n[lo_idx]:.0f} rpm; "
-                f"need {min_points}"
-            )
-        seed = list(range(lo_idx, lo_idx + min_points))
-        idx, reason_hi = _grow(n, cur, seed, sigma, k_sigma=k_sigma,
-                               n_consecutive=n_consecutive, direction=+1)
-        idx = [k for k in idx if k >= lo_idx]
-    else:
-        best: tuple[int, int, list[int], str, str] | None = None
-        for s in range(0, n.size - min_points + 1):
-            seed = list(range(s, s + min_points))
-            ln = _Line(n, cur, seed)
-            a, b, *_ = ln.fit()
-            res = cur[seed] - (a * n[seed] + b)
-            if a <= 0 or np.any(np.abs(res) > k_sigma * sigma):
-                continue
-            up, r_hi = _grow(n, cur, seed, sigma, k_sigma=k_sigma,
-                             n_consecutive=n_consecutive, direction=+1)
-            both, r_lo = _grow(n, cur, up, sigma, k_sigma=k_sigma,
-                               n_consecutive=n_consecutive, direction=-1)
-            a2, *_ = _Line(n, cur, both).fit()
-            if a2 <= 0:
-                continue
-            span = max(both) - min(both)
-            if best is None or span > best[0]:
-                best = (span, s, both, r_lo, r_hi)
-        if best is None:
-            raise IdentificationError(
-                "no run of plateaus where the mean current rises linearly with speed; record "
-                "more speeds or pass noise_a"
-            )
-        _, _, idx, reason_lo, reason_hi = best
-        # refine: re-seed on the middle half of the region (away from both curved ends) and
-        # grow again, so curvature picked up at one end does not tilt the line at the other
-        for _ in range(2):
-            lo_k, hi_k = min(idx), max(idx)
-            q = (hi_k - lo_k) // 4
-            mid = list(range(lo_k + q, hi_k - q + 1))
-            if len(mid) < min_points:
-                break
-            up, reason_hi = _grow(n, cur, mid, sigma, k_sigma=k_sigma,
-                                  n_consecutive=n_consecutive, direction=+1)
-            new, reason_lo = _grow(n, cur, up, sigma, k_sigma=k_sigma,
-                                   n_consecutive=n_consecutive, direction=-1)
-            if new == idx:
-                break
-            idx = new
-        reason_lo = "without spectra: " + reason_lo
+    first = 0 if lo_idx is None else lo_idx
+    if n.size - first < min_points:
+        raise IdentificationError(
+            f"only {n.size - first} plateaus above the lower limit {n[first]:.0f} rpm; "
+            f"need {min_points}"
+        )
+    sub, r_lo_lin, reason_hi = _longest_linear(
+        n[first:], cur[first:], sigma, k_sigma=k_sigma, n_consecutive=n_consecutive,
+        min_points=min_points,
+    )
+    idx = [k + first for k in sub]
+    if lo_idx is None:
+        reason_lo = "without spectra: " + r_lo_lin
+    elif min(idx) > lo_idx:
+        reason_lo += (
+            f"; the mean current is linear in speed only from {n[min(idx)]:.0f} rpm "
+            f"(low-speed friction): {r_lo_lin}"
+        )
     in_region = np.zeros(n.size, dtype=bool)
     in_region[min(idx) : max(idx) + 1] = True
     table["in_region"] = in_region
