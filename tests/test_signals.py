@@ -45,3 +45,13 @@ def test_units_depend_on_axis_kind() -> None:
 def test_unknown_signal_lists_known_codes() -> None:
     with pytest.raises(SignalNotFoundError, match="known codes"):
         lookup("NOPE")
+
+
+def test_glossary_page_is_generated_from_the_catalog() -> None:
+    # docs/glossary.md is generated (make docs); it must not drift from the catalog.
+    from pathlib import Path
+
+    from cnctwin.signals import glossary_markdown
+
+    page = Path(__file__).parents[1] / "docs" / "glossary.md"
+    assert page.read_text(encoding="utf-8") == glossary_markdown(), "run `make docs`"
