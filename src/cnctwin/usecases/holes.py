@@ -1,0 +1,626 @@
+"""The per-hole record: one row per drilled (or tapped) hole from drive signals and NC events.
+
+Thesis chapter 5 analyses every use-case hole by hole: the mean spindle current of each of the
+2676 holes (Figures 5.2, 5.3), the tool temperature over a set of 6 holes (Figure 5.5) and the
+X/Y/Z deviations of each hole (Figures 5.6-5.9). :func:`hole_record` builds that table.
+
+Segmentation
+------------
+Holes are found from the **Z motion** (works when a recording has no NC events, e.g. the
+simulator's streamed wear run): a plunge is a run of downward Z movement; its *feed part* is the
+final stretch at the slowest (cutting) speed, its *bottom* the Z minimum. A plunge that begins
+inside the hole drilled just before at the same XY (peck drilling, CYCLE83) continues that hole.
+**NC events** then add what motion cannot know: the drilling cycle (``CYCLE81`` ... ``CYCLE84``,
+``G81`` ... ``G84`` in block texts, ``/_CYCLES_DIR/_CYCLE81`` call events), its reference plane
+(the workpiece surface, RFP = 2nd cycle parameter) and the active tool. Without events the
+surface is where the spindle current leaves its air-feed level.
+
+References
+----------
+.. [1] Thesis, Koç University, chapter 4.3 (mean over the first 0.6 s of each cut, Fig. 4.5) and
+   chapter 5 (Figures 5.2-5.9).
+.. [2] Siemens, SINUMERIK 840D sl Cycles programming manual: CYCLE81(RTP, RFP, SDIS, DP, DPR).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from cnctwin.analysis.segments import spindle_speed_rpm
+from cnctwin.exceptions import ConfigError, SignalNotFoundError
+from cnctwin.recording import Recording
+from cnctwin.spindle import SpindleModel
+
+__all__ = [
+    "HOLE_COLUMNS",
+    "Plunge",
+    "find_plunges",
+    "hole_record",
+    "hole_records",
+    "holes_path",
+    "read_holes",
+    "write_holes",
+]
+
+HOLE_COLUMNS: dict[str, str] = {
+    "hole": "hole index, 0-based, in drilling order [-]",
+    "set": "set index (hole // set_size) [-]",
+    "position_in_set": "position within the set, 0-based [-]",
+    "start_cycle": "first cycle of the feed move of the plunge [-]",
+    "cut_start_cycle": "first cycle in the material (Z at or below the surface) [-]",
+    "cut_end_cycle": "cycle at which the bottom is reached [-]",
+    "end_cycle": "last cycle before the retract starts (dwell included) [-]",
+    "start_time": "UTC time of cut_start_cycle",
+    "start_s": "cut start, seconds after the first cycle of the first recording [s]",
+    "end_s": "bottom reached [s]",
+    "extraction_s": "Z back above the surface on the retract (tool out of the hole) [s]",
+    "cut_duration_s": "time in the material (feed parts from the surface to the bottom) [s]",
+    "x_mm": "programmed X during the cut (median DES_POS) [mm]",
+    "y_mm": "programmed Y during the cut [mm]",
+    "surface_z_mm": "Z of the workpiece surface used [mm]",
+    "surface_source": "'cycle' (RFP of the drilling cycle), 'current' (current onset) or 'feed'",
+    "bottom_z_mm": "lowest actual Z (ENC_POS) [mm]",
+    "depth_mm": "surface_z_mm - bottom_z_mm [mm]",
+    "feed_mm_min": "median feed speed of the feed part [mm/min]",
+    "speed_rpm": "median spindle speed during the cut [rpm]",
+    "current_mean_a": "mean CURRENT|SP1 during the cut [A]",
+    "current_peak_a": "max |CURRENT|SP1| during the cut [A]",
+    "current_first_a": "mean CURRENT|SP1 over the first window_s of the cut [A]",
+    "torque_first_nm": "mean estimated cutting torque over the first window_s [Nm]",
+    "torque_mean_nm": "mean estimated cutting torque over the cut [Nm]",
+    "energy_j": "cutting energy, integral of torque x omega over the cut [J]",
+    "thrust_proxy": "Z-axis load in the cut minus its air-feed level (unit in attrs) [-]",
+    "dev_{x,y,z}_{mean,maxabs,rms}_mm": "DES_POS - ENC_POS statistics during the cut [mm]",
+    "tool": "active tool number (NC events), <NA> without events",
+    "cycle": "drilling cycle name (CYCLE81 ...), '' without events",
+}
+"""Columns of :func:`hole_record` with their meaning and unit."""
+
+_CYCLE_RE = re.compile(r"\b(CYCLE8[1-9]|G8[1-9])\b", re.IGNORECASE)
+_CALL_RE = re.compile(r"_?(CYCLE8[1-9])", re.IGNORECASE)
+_PARAMS_RE = re.compile(r"CYCLE8[1-9]\s*\(([^)]*)\)", re.IGNORECASE)
+
+
+@dataclass(frozen=True)
+class Plunge:
+    """Sample indices (row positions in the HF table) of one plunge of the Z axis.
+
+    Attributes
+    ----------
+    start : int
+        First downward sample (rapid approach included).
+    feed_start : int
+        First sample of the final constant-feed stretch.
+    bottom : int
+        Sample of the Z minimum.
+    end : int
+        Last sample before Z moves up again (dwell included).
+    feed_mm_s : float
+        Median feed speed of the feed stretch [mm/s].
+    """
+
+    start: int
+    feed_start: int
+    bottom: int
+    end: int
+    feed_mm_s: float
+
+
+def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
+    m = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    d = np.diff(m)
+    starts = np.flatnonzero(d == 1)
+    ends = np.flatnonzero(d == -1) - 1
+    return list(zip(starts.tolist(), ends.tolist(), strict=True))
+
+
+def find_plunges(
+    z_mm: NDArray[np.float64],
+    *,
+    fs_hz: float,
+    min_speed_mm_s: float = 0.05,
+    min_travel_mm: float = 0.5,
+    feed_factor: float = 1.5,
+) -> list[Plunge]:
+    """Plunges of a feed axis: runs of downward motion ending in a feed stretch.
+
+    Parameters
+    ----------
+    z_mm : numpy.ndarray
+        Z position per cycle (preferably the setpoint ``DES_POS``) [mm].
+    fs_hz : float
+        Sample rate [Hz].
+    min_speed_mm_s : float, default 0.05
+        Slower movement counts as standstill [mm/s].
+    min_travel_mm : float, default 0.5
+        Shortest feed travel that counts as a plunge [mm].
+    feed_factor : float, default 1.5
+        Samples faster than ``feed_factor`` x the feed speed belong to the rapid approach.
+
+    Returns
+    -------
+    list of Plunge
+
+    Notes
+    -----
+    The feed speed of a plunge is the median speed over the last half of its downward run
+    (the approach is short and fast, the cut long and slow); the feed stretch is the contiguous
+    block of samples not faster than ``feed_factor`` times it that ends at the bottom.
+    """
+    z = np.asarray(pd.Series(z_mm).interpolate(limit_direction="both"), dtype=np.float64)
+    if z.size < 3 or not np.isfinite(z).all():
+        return []
+    v = np.gradient(z) * fs_hz
+    # down-runs separated only by standstill (exact stop between rapid and feed) are one plunge
+    merged: list[list[int]] = []
+    for s, e in _runs(v < -min_speed_mm_s):
+        if merged and not (v[merged[-1][1] + 1 : s] > min_speed_mm_s).any():
+            merged[-1][1] = e
+        else:
+            merged.append([s, e])
+    out: list[Plunge] = []
+    for s, e in merged:
+        hi = min(e + 2, z.size)
+        bottom = s + int(np.argmin(z[s:hi]))
+        speed = -v[s : bottom + 1]
+        moving = speed[speed > min_speed_mm_s]
+        if moving.size < 3:
+            continue
+        feed = float(np.median(moving[moving.size // 2 :]))
+        if feed <= 0:
+            continue
+        fast = np.flatnonzero(speed > feed_factor * feed)
+        feed_start = s + (int(fast[-1]) + 1 if fast.size else 0)
+        feed_start = min(feed_start, bottom)
+        if z[feed_start] - z[bottom] < min_travel_mm:
+            continue
+        up = np.flatnonzero(v[bottom:] > min_speed_mm_s)
+        end = bottom + int(up[0]) - 1 if up.size else z.size - 1
+        out.append(Plunge(s, feed_start, bottom, max(end, bottom), feed))
+    return out
+
+
+def _cycle_info(rec: Recording, cycles: NDArray[np.int64]) -> tuple[list[str], list[float]]:
+    """Drilling-cycle name and reference plane (RFP) active at each cycle, from NC events."""
+    ev = rec.events
+    n = len(cycles)
+    names = [""] * n
+    rfp = [math.nan] * n
+    if ev.empty:
+        return names, rfp
+    ev = ev.sort_values("cycle", kind="stable")
+    ec = ev["cycle"].to_numpy(dtype=np.int64)
+    kinds = ev["kind"].astype(str).to_numpy()
+    texts = ev["gcode"].astype(object).where(ev["gcode"].notna(), "").astype(str).to_numpy()
+    paths = ev["path"].astype(object).where(ev["path"].notna(), "").astype(str).to_numpy()
+    # modal state walked in event order
+    cur_name, cur_rfp = "", math.nan
+    state_name = np.empty(len(ec), dtype=object)
+    state_rfp = np.empty(len(ec))
+    for i in range(len(ec)):
+        if kinds[i] == "block":
+            t = texts[i].upper()
+            m = _CYCLE_RE.search(t)
+            if m:
+                cur_name = m.group(1).upper()
+                p = _PARAMS_RE.search(t)
+                if p:
+                    parts = [x.strip() for x in p.group(1).split(",")]
+                    try:
+                        cur_rfp = float(parts[1]) if len(parts) > 1 and parts[1] else math.nan
+                    except ValueError:
+                        cur_rfp = math.nan
+            elif re.fullmatch(r"\s*MCALL\s*", t) or re.search(r"\bG80\b", t):
+                cur_name, cur_rfp = "", math.nan
+        elif kinds[i] == "call":
+            m = _CALL_RE.search(paths[i])
+            if m and not cur_name:
+                cur_name = m.group(1).upper()
+        state_name[i] = cur_name
+        state_rfp[i] = cur_rfp
+    idx = np.searchsorted(ec, cycles, side="right") - 1
+    for k, j in enumerate(idx):
+        if j >= 0:
+            names[k] = str(state_name[j])
+            rfp[k] = float(state_rfp[j])
+    return names, rfp
+
+
+def _active_tool(rec: Recording, cycles: NDArray[np.int64]) -> list[int | None]:
+    ev = rec.events
+    if ev.empty or "active_tool" not in ev.columns:
+        return [None] * len(cycles)
+    t = ev[["cycle", "active_tool"]].dropna().sort_values("cycle", kind="stable")
+    if t.empty:
+        return [None] * len(cycles)
+    tc = t["cycle"].to_numpy(dtype=np.int64)
+    tv = t["active_tool"].to_numpy()
+    idx = np.searchsorted(tc, cycles, side="right") - 1
+    return [int(tv[j]) if j >= 0 else None for j in idx]
+
+
+def _contact(
+    current: NDArray[np.float64], lo: int, hi: int, fs_hz: float
+) -> int | None:
+    """First sample in [lo, hi] where |I| leaves its air-feed level (None if it never does)."""
+    a = np.abs(current[lo : hi + 1])
+    if a.size < 10 or not np.isfinite(a).all():
+        return None
+    k = max(5, min(round(0.1 * fs_hz), a.size // 5))
+    sm = pd.Series(a).rolling(max(3, round(0.02 * fs_hz)), center=True, min_periods=1).mean()
+    smv = sm.to_numpy()
+    air = float(np.median(smv[:k]))
+    noise = 1.4826 * float(np.median(np.abs(a[:k] - np.median(a[:k]))))
+    top = float(np.quantile(smv, 0.9))
+    thr = max(6.0 * noise, 0.1 * (top - air))
+    if top - air <= thr:
+        return None
+    above = np.flatnonzero(smv - air > thr)
+    if not above.size:
+        return None
+    # walk back to where the rise begins (the threshold is crossed part-way up the ramp)
+    k0 = int(above[0])
+    floor = max(2.0 * noise, 0.02 * (top - air))
+    while k0 > 0 and smv[k0 - 1] - air > floor:
+        k0 -= 1
+    return lo + k0
+
+
+def _zload(rec: Recording, z_axis: str) -> tuple[NDArray[np.float64], str, bool] | None:
+    for code, unit in (("TORQUE", "Nm"), ("CURRENT", "A")):
+        col = f"{code}|{z_axis}"
+        if rec.has(col):
+            return rec.hf[col].to_numpy(dtype=np.float64), f"{col} [{unit}]", True
+    des, enc = f"DES_POS|{z_axis}", f"ENC_POS|{z_axis}"
+    if rec.has(des) and rec.has(enc):
+        d = rec.hf[des].to_numpy(dtype=np.float64) - rec.hf[enc].to_numpy(dtype=np.float64)
+        return d, f"{des} - {enc} (following error) [mm]", False
+    return None
+
+
+def _dev(rec: Recording, axis: str, idx: NDArray[np.int64]) -> tuple[float, float, float]:
+    des, enc = f"DES_POS|{axis}", f"ENC_POS|{axis}"
+    if not (rec.has(des) and rec.has(enc)):
+        return (math.nan, math.nan, math.nan)
+    d = rec.hf[des].to_numpy(dtype=np.float64)[idx] - rec.hf[enc].to_numpy(
+        dtype=np.float64
+    )[idx]
+    d = d[np.isfinite(d)]
+    if d.size == 0:
+        return (math.nan, math.nan, math.nan)
+    return float(d.mean()), float(np.abs(d).max()), float(np.sqrt(np.mean(d * d)))
+
+
+def hole_record(
+    rec: Recording,
+    *,
+    spindle: str = "SP1",
+    z_axis: str = "Z1",
+    xy_axes: tuple[str, str] = ("X1", "Y1"),
+    model: SpindleModel | None = None,
+    window_s: float = 0.6,
+    set_size: int = 6,
+    first_hole: int = 0,
+    time_origin: pd.Timestamp | None = None,
+    min_travel_mm: float = 0.5,
+    store: bool = True,
+) -> pd.DataFrame:
+    """One row per hole: segmentation, current, torque, energy, thrust, deviations, tool.
+
+    Parameters
+    ----------
+    rec : Recording
+        Recording with ``CURRENT|<spindle>`` and ``DES_POS|<z_axis>`` or ``ENC_POS|<z_axis>``.
+    spindle : str, default 'SP1'
+        Spindle axis name.
+    z_axis : str, default 'Z1'
+        Drilling (feed) axis.
+    xy_axes : (str, str), default ('X1', 'Y1')
+        Lateral axes for the hole position and deviations.
+    model : SpindleModel, optional
+        Calibrated spindle model for the cutting torque (thesis Eq. 4.4). Default: the thesis
+        parameter set ``'thesis_spinner_840dsl'`` (not calibrated to this machine; noted in
+        ``attrs["spindle_model"]``).
+    window_s : float, default 0.6
+        Length of the first window of each cut (thesis §4.3: first 0.6 s) [s].
+    set_size : int, default 6
+        Holes per set (thesis §5.1).
+    first_hole : int, default 0
+        Index of the first hole (to continue numbering across files).
+    time_origin : pandas.Timestamp, optional
+        UTC time that ``start_s``/``end_s``/``extraction_s`` count from; default the first
+        cycle of ``rec``.
+    min_travel_mm : float, default 0.5
+        Shortest feed travel counted as a plunge [mm].
+    store : bool, default True
+        Also store the table in ``rec.meta.attrs["holes"]``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns :data:`HOLE_COLUMNS`; ``attrs`` hold ``thrust_source``, ``spindle_model``,
+        ``z_source``, ``event_cycle_calls`` and ``issues`` (oddities seen).
+
+    Raises
+    ------
+    SignalNotFoundError
+        Without spindle current or Z position.
+
+    Notes
+    -----
+    Cutting torque ``tau_c = Kt I - B n - tau_f sign(n) - J dOmega/dt`` (thesis Eq. 3.1/4.4);
+    energy ``E = sum(tau_c * omega) * dt`` with ``omega = 2 pi n / 60`` over the cut (surface
+    to bottom). The thrust proxy is the mean Z-axis torque (or current, or following error when
+    the drive values are not recorded) in the cut minus its mean during the feed in air just
+    before contact, which removes gravity, friction and the velocity-proportional lag.
+    """
+    if set_size < 1:
+        raise ConfigError(f"set_size must be >= 1, not {set_size}")
+    i_col = f"CURRENT|{spindle}"
+    if not rec.has(i_col):
+        raise SignalNotFoundError(
+            f"hole_record needs {i_col!r}; the recording has: {', '.join(rec.columns)}"
+        )
+    z_des, z_enc = f"DES_POS|{z_axis}", f"ENC_POS|{z_axis}"
+    if not (rec.has(z_des) or rec.has(z_enc)):
+        raise SignalNotFoundError(
+            f"hole_record segments holes from the Z motion and needs {z_des!r} or {z_enc!r}; "
+            f"pass z_axis=... (the recording has: {', '.join(rec.columns)})"
+        )
+    issues: list[str] = []
+    fs = rec.fs_hz
+    ct = rec.meta.cycle_time_s
+    z_src = z_des if rec.has(z_des) else z_enc
+    zm = rec.hf[z_src].to_numpy(dtype=np.float64)
+    za = rec.hf[z_enc].to_numpy(dtype=np.float64) if rec.has(z_enc) else zm
+    current = rec.hf[i_col].to_numpy(dtype=np.float64)
+    try:
+        speed, _ = spindle_speed_rpm(rec, spindle)
+        speed = np.asarray(pd.Series(speed).ffill().bfill().fillna(0.0), dtype=np.float64)
+    except SignalNotFoundError:
+        speed = np.full(current.size, math.nan)
+        issues.append(f"no spindle speed for {spindle}: torque and energy are NaN")
+    if model is None:
+        model = SpindleModel.from_parameters("thesis_spinner_840dsl")
+        model_note = "thesis_spinner_840dsl (default, not calibrated to this machine)"
+    else:
+        model_note = repr(model)
+    with np.errstate(invalid="ignore"):
+        torque = model.cutting_torque(current, speed, fs_hz=fs)
+    zl = _zload(rec, z_axis)
+    cycles = rec.cycles
+    times = pd.DatetimeIndex(rec.hf["time"])
+    origin = pd.Timestamp(time_origin) if time_origin is not None else (
+        times[0] if len(times) else pd.Timestamp(0, tz="UTC"))
+    t_s = ((times - origin) / pd.Timedelta(seconds=1)).to_numpy(dtype=np.float64)
+
+    plunges = find_plunges(zm, fs_hz=fs, min_travel_mm=min_travel_mm)
+    names, rfps = _cycle_info(rec, cycles[[p.feed_start for p in plunges]] if plunges else
+                              np.empty(0, dtype=np.int64))
+    tools = _active_tool(rec, cycles[[p.feed_start for p in plunges]] if plunges else
+                         np.empty(0, dtype=np.int64))
+    x_des = f"DES_POS|{xy_axes[0]}"
+    y_des = f"DES_POS|{xy_axes[1]}"
+    xd = rec.hf[x_des].to_numpy(dtype=np.float64) if rec.has(x_des) else None
+    yd = rec.hf[y_des].to_numpy(dtype=np.float64) if rec.has(y_des) else None
+
+    # group peck plunges into holes: a plunge starting inside the previous hole continues it
+    groups: list[list[int]] = []
+    for k, p in enumerate(plunges):
+        if groups:
+            q = plunges[groups[-1][0]]
+            same_xy = all(
+                arr is None or abs(float(arr[p.feed_start]) - float(arr[q.feed_start])) < 0.01
+                for arr in (xd, yd)
+            )
+            first_top = float(zm[q.feed_start])
+            if same_xy and float(zm[p.feed_start]) < first_top - 0.5:
+                groups[-1].append(k)
+                continue
+        groups.append([k])
+
+    rows = []
+    for h, grp in enumerate(groups):
+        first = plunges[grp[0]]
+        last = plunges[grp[-1]]
+        bottom = min((plunges[i].bottom for i in grp), key=lambda b: float(za[b]))
+        name, rfp = names[grp[0]], rfps[grp[0]]
+        lo, hi = first.feed_start, bottom
+        if math.isfinite(rfp):
+            surface, src = rfp, "cycle"
+            inside = np.flatnonzero(za[lo : hi + 1] <= rfp)
+            cut_start = lo + int(inside[0]) if inside.size else lo
+        else:
+            c = _contact(current, lo, hi, fs)
+            if c is not None:
+                cut_start, surface, src = c, float(za[c]), "current"
+            else:
+                cut_start, surface, src = lo, float(zm[lo]), "feed"
+        cut_end = max(hi, cut_start)
+        # samples in the material: the feed parts of all plunges of the hole (peck retracts
+        # and re-approaches excluded), from the surface on
+        parts = []
+        deepest = math.inf
+        for i in grp:
+            seg = np.arange(max(plunges[i].feed_start, cut_start), plunges[i].bottom + 1)
+            parts.append(seg[zm[seg] < deepest])  # new material only (not the re-entry)
+            deepest = min(deepest, float(zm[plunges[i].bottom]))
+        sl = np.concatenate(parts)
+        if sl.size == 0:
+            sl = np.arange(cut_start, cut_end + 1)
+        nwin = max(1, round(window_s * fs))
+        fw = sl[:nwin]
+        omega = speed[sl] * 2.0 * math.pi / 60.0
+        energy = float(np.nansum(torque[sl] * omega) * ct)
+        thrust = math.nan
+        if zl is not None:
+            # feed in air before contact; its first half may still hold the exact-stop ramp
+            air = zl[0][lo + (cut_start - lo) // 2 : cut_start]
+            air = air[np.isfinite(air)]
+            if air.size >= 5:
+                # positive = pushing the tool into the part: the Z load (and the lag of the
+                # encoder behind the setpoint) grows negative while the axis pushes down
+                thrust = -float(np.nanmean(zl[0][sl]) - np.mean(air))
+        out_idx = np.flatnonzero(za[last.end:] > surface)
+        extraction = last.end + int(out_idx[0]) if out_idx.size else len(za) - 1
+        row: dict[str, object] = {
+            "hole": first_hole + h,
+            "set": (first_hole + h) // set_size,
+            "position_in_set": (first_hole + h) % set_size,
+            "start_cycle": int(cycles[first.feed_start]),
+            "cut_start_cycle": int(cycles[cut_start]),
+            "cut_end_cycle": int(cycles[cut_end]),
+            "end_cycle": int(cycles[last.end]),
+            "start_time": times[cut_start],
+            "start_s": float(t_s[cut_start]),
+            "end_s": float(t_s[cut_end]),
+            "extraction_s": float(t_s[extraction]),
+            "cut_duration_s": float(sl.size * ct),
+            "x_mm": float(np.median(xd[sl])) if xd is not None else math.nan,
+            "y_mm": float(np.median(yd[sl])) if yd is not None else math.nan,
+            "surface_z_mm": float(surface),
+            "surface_source": src,
+            "bottom_z_mm": float(za[bottom]),
+            "depth_mm": float(surface - za[bottom]),
+            "feed_mm_min": float(first.feed_mm_s * 60.0),
+            "speed_rpm": float(np.nanmedian(speed[sl])),
+            "current_mean_a": float(np.nanmean(current[sl])),
+            "current_peak_a": float(np.nanmax(np.abs(current[sl]))),
+            "current_first_a": float(np.nanmean(current[fw])),
+            "torque_first_nm": float(np.nanmean(torque[fw])),
+            "torque_mean_nm": float(np.nanmean(torque[sl])),
+            "energy_j": energy,
+            "thrust_proxy": thrust,
+        }
+        for ax, tag in ((xy_axes[0], "x"), (xy_axes[1], "y"), (z_axis, "z")):
+            m, mx, rms = _dev(rec, ax, sl)
+            row[f"dev_{tag}_mean_mm"] = m
+            row[f"dev_{tag}_maxabs_mm"] = mx
+            row[f"dev_{tag}_rms_mm"] = rms
+        row["tool"] = tools[grp[0]]
+        row["cycle"] = name
+        rows.append(row)
+    df = pd.DataFrame(rows, columns=_columns())
+    df["tool"] = df["tool"].astype("Int64")
+    for col in ("hole", "set", "position_in_set", "start_cycle", "cut_start_cycle",
+                "cut_end_cycle", "end_cycle"):
+        df[col] = df[col].astype("int64")
+    n_calls = _count_cycle_calls(rec)
+    if n_calls and n_calls != len(df):
+        issues.append(f"{n_calls} drilling-cycle calls in the NC events but {len(df)} holes "
+                      "found in the Z motion")
+    df.attrs.update(
+        {
+            "thrust_source": zl[1] if zl is not None else "none",
+            "spindle_model": model_note,
+            "z_source": z_src,
+            "event_cycle_calls": n_calls,
+            "window_s": window_s,
+            "set_size": set_size,
+            "issues": issues,
+        }
+    )
+    if store:
+        rec.meta.attrs["holes"] = df
+    return df
+
+
+def _columns() -> list[str]:
+    cols = [c for c in HOLE_COLUMNS if not c.startswith("dev_") and c not in ("tool", "cycle")]
+    for tag in ("x", "y", "z"):
+        cols += [f"dev_{tag}_mean_mm", f"dev_{tag}_maxabs_mm", f"dev_{tag}_rms_mm"]
+    return [*cols, "tool", "cycle"]
+
+
+def _count_cycle_calls(rec: Recording) -> int:
+    ev = rec.events
+    if ev.empty:
+        return 0
+    calls = ev[ev["kind"] == "call"]["path"].dropna().astype(str)
+    return int(calls.str.contains(r"CYCLE8[1-9]", case=False, regex=True).sum())
+
+
+def hole_records(
+    recordings: Sequence[Recording],
+    *,
+    spindle: str = "SP1",
+    z_axis: str = "Z1",
+    xy_axes: tuple[str, str] = ("X1", "Y1"),
+    model: SpindleModel | None = None,
+    window_s: float = 0.6,
+    set_size: int = 6,
+) -> pd.DataFrame:
+    """:func:`hole_record` over several recordings in time order (e.g. one file per set).
+
+    Hole numbers continue across the recordings and all times count from the first cycle of
+    the earliest recording. Each recording also keeps its own rows in ``meta.attrs["holes"]``.
+    """
+    if not recordings:
+        raise ConfigError("hole_records needs at least one recording")
+    recs = sorted(recordings, key=lambda r: pd.Timestamp(r.hf["time"].iloc[0]))
+    origin = pd.Timestamp(recs[0].hf["time"].iloc[0])
+    parts = []
+    n = 0
+    issues: list[str] = []
+    for r in recs:
+        df = hole_record(r, spindle=spindle, z_axis=z_axis, xy_axes=xy_axes, model=model,
+                         window_s=window_s, set_size=set_size, first_hole=n, time_origin=origin)
+        parts.append(df)
+        issues += df.attrs.get("issues", [])
+        n += len(df)
+    out = pd.concat(parts, ignore_index=True)
+    out.attrs.update({**parts[0].attrs, "issues": issues,
+                      "event_cycle_calls": sum(p.attrs["event_cycle_calls"] for p in parts)})
+    return out
+
+
+def holes_path(recording_path: str | PathLike[str]) -> Path:
+    """Where the hole table of a recording file goes: ``<name>.holes.parquet`` beside it."""
+    p = Path(recording_path)
+    return p.with_name(p.name.split(".")[0] + ".holes.parquet")
+
+
+def write_holes(holes: pd.DataFrame, path: str | PathLike[str]) -> Path:
+    """Write a hole table to Parquet (attrs kept as JSON in the file metadata).
+
+    Parameters
+    ----------
+    holes : pandas.DataFrame
+        Output of :func:`hole_record`.
+    path : str or path-like
+        Target file; use :func:`holes_path` to put it beside the recording.
+    """
+    import json
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    p = Path(path)
+    table = pa.Table.from_pandas(holes, preserve_index=False)
+    meta = dict(table.schema.metadata or {})
+    meta[b"cnctwin.holes"] = json.dumps(holes.attrs, default=str).encode()
+    pq.write_table(table.replace_schema_metadata(meta), p)
+    return p
+
+
+def read_holes(path: str | PathLike[str]) -> pd.DataFrame:
+    """Read a hole table written by :func:`write_holes` (attrs restored)."""
+    import json
+
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(Path(path))
+    df = table.to_pandas()
+    raw = (table.schema.metadata or {}).get(b"cnctwin.holes")
+    if raw:
+        df.attrs.update(json.loads(raw))
+    return df
