@@ -257,6 +257,16 @@ def _servo_kernel(
         t_mod = t_eq if mode != 0 else 1.0 / kv
         a_mod = tc / (t_mod + tc)
         a_lf = 1.0 - math.exp(-tc / par[a, P_LFT])
+        use0 = jtype == 2 or jtype == 4
+        use1 = jtype == 4
+        use2 = dra_t > 0.0 and dra_dead
+        use3 = bal_dead
+        frozen = False
+        fz_xd = 0.0
+        fz_f = 0.0
+        fz_iq = 0.0
+        fz_vl = 0.0
+        fz_util = 0.0
 
         if st[a, S_INIT] == 0.0:
             x0 = des[a, 0] if n > 0 else 0.0
@@ -305,8 +315,43 @@ def _servo_kernel(
 
         for k in range(n):
             ridx = (ridx + 1) % nring
-            # ---- NC: jerk filter
             xd = des[a, k]
+            fext = force[a, k]
+            if frozen:
+                if xd == fz_xd and fext == fz_f:
+                    # settled: the dynamic state is a bitwise fixed point (see Notes of
+                    # simulate_servo); only noise, temperature and LF filters move
+                    temp += tc * (rph * fz_iq * fz_iq - (temp - tamb) / rth) / cth
+                    lf_speed += a_lf * (fz_vl - lf_speed)
+                    lf_iabs += a_lf * (abs(fz_iq) - lf_iabs)
+                    lf_iq += a_lf * (fz_iq - lf_iq)
+                    lf_util += a_lf * (fz_util - lf_util)
+                    for i in range(_N_OUT):
+                        out[a, i, k] = out[a, i, k - 1]
+                    out[a, 8, k] = fz_iq + noise[a, k]
+                    out[a, 12, k] = lf_speed
+                    out[a, 13, k] = lf_iabs
+                    out[a, 14, k] = lf_iq
+                    out[a, 15, k] = lf_util
+                    out[a, 16, k] = temp
+                    continue
+                frozen = False
+            b_xf1 = xf1
+            b_xf2 = xf2
+            b_j1 = j1
+            b_j2 = j2
+            b_dra = dra
+            b_bal = bal
+            b_mod = mod
+            b_x = x
+            b_w = w
+            b_integ = integ
+            b_tact = tact
+            b_tset = tset
+            b_xq = xq
+            b_ctrl1 = ctrl1
+            b_fric = fric
+            # ---- NC: jerk filter
             if jtype == 1:
                 j1 += a_j * (xd - j1)
                 j2 += a_j * (j1 - j2)
@@ -362,7 +407,6 @@ def _servo_kernel(
             dctrl = ctrl - ctrl1
             ctrl1 = ctrl
             # ---- drive: 125 us loops
-            fext = force[a, k]
             dsum = 0.0
             for j in range(inner_steps):
                 if j > 0:
@@ -428,6 +472,33 @@ def _servo_kernel(
             out[a, 17, k] = x
             out[a, 18, k] = fric
             out[a, 19, k] = w
+            # ---- settled? same inputs as the previous cycle and the state did not move
+            if (
+                k > 0
+                and xd == des[a, k - 1]
+                and fext == force[a, k - 1]
+                and xf1 == b_xf1 and xf2 == b_xf2 and j1 == b_j1 and j2 == b_j2
+                and dra == b_dra and bal == b_bal and mod == b_mod and x == b_x and w == b_w
+                and integ == b_integ and tact == b_tact and tset == b_tset and xq == b_xq
+                and ctrl1 == b_ctrl1 and fric == b_fric
+            ):
+                ok = True
+                for b in range(_N_RING):
+                    if (b == 0 and use0) or (b == 1 and use1) or (b == 2 and use2) or (
+                        b == 3 and use3
+                    ):
+                        v0 = ring[a, b, ridx]
+                        for i in range(nring):
+                            if ring[a, b, i] != v0:
+                                ok = False
+                                break
+                if ok:
+                    frozen = True
+                    fz_xd = xd
+                    fz_f = fext
+                    fz_iq = iq
+                    fz_vl = vload * v_out
+                    fz_util = abs(tset) / tmax * 100.0
 
         st[a, S_XF1] = xf1
         st[a, S_XF2] = xf2

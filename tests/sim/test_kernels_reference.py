@@ -1,0 +1,75 @@
+"""The optimised servo and spindle kernels against the pre-optimisation reference kernels.
+
+:mod:`cnctwin.sim._reference` keeps the kernels as they were before the speed work (issue #3).
+The servo kernel skips cycles of settled axes (a bitwise fixed point of its state), which must
+not change a single bit of the output; the spindle kernel may differ by float rounding only
+(relative 1e-9, far below the 0.03 A current noise and 0.5 rpm speed noise of the model).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cnctwin.sim._reference import servo_kernel_reference, spindle_kernel_reference
+from cnctwin.sim.machine import Machine
+from cnctwin.sim.servo import _N_OUT, ServoState, _servo_kernel, servo_parameters
+from cnctwin.sim.spindle import _TRACE_FIELDS, SpindleState, _kernel, _param_vector
+
+TC = 0.002
+
+
+def _drilling_setpoints(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """X/Y move between holes and stand still, Z drills with a thrust, C/B never move."""
+    t = np.arange(n) * TC
+    des = np.zeros((5, n))
+    hole = (t // 1.5).astype(int)
+    x_target = 15.0 * hole
+    ramp = np.clip((t % 1.5) / 0.3, 0.0, 1.0)
+    des[0] = x_target - 15.0 * (1.0 - ramp) * (hole > 0)
+    des[1] = 3.0
+    z = np.clip((t % 1.5) - 0.4, 0.0, 0.8) / 0.8 * -5.0
+    des[2] = np.where((t % 1.5) < 1.3, z, 2.0)
+    force = np.zeros((5, n))
+    force[2] = np.where(des[2] < -0.5, 1500.0, 0.0)  # thrust while drilling [N]
+    force[0] = np.where(des[2] < -0.5, 20.0, 0.0)  # constant radial force
+    return des, force
+
+
+def test_servo_kernel_bit_identical_to_reference_chunked() -> None:
+    m = Machine.thesis_default()
+    par = servo_parameters(m.axes)
+    des, force = _drilling_setpoints(6000)
+    noise = np.random.default_rng(5).standard_normal(des.shape) * 0.01
+    st_new, st_ref = ServoState.new(5), ServoState.new(5)
+    for lo, hi in [(0, 1), (1, 2500), (2500, 2501), (2501, 6000)]:
+        args = (np.ascontiguousarray(des[:, lo:hi]), np.ascontiguousarray(force[:, lo:hi]),
+                np.ascontiguousarray(noise[:, lo:hi]), par)
+        out_new = np.empty((5, _N_OUT, hi - lo))
+        out_ref = np.empty((5, _N_OUT, hi - lo))
+        _servo_kernel(*args, st_new.values, st_new.history, out_new, TC, m.inner_steps)
+        servo_kernel_reference(*args, st_ref.values, st_ref.history, out_ref, TC,
+                               m.inner_steps)
+        np.testing.assert_array_equal(out_new, out_ref)
+        np.testing.assert_array_equal(st_new.values, st_ref.values)
+        np.testing.assert_array_equal(st_new.history, st_ref.history)
+
+
+def test_spindle_kernel_matches_reference() -> None:
+    motor = Machine.thesis_default().spindle
+    n = 8000
+    t = np.arange(n) * TC
+    cmd = np.minimum(t * 3000.0, 2400.0)
+    cmd[5000:] = np.maximum(2400.0 - (t[5000:] - t[5000]) * 3000.0, -9000.0)
+    load = np.where((t > 2.0) & (t < 6.0), 4.0, 0.0)
+    mode = np.zeros(n, dtype=np.int64)
+    mode[7000:] = 1
+    pos = np.full(n, 90.0)
+    noise = np.random.default_rng(3).standard_normal((n, 3))
+    pv = _param_vector(motor)
+    outs = []
+    for kern in (_kernel, spindle_kernel_reference):
+        st = SpindleState.initial(motor).vector.copy()
+        out = np.empty((n, len(_TRACE_FIELDS)))
+        kern(cmd, load, pos, mode, noise, pv, st, TC, 16, out)
+        outs.append(out)
+    np.testing.assert_allclose(outs[0], outs[1], rtol=1e-9, atol=1e-9)
