@@ -539,7 +539,9 @@ def _friction_nm(w: float, t_rotor: float, pv: NDArray[np.float64]) -> float:  #
     x = (aw - pv[13]) / pv[14]
     softplus = x + math.log1p(math.exp(-x)) if x > 0.0 else math.log1p(math.exp(x))
     w_eff = aw - (1.0 - pv[43]) * pv[14] * softplus
-    sgn = math.tanh(w / pv[15])
+    r = w / pv[15]
+    # tanh(r) rounds to exactly +-1.0 for |r| > 19.1; skip the call there (same bits)
+    sgn = math.tanh(r) if abs(r) < 20.0 else (1.0 if r > 0.0 else -1.0)
     return sgn * (tau_c + pv[11] * math.exp(-aw / pv[12]) + b * w_eff)
 
 
@@ -572,6 +574,7 @@ def _kernel(  # pragma: no cover - compiled
     b_lf = 1.0 - math.exp(-cycle_time_s / pv[42])
     rpm = 60.0 / (2.0 * math.pi)
     sq2 = math.sqrt(2.0)
+    psi_sq_margin = 1.0 + 1e-9
     w = state[0]
     th = state[1]
     integ = state[2]
@@ -609,12 +612,18 @@ def _kernel(  # pragma: no cover - compiled
             id_ref = 0.0
             if we > 1.0:
                 arg = (umax / we) ** 2 - (lq * i_q) ** 2
-                id_ref = min(0.0, (math.sqrt(arg) - psi_t) / ld) if arg > 0.0 else -psi_t / ld
+                # below the voltage limit (sqrt(arg) > psi_t with margin) id_ref is 0.0:
+                # skip the sqrt there (same bits)
+                if arg <= psi_sq_margin * psi_t * psi_t:
+                    id_ref = (min(0.0, (math.sqrt(arg) - psi_t) / ld) if arg > 0.0
+                              else -psi_t / ld)
                 if id_ref < -0.95 * imax:
                     id_ref = -0.95 * imax
             # speed PI with torque limit from the current circle (anti-windup: clamp)
             kt_drive = 1.5 * p * (psi0 + (ld - lq) * i_d)
-            iq_avail = math.sqrt(max(imax * imax - id_ref * id_ref, 0.0))
+            # sqrt(fl(imax^2)) == imax exactly, so id_ref == 0 needs no sqrt (same bits)
+            iq_avail = (imax if id_ref == 0.0
+                        else math.sqrt(max(imax * imax - id_ref * id_ref, 0.0)))
             t_max = kt_drive * iq_avail
             e = w_ref - w
             t_ref = kp * e + integ
@@ -629,8 +638,10 @@ def _kernel(  # pragma: no cover - compiled
             i_d += a_i * (id_ref - i_d)
             i_q += a_i * (iq_ref - i_q)
             # saturation lowers the magnet flux contribution at high |iq|
-            x = abs(i_q) / pv[4] - 1.0
-            sat = 1.0 / (1.0 + pv[5] * x * x) if x > 0.0 else 1.0
+            sat = 1.0
+            if abs(i_q) > pv[4]:  # else x <= 0: no saturation (division skipped, same bits)
+                x = abs(i_q) / pv[4] - 1.0
+                sat = 1.0 / (1.0 + pv[5] * x * x) if x > 0.0 else 1.0
             psi_act = psi_t * sat
             te = 1.5 * p * (psi_act + (ld - lq) * i_d) * i_q
             fr = _friction_nm(w, tr, pv)
