@@ -1,0 +1,208 @@
+"""Figures of thesis chapter 5 from hole records (matplotlib, Agg; each returns a Figure).
+
+* :func:`plot_hole_means`: per-hole means and their 15-hole moving average (Figures 5.2/5.3).
+* :func:`plot_set_temperature`: spindle current of one set of 6 holes with the tool-tip
+  temperature per hole, measured and predicted (Figure 5.5).
+* :func:`plot_deviation_paths`: desired and encoder paths per hole in 3D, X-Z, Y-Z or X-Y
+  (Figures 5.6-5.9).
+* :func:`plot_anomaly_scores`: a detector score over time with alarms and fault onsets.
+
+Figures are built on :class:`matplotlib.figure.Figure` directly (no pyplot state, no GUI
+backend needed); nothing is shown or saved here: call ``fig.savefig(path)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+from numpy.typing import ArrayLike
+
+from cnctwin.exceptions import ConfigError
+from cnctwin.recording import Recording
+from cnctwin.usecases.wear import moving_average
+
+__all__ = [
+    "plot_anomaly_scores",
+    "plot_deviation_paths",
+    "plot_hole_means",
+    "plot_set_temperature",
+]
+
+_VIEWS = {"3d": ("x", "y", "z"), "xz": ("x", "z"), "yz": ("y", "z"), "xy": ("x", "y")}
+
+
+def plot_hole_means(
+    holes: pd.DataFrame,
+    *,
+    columns: Sequence[str] = ("current_mean_a", "torque_mean_nm"),
+    window: int = 15,
+    wear_um: ArrayLike | None = None,
+) -> Figure:
+    """Per-hole values with their moving average (thesis Figures 5.2 and 5.3).
+
+    Parameters
+    ----------
+    holes : pandas.DataFrame
+        Hole record.
+    columns : sequence of str
+        Columns to plot, one panel each.
+    window : int, default 15
+        Moving-average window [holes] (thesis Figure 5.3).
+    wear_um : array-like, optional
+        Estimated or measured wear per hole, drawn on a right axis of the last panel [µm].
+    """
+    fig = Figure(figsize=(9, 2.6 * len(columns)), layout="constrained")
+    axs = fig.subplots(len(columns), 1, sharex=True, squeeze=False)[:, 0]
+    x = holes["hole"].to_numpy()
+    for ax, col in zip(axs, columns, strict=True):
+        y = holes[col].to_numpy(dtype=np.float64)
+        ax.plot(x, y, ".", ms=2, alpha=0.5, label="per hole")
+        ax.plot(x, moving_average(y, window=window), "-", lw=1.5,
+                label=f"moving average ({window})")
+        ax.set_ylabel(col)
+        ax.legend(loc="upper left", fontsize=8)
+        ax.grid(alpha=0.3)
+    if wear_um is not None:
+        tw = axs[-1].twinx()
+        tw.plot(x, np.asarray(wear_um, dtype=np.float64), "r-", lw=1, label="wear")
+        tw.set_ylabel("flank wear [µm]", color="r")
+    axs[-1].set_xlabel("hole")
+    return fig
+
+
+def plot_set_temperature(
+    rec: Recording,
+    holes: pd.DataFrame,
+    *,
+    set_index: int | None = None,
+    spindle: str = "SP1",
+    predicted_c: ArrayLike | None = None,
+) -> Figure:
+    """Spindle current of one set with the tool-tip temperature of each hole (Figure 5.5).
+
+    Parameters
+    ----------
+    rec : Recording
+        Recording holding the set.
+    holes : pandas.DataFrame
+        Hole record (with ``camera_temperature_c`` from
+        :func:`~cnctwin.usecases.thermal.merge_camera` if measured).
+    set_index : int, optional
+        Set to draw; default the first set inside ``rec``.
+    spindle : str, default 'SP1'
+        Spindle axis.
+    predicted_c : array-like, optional
+        Soft-sensor temperature per row of ``holes`` [°C].
+    """
+    c0, c1 = int(rec.cycles[0]), int(rec.cycles[-1])
+    h = holes.copy()
+    if predicted_c is not None:
+        h["predicted_c"] = np.asarray(predicted_c, dtype=np.float64)
+    h = h[(h["cut_start_cycle"] >= c0) & (h["cut_end_cycle"] <= c1)]
+    if h.empty:
+        raise ConfigError("no hole of the table lies inside this recording")
+    s = int(h["set"].iloc[0]) if set_index is None else set_index
+    h = h[h["set"] == s]
+    if h.empty:
+        raise ConfigError(f"set {s} is not in this recording")
+    lo = int(h["start_cycle"].min()) - 250
+    hi = int(h["end_cycle"].max()) + 250
+    part = rec.select(cycles=(lo, hi))
+    t0 = rec.cycles[0]
+    t = (part.cycles - t0) * rec.meta.cycle_time_s
+    fig = Figure(figsize=(9, 4), layout="constrained")
+    ax = fig.add_subplot()
+    ax.plot(t, part.hf[f"CURRENT|{spindle}"], lw=0.5, color="C0")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(f"CURRENT|{spindle} [A]", color="C0")
+    tw = ax.twinx()
+    te = (h["end_cycle"].to_numpy() - t0) * rec.meta.cycle_time_s
+    if "camera_temperature_c" in h.columns:
+        tw.plot(te, h["camera_temperature_c"], "o", color="C3", label="camera")
+    if "predicted_c" in h.columns:
+        tw.plot(te, h["predicted_c"], "s--", color="C1", mfc="none", label="soft sensor")
+    tw.set_ylabel("tool-tip temperature [°C]", color="C3")
+    tw.legend(loc="upper left", fontsize=8)
+    ax.set_title(f"set {s}: holes {int(h['hole'].min())}-{int(h['hole'].max())}")
+    return fig
+
+
+def plot_deviation_paths(
+    paths: pd.DataFrame,
+    *,
+    view: str = "3d",
+    holes: Sequence[int] | None = None,
+    lateral_scale: float = 1000.0,
+) -> Figure:
+    """Desired vs encoder path of each hole, top of the hole at (0, 0, 0) (Figures 5.6-5.9).
+
+    Parameters
+    ----------
+    paths : pandas.DataFrame
+        Output of :func:`~cnctwin.usecases.quality.deviation_paths`.
+    view : {'3d', 'xz', 'yz', 'xy'}
+        Figure 5.6 (3D), 5.7 (X-Z), 5.8 (Y-Z) or 5.9 (X-Y).
+    holes : sequence of int, optional
+        Holes to draw, one panel each (a)-(f); default the first six.
+    lateral_scale : float, default 1000
+        X and Y are drawn in mm times this factor (1000: µm), Z in mm.
+    """
+    if view not in _VIEWS:
+        raise ConfigError(f"view must be one of {sorted(_VIEWS)}, not {view!r}")
+    ids = list(holes) if holes is not None else sorted(paths["hole"].unique())[:6]
+    if not ids:
+        raise ConfigError("no hole to draw")
+    ncol = min(3, len(ids))
+    nrow = -(-len(ids) // ncol)
+    fig = Figure(figsize=(4 * ncol, 3.4 * nrow), layout="constrained")
+    unit = "µm" if lateral_scale == 1000.0 else f"mm x {lateral_scale:g}"
+    dims = _VIEWS[view]
+    for k, hid in enumerate(ids):
+        p = paths[paths["hole"] == hid]
+        if view == "3d":
+            ax = fig.add_subplot(nrow, ncol, k + 1, projection="3d")
+        else:
+            ax = fig.add_subplot(nrow, ncol, k + 1)
+        for kind, style in (("des", "--"), ("enc", "-")):
+            vals = [p[f"{kind}_{d}_mm"].to_numpy() * (lateral_scale if d != "z" else 1.0)
+                    for d in dims]
+            ax.plot(*vals, style, lw=1, label="desired" if kind == "des" else "encoder")
+        labels = [f"{d.upper()} [{unit if d != 'z' else 'mm'}]" for d in dims]
+        ax.set_xlabel(labels[0])
+        ax.set_ylabel(labels[1])
+        if view == "3d":
+            ax.set_zlabel(labels[2])
+        ax.set_title(f"({chr(ord('a') + k)}) hole {hid}", fontsize=9)
+        if k == 0:
+            ax.legend(fontsize=7)
+    return fig
+
+
+def plot_anomaly_scores(
+    time_s: ArrayLike,
+    scores: ArrayLike,
+    *,
+    threshold: float = 0.0,
+    alarms_s: Sequence[float] = (),
+    fault_onsets_s: Sequence[float] = (),
+    learn_until_s: float | None = None,
+    title: str = "",
+) -> Figure:
+    """Detector score over time with threshold, alarms and true fault onsets."""
+    fig = Figure(figsize=(9, 3), layout="constrained")
+    ax = fig.add_subplot()
+    ax.plot(np.asarray(time_s), np.asarray(scores), lw=0.6)
+    ax.axhline(threshold, color="k", lw=0.8, ls=":")
+    for a in alarms_s:
+        ax.axvline(a, color="C3", lw=0.8)
+    for o in fault_onsets_s:
+        ax.axvline(o, color="C2", lw=1.2, ls="--")
+    if learn_until_s is not None:
+        ax.axvspan(float(np.min(time_s)), learn_until_s, color="0.9")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("score")
+    ax.set_title(title or "anomaly score (red: alarms, green dashed: fault onsets)")
+    return fig
