@@ -506,30 +506,27 @@ def _lf_frame(
     idx = np.flatnonzero(cyc % period == 0)
     if idx.size == 0:
         return pd.DataFrame(columns=LF_COLUMNS)
-    parts: list[tuple[str, NDArray[np.float64]]] = []
+    names: list[str] = []
+    rows: list[NDArray[np.float64]] = []
     for i, ax in enumerate(feed):
-        parts += [
-            (f"SPEED_SMOOTHED|{ax}", sig["SPEED_SMOOTHED"][i, idx]),
-            (f"CURRENT_ABS_SMOOTHED|{ax}", sig["CURRENT_ABS_SMOOTHED"][i, idx]),
-            (f"IQ_ACT|{ax}", sig["IQ_ACT"][i, idx]),
-            (f"TORQUE_UTIL|{ax}", sig["TORQUE_UTIL"][i, idx]),
-            (f"MOTOR_TEMP|{ax}", sig["MOTOR_TEMP"][i, idx]),
-        ]
-    parts += [
-        (f"SPEED_SMOOTHED|{sp_name}", sp.speed_smoothed_rpm[idx]),
-        (f"CURRENT_ABS_SMOOTHED|{sp_name}", sp.current_abs_smoothed_a[idx]),
-        (f"IQ_ACT|{sp_name}", sp.iq_smoothed_a[idx]),
-        (f"TORQUE_UTIL|{sp_name}", sp.torque_utilization_pct[idx]),
-        (f"MOTOR_TEMP|{sp_name}", sp.motor_temperature_c[idx]),
-    ]
-    cycles = np.tile(cyc[idx], len(parts))
-    values = np.concatenate([v for _, v in parts])
-    signals = np.repeat([name for name, _ in parts], idx.size)
+        for code in ("SPEED_SMOOTHED", "CURRENT_ABS_SMOOTHED", "IQ_ACT", "TORQUE_UTIL",
+                     "MOTOR_TEMP"):
+            names.append(f"{code}|{ax}")
+            rows.append(sig[code][i, idx])
+    names += [f"{code}|{sp_name}" for code in ("SPEED_SMOOTHED", "CURRENT_ABS_SMOOTHED",
+                                                 "IQ_ACT", "TORQUE_UTIL", "MOTOR_TEMP")]
+    rows += [sp.speed_smoothed_rpm[idx], sp.current_abs_smoothed_a[idx],
+             sp.iq_smoothed_a[idx], sp.torque_utilization_pct[idx], sp.motor_temperature_c[idx]]
+    # rows sorted by (cycle, signal) directly: cycle-major, signal names in sorted order
+    order = sorted(range(len(names)), key=names.__getitem__)
+    values = np.stack([rows[j] for j in order], axis=1).ravel()
+    cycles = np.repeat(cyc[idx], len(names))
+    signals = np.tile(np.array([names[j] for j in order]), idx.size)
     times = cycles_to_time(cycles, meta.time_anchors, cycle_time_s=meta.cycle_time_s)
     return pd.DataFrame({
         "cycle": cycles, "time": times, "signal": signals, "value": values,
         "text": pd.Series([None] * cycles.size, dtype="object"),
-    }).sort_values(["cycle", "signal"], kind="stable", ignore_index=True)
+    })
 
 
 def iter_chunks(program: Any, machine: Machine, chunk_cycles: int) -> Iterable[Any]:
