@@ -1,4 +1,9 @@
-"""Simulator subcommand: ``cnctwin simulate NAME --out DIR --seed N [--set key=value ...]``."""
+"""Simulator subcommand: ``cnctwin simulate NAME --out DIR --seed N [--set key=value ...]``.
+
+Runs one scenario of :mod:`cnctwin.sim.scenarios` (each on :func:`cnctwin.sim.simulate`) with
+a rich progress bar over the program's machine time; ``--format`` chooses Capture4Analysis JSON
+(chained files) or a Parquet chunk directory for the recording.
+"""
 
 from __future__ import annotations
 
@@ -40,7 +45,16 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="scenario option, e.g. n_holes=60 for tool_wear_run (repeatable)",
+        help="scenario option, e.g. n_holes=60 for tool_wear_run (repeatable; JSON values, "
+        'e.g. faults=\'[{"type": "ToolBreakage", "hole": 40}]\')',
+    )
+    p.add_argument(
+        "--format",
+        dest="fmt",
+        choices=("c4a", "parquet"),
+        default=None,
+        help="recording format: c4a (Capture4Analysis JSON) or parquet (chunk directory); "
+        "default: the scenario's (parquet for tool_wear_run, c4a otherwise)",
     )
     p.set_defaults(func=_cmd_simulate)
 
@@ -65,6 +79,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
     overrides = _parse_pairs(args.overrides, "--set")
     options = _parse_pairs(args.options, "--option")
+    if args.fmt is not None:
+        options["fmt"] = args.fmt
     with Progress(transient=True) as bar:
         task = bar.add_task(args.name, total=1.0)
 

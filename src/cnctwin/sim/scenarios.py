@@ -1,26 +1,43 @@
 """Ready-made simulation scenarios of the thesis experiments (one function call each).
 
-Every scenario returns a :class:`ScenarioResult` and, with ``out_dir``, writes
+Every scenario runs the simulator's orchestrator :func:`cnctwin.sim.simulate` on a G-code
+program from :mod:`cnctwin.sim.programs` (interpolator -> spindle drive + feed-axis servo) with a
+cutting-process hook built here from :mod:`~cnctwin.sim.cutting`, :mod:`~cnctwin.sim.tool` and
+:mod:`~cnctwin.sim.faults`:
 
-* the recording(s) as Capture4Analysis JSON (:func:`cnctwin.iotools.write_capture4analysis`),
-* external sensors as CSV (``dynamometer*.csv``: ``time_s,fx_n,fy_n,fz_n,mz_nm``;
-  ``thermal_camera.csv``: ``time_s,hole,temperature_c``),
-* ``truth.json``: every TRUE parameter used (machine incl. spindle, materials, tool, wear,
-  sensor clocks, fault onsets) and per-scenario ground truth.
+* drilling (:class:`DrillingProcess`): the load follows the tool-tip depth below the surface
+  (expected actual Z position); the thrust is the Z disturbance force, the drill walk and the
+  rotating lateral force are X/Y disturbance forces, so hole-position deviations show up in the
+  X/Y ``ENC_POS`` through the servo; wear per hole, tool-tip temperature, faults;
+* milling (:class:`MillingProcess`): the mechanistic end-milling forces on X/Y (Z: axial);
+* rigid tapping (:class:`TappingProcess`): spindle in position control, torque reversing on
+  extraction; a loose tap adds a fluctuating torque and axial force while the tap reverses.
 
-Scenarios: :func:`air_cut_sweep`, :func:`warm_up`, :func:`drilling_validation`,
-:func:`tool_wear_run`, :func:`loose_tap` (:data:`SCENARIOS`).
+Outputs with ``out`` (a directory):
 
-Kinematics: these scenarios run the spindle drive (:func:`cnctwin.sim.spindle.simulate_spindle`)
-with NC-style ramped commands built here, and a simple Z-axis follower (first-order lag with
-speed feedforward residual + axial compliance) for the drilling/tapping feed. They do not yet use
-the full feed-axis servo of :func:`cnctwin.sim.machine.simulate` (see docs/simulator.md).
+* the recording as Capture4Analysis JSON (chained files above ``max_file_mb``) or, with
+  ``fmt="parquet"``, a Parquet chunk directory (:class:`~cnctwin.sim.recorder.ParquetChunkSink`);
+  both stream chunk by chunk and read back with :func:`cnctwin.read_recording`;
+* external sensors on their own clocks as CSV (``dynamometer*.csv``:
+  ``time_s,fx_n,fy_n,fz_n,mz_nm``; ``thermal_camera.csv``: ``time_s,hole,temperature_c``);
+* ``truth.json``: every true parameter (machine incl. spindle and servo, materials, tools, wear
+  curve, sensor clocks, faults and their onsets) and the per-hole / per-step ground truth;
+* ``truth_per_cycle.parquet``: per-cycle hidden process values (cutting torque, thrust,
+  lateral forces, tool temperature, wear, hole) of the cycles with the tool in the workpiece.
 
-Overrides: ``{"spindle.kt_nm_per_a": 1.1}`` (and every ``Machine.with_overrides`` key),
-``"material.<key>.<field>"`` (e.g. ``material.aisi1045.kc1_n_per_mm2``), ``"drill.<field>"``,
-``"tap.<field>"``, ``"drilling.<field>"`` (:class:`~cnctwin.sim.cutting.DrillingModel`),
-``"wear.<field>"`` (:class:`~cnctwin.sim.tool.WearCurve`), ``"tool_thermal.<field>"``,
-``"dynamometer.<field>"``, ``"camera.<field>"``.
+Without ``out`` everything stays in memory: ``result.recordings`` (with the external channels
+attached) and ``result.per_cycle`` (the simulator's per-cycle truth incl. the process values).
+
+Scenarios (:data:`SCENARIOS`): :func:`air_cut_sweep`, :func:`warm_up`,
+:func:`drilling_validation`, :func:`tool_wear_run`, :func:`loose_tap`,
+:func:`milling_square_circle`.
+
+Overrides (every physical parameter): every :meth:`Machine.with_overrides` key
+(``spindle.kt_nm_per_a``, ``axes.X1.kv_m_min_per_mm``), ``material.<key>.<field>`` and
+``material.<key>.milling.<field>``, ``drill.<field>``, ``tap.<field>``, ``end_mill.<field>``,
+``drilling.<field>`` (:class:`~cnctwin.sim.cutting.DrillingModel`), ``wear.<field>``
+(:class:`~cnctwin.sim.tool.WearCurve`), ``tool_thermal.<field>``, ``dynamometer.<field>``,
+``camera.<field>``.
 """
 
 from __future__ import annotations
@@ -28,15 +45,14 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
-from scipy.signal import lfilter
 
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import ExternalChannel, Recording
@@ -44,39 +60,70 @@ from cnctwin.sim.cutting import (
     MATERIALS,
     DrillingModel,
     Material,
+    drill_thrust_n,
     drill_torque_nm,
     drilling_load,
+    milling_load,
     tapping_load,
 )
 from cnctwin.sim.faults import Fault, LooseTool, apply_faults, fault_to_dict, hardness_factor
+from cnctwin.sim.gcode import Program, parse_program
 from cnctwin.sim.machine import Machine
+from cnctwin.sim.programs import (
+    AIR_CUT_SPEEDS_RPM,
+    circle_path,
+    drilling_validation_program,
+    hole_pattern,
+    square_path,
+    tapping_program,
+)
+from cnctwin.sim.programs import air_cut_sweep as air_cut_program
+from cnctwin.sim.programs import warm_up as warm_up_program
+from cnctwin.sim.recorder import Capture4AnalysisSink, ParquetChunkSink, RecordingSink
 from cnctwin.sim.sensors import (
     Dynamometer,
     ThermalCamera,
     dynamometer_channel,
     thermal_camera_channel,
-    write_dynamometer_csv,
     write_thermal_camera_csv,
 )
-from cnctwin.sim.spindle import SpindleState, SpindleTrace, simulate_spindle
-from cnctwin.sim.tool import Drill, Tap, ToolThermal, WearCurve, flank_wear_um, tool_temperature
+from cnctwin.sim.simulation import CuttingInput, CuttingOutput, SimulationResult, simulate
+from cnctwin.sim.tool import (
+    Drill,
+    EndMill,
+    Tap,
+    ToolThermal,
+    WearCurve,
+    flank_wear_um,
+    tool_temperature,
+)
 
 __all__ = [
     "SCENARIOS",
+    "DrillingProcess",
+    "MillingProcess",
     "ScenarioConfig",
     "ScenarioResult",
+    "TappingProcess",
     "air_cut_sweep",
     "drilling_validation",
     "loose_tap",
+    "milling_square_circle",
+    "random_loop_overrides",
     "run_scenario",
     "tool_wear_run",
     "warm_up",
 ]
 
 ProgressFn = Callable[[float, str], None]
-_START = pd.Timestamp("2024-05-06T08:00:00Z")
+START_CYCLE = 5_000_000
+"""CYCLE counter of the first recorded cycle of every scenario."""
+START_TIME = pd.Timestamp("2024-05-06T08:00:00Z")
+"""UTC time of the first recorded cycle."""
+_FORMATS = ("c4a", "parquet")
 
 
+# ----------------------------------------------------------------------------- results
 @dataclass
 class ScenarioResult:
     """What a scenario produced.
@@ -86,24 +133,36 @@ class ScenarioResult:
     name : str
         Scenario name.
     recordings : list of Recording
-        Recordings kept in memory (for streamed scenarios only the last chunk).
+        Recordings kept in memory (only without ``out``), external channels attached.
     paths : list of Path
-        Files written (empty without ``out_dir``).
+        Every file written (empty without ``out``).
+    recording_paths : list of Path
+        The first file (or Parquet directory) of each written recording, for
+        :func:`cnctwin.read_recording`.
     truth : dict
         The true parameters and ground truth (also ``truth.json``).
+    per_cycle : list of pandas.DataFrame
+        Per recording, the simulator's per-cycle truth indexed by cycle (drive truth plus the
+        process values of the hook) - only without ``out``.
     """
 
     name: str
     recordings: list[Recording] = field(default_factory=list)
     paths: list[Path] = field(default_factory=list)
+    recording_paths: list[Path] = field(default_factory=list)
     truth: dict[str, Any] = field(default_factory=dict)
+    per_cycle: list[pd.DataFrame] = field(default_factory=list)
 
     @property
     def recording(self) -> Recording:
-        """The (first) recording."""
-        if not self.recordings:
-            raise ConfigError(f"scenario {self.name!r} kept no recording in memory")
-        return self.recordings[0]
+        """The first recording: in memory, or read back from ``recording_paths[0]``."""
+        if self.recordings:
+            return self.recordings[0]
+        if self.recording_paths:
+            from cnctwin.iotools import read_recording
+
+            return read_recording(self.recording_paths[0])
+        raise ConfigError(f"scenario {self.name!r} kept no recording")
 
 
 @dataclass(frozen=True)
@@ -114,6 +173,7 @@ class ScenarioConfig:
     materials: dict[str, Material]
     drill: Drill
     tap: Tap
+    end_mill: EndMill
     drilling: DrillingModel
     wear: WearCurve
     tool_thermal: ToolThermal
@@ -121,35 +181,55 @@ class ScenarioConfig:
     camera: ThermalCamera
 
     @classmethod
-    def build(cls, overrides: Mapping[str, Any] | None = None) -> ScenarioConfig:
-        """Defaults with dotted-key ``overrides`` applied (unknown keys raise ConfigError)."""
+    def build(
+        cls, overrides: Mapping[str, Any] | None = None, *, machine: Machine | None = None
+    ) -> ScenarioConfig:
+        """Defaults (or ``machine``) with dotted-key ``overrides`` applied.
+
+        Raises
+        ------
+        ConfigError
+            For an unknown key (the message lists the valid keys) or a bad value.
+        """
         ov = dict(overrides or {})
         machine_keys = {k: v for k, v in ov.items() if k.split(".")[0] not in _OWN_PREFIXES}
-        machine = Machine.thesis_default().with_overrides(machine_keys)
+        base = machine if machine is not None else Machine.thesis_default()
+        m = base.with_overrides(machine_keys) if machine_keys else base
         own: dict[str, dict[str, Any]] = {}
         mats: dict[str, dict[str, Any]] = {}
+        mill: dict[str, dict[str, Any]] = {}
         for key, value in ov.items():
             parts = key.split(".")
             if parts[0] not in _OWN_PREFIXES:
                 continue
             if parts[0] == "material":
-                if len(parts) != 3 or parts[1] not in MATERIALS:
+                if len(parts) == 4 and parts[1] in MATERIALS and parts[2] == "milling":
+                    mill.setdefault(parts[1], {})[parts[3]] = value
+                elif len(parts) == 3 and parts[1] in MATERIALS:
+                    mats.setdefault(parts[1], {})[parts[2]] = value
+                else:
                     raise ConfigError(
-                        f"override {key!r}: use material.<{'|'.join(MATERIALS)}>.<field>"
+                        f"override {key!r}: use material.<{'|'.join(MATERIALS)}>.<field> or "
+                        "material.<key>.milling.<field>"
                     )
-                mats.setdefault(parts[1], {})[parts[2]] = value
             elif len(parts) == 2:
                 own.setdefault(parts[0], {})[parts[1]] = value
             else:
                 raise ConfigError(f"override {key!r}: expected {parts[0]}.<field>")
         materials = {}
-        for name, m in MATERIALS.items():
-            materials[name] = _replace(m, mats.get(name, {}), f"material.{name}")
+        for name, mat in MATERIALS.items():
+            changes = dict(mats.get(name, {}))
+            if name in mill:
+                if mat.milling is None:
+                    raise ConfigError(f"material {name!r} has no milling coefficients to override")
+                changes["milling"] = _replace(mat.milling, mill[name], f"material.{name}.milling")
+            materials[name] = _replace(mat, changes, f"material.{name}")
         return cls(
-            machine=machine,
+            machine=m,
             materials=materials,
             drill=_replace(Drill(), own.get("drill", {}), "drill"),
             tap=_replace(Tap(), own.get("tap", {}), "tap"),
+            end_mill=_replace(EndMill(), own.get("end_mill", {}), "end_mill"),
             drilling=_replace(DrillingModel(), own.get("drilling", {}), "drilling"),
             wear=_replace(WearCurve(), own.get("wear", {}), "wear"),
             tool_thermal=_replace(ToolThermal(), own.get("tool_thermal", {}), "tool_thermal"),
@@ -169,6 +249,7 @@ class ScenarioConfig:
             "materials": {k: dataclasses.asdict(v) for k, v in self.materials.items()},
             "drill": dataclasses.asdict(self.drill),
             "tap": dataclasses.asdict(self.tap),
+            "end_mill": dataclasses.asdict(self.end_mill),
             "drilling_model": dataclasses.asdict(self.drilling),
             "wear_curve": dataclasses.asdict(self.wear),
             "tool_thermal": dataclasses.asdict(self.tool_thermal),
@@ -181,6 +262,7 @@ _OWN_PREFIXES = (
     "material",
     "drill",
     "tap",
+    "end_mill",
     "drilling",
     "wear",
     "tool_thermal",
@@ -197,103 +279,555 @@ def _replace(obj: Any, changes: Mapping[str, Any], prefix: str) -> Any:
             f"unknown override keys {[f'{prefix}.{b}' for b in bad]}; valid: "
             f"{sorted(f'{prefix}.{v}' for v in valid)}"
         )
-    return dataclasses.replace(obj, **changes) if changes else obj
+    try:
+        return dataclasses.replace(obj, **changes) if changes else obj
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"override of {prefix}: {exc}") from exc
 
 
-# ----------------------------------------------------------------------------- building blocks
-def _ramp(
-    targets_rpm: NDArray[np.float64], start_rpm: float, rate_rpm_per_s: float, cycle_time_s: float
-) -> NDArray[np.float64]:
-    """Rate-limited speed command (NC spindle acceleration limit)."""
-    out = np.empty(targets_rpm.size)
-    step = rate_rpm_per_s * cycle_time_s
-    v = start_rpm
-    for k, tgt in enumerate(targets_rpm):
-        v += min(max(tgt - v, -step), step)
-        out[k] = v
+def random_loop_overrides(
+    seed: int, *, axes: Sequence[str] = ("X1", "Y1")
+) -> dict[str, float | int]:
+    """Randomly drawn position-loop parameters (for identification tests), as overrides.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the draw.
+    axes : sequence of str, default ('X1', 'Y1')
+        Feed axes to randomise.
+
+    Returns
+    -------
+    dict
+        ``Machine.with_overrides`` keys: per axis Kv MD32200 U(1.5, 4) (m/min)/mm, FFW mode
+        MD32620 from {1, 2, 3, 4}, jerk filter time MD32410 U(4, 16) ms (moving average),
+        MD32810 U(1, 4) ms, MD32800 U(0.3, 0.8) ms, speed-controller gain x U(0.7, 1.4) and
+        Coulomb friction U(80, 220) N. Ranges: physics-and-performance.md §1.2 [S]/[E].
+    """
+    rng = np.random.default_rng([seed, 0x5EED])
+    ref = Machine.thesis_default()
+    out: dict[str, float | int] = {}
+    for ax in axes:
+        a = ref.axis(ax)
+        p = f"axes.{ax}."
+        out[p + "kv_m_min_per_mm"] = round(float(rng.uniform(1.5, 4.0)), 4)
+        out[p + "ffw_mode"] = int(rng.choice([1, 2, 3, 4]))
+        out[p + "jerk_filter_type"] = 2
+        out[p + "jerk_time_s"] = round(float(rng.uniform(0.004, 0.016)), 5)
+        out[p + "equiv_speedctrl_time_s"] = round(float(rng.uniform(0.001, 0.004)), 5)
+        out[p + "equiv_currctrl_time_s"] = round(float(rng.uniform(0.0003, 0.0008)), 6)
+        out[p + "speed_kp_nm_s_per_rad"] = round(
+            float(a.speed_kp_nm_s_per_rad * rng.uniform(0.7, 1.4)), 4)
+        out[p + "coulomb_n"] = round(float(rng.uniform(80.0, 220.0)), 2)
     return out
 
 
-def _lf_frame(
-    cycles: NDArray[np.int64],
-    times: pd.DatetimeIndex,
-    trace: SpindleTrace,
-    axis: str,
-    every: int = 50,
-) -> pd.DataFrame:
-    """LF drive values (r0063, r0068, r0078, r0081, r0035) every ``every`` cycles (100 ms)."""
-    idx = np.arange(0, cycles.size, every)
-    parts = []
-    for code, arr in (
-        ("SPEED_SMOOTHED", trace.speed_smoothed_rpm),
-        ("CURRENT_ABS_SMOOTHED", trace.current_abs_smoothed_a),
-        ("IQ_ACT", trace.iq_smoothed_a),
-        ("TORQUE_UTIL", trace.torque_utilization_pct),
-        ("MOTOR_TEMP", trace.motor_temperature_c),
-    ):
-        v = np.round(arr[idx], 3)
-        parts.append(
-            pd.DataFrame(
-                {
-                    "cycle": cycles[idx],
-                    "time": times[idx],
-                    "signal": f"{code}|{axis}",
-                    "value": v,
-                    "text": [repr(float(x)) for x in v],
+# ----------------------------------------------------------------------------- streaming helpers
+def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
+    """Half-open index ranges [a, b) where ``mask`` is True."""
+    m = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    d = np.diff(m)
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(),
+                    strict=True))
+
+
+class _DynamometerDAQ:
+    """The dynamometer DAQ fed chunk by chunk; one file (session) per run of ``on`` cycles.
+
+    Each session has its own clock (own t = 0 at ``clock_offset_s`` after the session start on
+    the recording time base, drifting by ``clock_drift_ppm``); consecutive chunks are sampled
+    without gaps (the last true sample of a chunk is kept for the next one).
+    """
+
+    _COLUMNS = ("fx_n", "fy_n", "fz_n", "mz_nm")
+
+    def __init__(self, sensor: Dynamometer, rng: np.random.Generator, out: Path | None,
+                 stem: str) -> None:
+        self.sensor = sensor
+        self.rng = rng
+        self.out = out
+        self.stem = stem
+        self.sessions: list[dict[str, Any]] = []
+        self.channels: list[ExternalChannel] = []
+        self.paths: list[Path] = []
+        self._frames: list[pd.DataFrame] = []
+        self._fh: IO[str] | None = None
+        self._open = False
+        self._last: tuple[float, NDArray[np.float64]] | None = None
+        self._last_own = -math.inf
+
+    def feed(self, time_s: NDArray[np.float64], values: NDArray[np.float64],
+             on: NDArray[np.bool_] | None = None) -> None:
+        """``values`` shape (4, n): fx, fy, fz [N], mz [Nm] on the recording time ``time_s``."""
+        n = time_s.size
+        mask = np.ones(n, dtype=bool) if on is None else on
+        for a, b in _runs(mask):
+            if not (a == 0 and self._open):
+                self._close_session()
+                self._open_session(float(time_s[a]))
+            t = time_s[a:b]
+            v = values[:, a:b]
+            if self._last is not None:
+                t = np.concatenate([[self._last[0]], t])
+                v = np.concatenate([self._last[1][:, None], v], axis=1)
+            self._last = (float(t[-1]), v[:, -1].copy())
+            if t.size >= 2:
+                self._sample(t, v)
+            if b < n:
+                self._close_session()
+
+    def _open_session(self, t0: float) -> None:
+        k = len(self.sessions) + 1
+        name = f"{self.stem}.csv" if k == 1 else f"{self.stem}_{k:04d}.csv"
+        self.sessions.append({"file": name, "start_s": t0,
+                              "clock_offset_s": t0 + self.sensor.clock_offset_s,
+                              "clock_drift_ppm": self.sensor.clock_drift_ppm,
+                              "fs_hz": self.sensor.fs_hz})
+        self._open = True
+        self._last = None
+        self._last_own = -math.inf
+        self._frames = []
+        if self.out is not None:
+            p = self.out / name
+            self._fh = p.open("w", encoding="utf-8")
+            self._fh.write("time_s,fx_n,fy_n,fz_n,mz_nm\n")
+            self.paths.append(p)
+
+    def _sample(self, t: NDArray[np.float64], v: NDArray[np.float64]) -> None:
+        sensor = dataclasses.replace(self.sensor,
+                                     clock_offset_s=self.sessions[-1]["clock_offset_s"])
+        ch = dynamometer_channel(t, v[3], v[2], fx_n=v[0], fy_n=v[1], sensor=sensor,
+                                 rng=self.rng)
+        d = ch.data[ch.data.index.to_numpy() > self._last_own + 1e-12]
+        if not len(d):
+            return
+        self._last_own = float(d.index[-1])
+        if self._fh is not None:
+            arr = np.column_stack([d.index.to_numpy(), d[list(self._COLUMNS)].to_numpy()])
+            np.savetxt(self._fh, arr, fmt=["%.6f", "%.6g", "%.6g", "%.6g", "%.6g"],
+                       delimiter=",")
+        else:
+            self._frames.append(d[list(self._COLUMNS)])
+
+    def _close_session(self) -> None:
+        if not self._open:
+            return
+        self._open = False
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+        elif self._frames:
+            data = pd.concat(self._frames)
+            self.channels.append(ExternalChannel(
+                name="dynamometer", data=data,
+                units={"fx_n": "N", "fy_n": "N", "fz_n": "N", "mz_nm": "N*m"},
+                fs_hz=self.sensor.fs_hz, source="cnctwin.sim"))
+        self._frames = []
+
+    def close(self) -> None:
+        """End the last session."""
+        self._close_session()
+
+
+class _TruthParquet:
+    """Per-cycle truth rows streamed to one Parquet file (one row group per chunk)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._writer: Any = None
+
+    def write(self, frame: dict[str, NDArray[Any]]) -> None:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        table = pa.table(frame)
+        if self._writer is None:
+            self._writer = pq.ParquetWriter(self.path, table.schema, compression="zstd")
+        self._writer.write_table(table)
+
+    def close(self) -> Path | None:
+        if self._writer is None:
+            return None
+        self._writer.close()
+        return self.path
+
+
+@dataclass
+class _Progress:
+    fn: ProgressFn | None
+    total_s: float
+    label: str
+    done: float = 0.0
+    share: float = 1.0
+
+    def __call__(self, time_s: float) -> None:
+        if self.fn is not None and self.total_s > 0:
+            frac = self.done + self.share * min(time_s / self.total_s, 1.0)
+            self.fn(min(frac, 1.0), f"{self.label} {time_s:.0f}/{self.total_s:.0f} s")
+
+
+class _Process:
+    """Shared bookkeeping of the cutting hooks (hole counting, truth, DAQ, progress)."""
+
+    def __init__(self, *, surface_z_mm: float, faults: Sequence[Fault],
+                 rng: np.random.Generator, truth: _TruthParquet | None,
+                 daq: _DynamometerDAQ | None, daq_off_blocks: Sequence[int] = (),
+                 progress: _Progress | None = None, first_hole: int = 0) -> None:
+        self.surface_z_mm = surface_z_mm
+        self.faults = tuple(faults)
+        self.rng = rng
+        self.truth_out = truth
+        self.daq = daq
+        self.daq_off_blocks = np.asarray(daq_off_blocks, dtype=np.int64)
+        self.progress = progress
+        self.first_hole = first_hole
+        self.onsets: list[float | None] = [None] * len(self.faults)
+        self.holes: dict[int, dict[str, Any]] = {}
+        self._hole = -1
+        self._hole_xy: tuple[float, float] | None = None
+        self._inside = False
+        self._prev: dict[str, float] = {}
+
+    def _velocity(self, key: str, x: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
+        prev = self._prev.get(key, float(x[0]))
+        self._prev[key] = float(x[-1])
+        return np.diff(x, prepend=prev) / dt
+
+    def _hole_index(self, depth: NDArray[np.float64], ci: CuttingInput) -> NDArray[np.int64]:
+        """Hole number per cycle: a new hole at each entry at a new XY position (0.5 mm)."""
+        inside = depth > 0.0
+        prev = np.concatenate([[self._inside], inside[:-1]])
+        self._inside = bool(inside[-1])
+        out = np.full(depth.size, self._hole, dtype=np.int64)
+        x, y = ci.des_pos["X1"], ci.des_pos["Y1"]
+        for e in np.flatnonzero(inside & ~prev):
+            xy = (float(x[e]), float(y[e]))
+            if self._hole_xy is None or math.hypot(xy[0] - self._hole_xy[0],
+                                                   xy[1] - self._hole_xy[1]) > 0.5:
+                self._hole += 1
+                self._hole_xy = xy
+                self.holes[self.first_hole + self._hole] = {
+                    "hole": self.first_hole + self._hole, "x_mm": xy[0], "y_mm": xy[1],
+                    "cut_first_cycle": int(ci.cycle[e]), "cut_first_s": float(ci.time_s[e]),
                 }
-            )
-        )
-    return pd.concat(parts, ignore_index=True).sort_values(
-        ["cycle", "signal"], kind="stable", ignore_index=True
-    )
+                out[e:] = self._hole
+        return np.where(out >= 0, out + self.first_hole, -1)
+
+    def _faults(self, load: Any, ci: CuttingInput, hole: NDArray[np.int64],
+                speed: NDArray[np.float64], progress: NDArray[np.float64] | None) -> Any:
+        if not self.faults:
+            return load
+        load, on = apply_faults(self.faults, load, time_s=ci.time_s, hole=hole,
+                                speed_rpm=speed, hole_progress=progress, rng=self.rng)
+        for q, o in enumerate(on):
+            if o is not None and self.onsets[q] is None:
+                self.onsets[q] = o
+        return load
+
+    def _emit(self, ci: CuttingInput, load: Any, forces: dict[str, NDArray[np.float64]],
+              truth: dict[str, NDArray[Any]], keep: NDArray[np.bool_]) -> CuttingOutput:
+        if self.daq is not None:
+            on = None
+            if self.daq_off_blocks.size:
+                on = ~np.isin(np.asarray(ci.block_index), self.daq_off_blocks)
+            self.daq.feed(ci.time_s, np.vstack([load.fx_n, load.fy_n, load.thrust_n,
+                                                load.torque_nm]), on)
+        if self.progress is not None:
+            self.progress(float(ci.time_s[-1]))
+        if self.truth_out is not None:
+            if keep.any():
+                frame: dict[str, NDArray[Any]] = {"cycle": ci.cycle[keep]}
+                for k, v in truth.items():
+                    dtype = np.int32 if k == "hole" else np.float32
+                    frame[k] = np.asarray(v)[keep].astype(dtype)
+                self.truth_out.write(frame)
+            truth = {}
+        return CuttingOutput(spindle_torque_nm=load.torque_nm, force_n=forces,
+                             truth={k: np.asarray(v, dtype=np.float64)
+                                    for k, v in truth.items()})
+
+    def hole_rows(self) -> list[dict[str, Any]]:
+        """Per-hole truth, in hole order."""
+        return [self.holes[k] for k in sorted(self.holes)]
 
 
-def _recording(
-    machine: Machine,
-    start_cycle: int,
-    trace: SpindleTrace,
-    speed_cmd_rpm: NDArray[np.float64],
-    extra: Mapping[str, NDArray[np.float64]] | None = None,
-) -> Recording:
-    """Recording of the spindle HF/LF values (+ extra HF columns) on the cycle base."""
-    ax = machine.spindle_name
-    n = len(trace)
-    cycles = np.arange(start_cycle, start_cycle + n, dtype=np.int64)
-    cols: dict[str, Any] = {
-        f"CMD_SPEED|{ax}": speed_cmd_rpm,
-        f"ENC_POS|{ax}": np.mod(trace.position_deg, 360.0),
-        f"CURRENT|{ax}": trace.current_a,
-        f"TORQUE|{ax}": trace.torque_setpoint_nm,
-        f"LOAD|{ax}": trace.load_pct,
-        f"POWER|{ax}": trace.power_w,
-    }
-    cols.update(extra or {})
-    start = _START + pd.Timedelta(seconds=start_cycle * machine.cycle_time_s)
-    rec = Recording.from_arrays(
-        cycles,
-        cols,
-        start_time=start,
-        cycle_time_s=machine.cycle_time_s,
-        machine=machine.name,
-        axis_map=dict(machine.axis_map),
-        source_format="sim",
-    )
-    rec.lf = _lf_frame(cycles, pd.DatetimeIndex(rec.hf["time"]), trace, ax)
-    return rec
+class DrillingProcess(_Process):
+    """Cutting hook for drilling (:func:`cnctwin.sim.cutting.drilling_load`).
+
+    Per chunk: tool-tip depth below ``surface_z_mm`` from the expected actual Z position, feed
+    per revolution from its velocity and the commanded speed, the hole number (a new hole at
+    each entry at a new XY position), flank wear of that hole (:func:`flank_wear_um` of
+    ``first_hole`` + holes drilled), hardness faults, the lumped tool-tip temperature (state
+    carried across chunks), random fluctuation, lip ripple and drill walk, then the faults.
+    Outputs: spindle load torque; forces ``Z1`` = thrust (pushes the tool up), ``X1``/``Y1`` =
+    walk + rotating lateral force (hole-position deviations through the servo).
+
+    Parameters
+    ----------
+    cfg : ScenarioConfig
+        Drill, drilling model, wear curve, tool thermal model.
+    material : Material
+        Workpiece.
+    feed_mm_per_rev, speed_rpm : float
+        Programmed feed and speed (for the per-hole model torque in the truth).
+    hole_depth_mm : float
+        Programmed depth (progress of :class:`~cnctwin.sim.faults.ToolBreakage`) [mm].
+    walk_direction_rad : float, default 0.7
+        Direction of the static walk force in XY [rad] (lip asymmetry of this drill).
+    """
+
+    def __init__(self, cfg: ScenarioConfig, *, material: Material, feed_mm_per_rev: float,
+                 speed_rpm: float, hole_depth_mm: float, walk_direction_rad: float = 0.7,
+                 **kw: Any) -> None:
+        super().__init__(**kw)
+        self.cfg = cfg
+        self.material = material
+        self.feed_mm_per_rev = feed_mm_per_rev
+        self.speed_rpm = speed_rpm
+        self.hole_depth_mm = hole_depth_mm
+        self.walk_direction_rad = walk_direction_rad
+        self.temperature_c = cfg.tool_thermal.ambient_temperature_c
+        self._acc: dict[int, list[float]] = {}
+
+    def __call__(self, ci: CuttingInput) -> CuttingOutput:
+        cfg = self.cfg
+        dt = ci.cycle_time_s
+        z = ci.position["Z1"]
+        vz = self._velocity("Z1", z, dt)
+        n = ci.spindle_speed_rpm
+        feed = np.where(vz < -1e-9, -vz * 60.0 / np.maximum(np.abs(n), 1.0), 0.0)
+        depth = self.surface_z_mm - z
+        hole = self._hole_index(depth, ci)
+        wear = np.where(hole >= 0, flank_wear_um(np.maximum(hole, 0), curve=cfg.wear), 0.0)
+        hard = hardness_factor(self.faults, hole)
+        angle = np.deg2rad(ci.spindle_pos_deg)
+        kw: dict[str, Any] = {"drill": cfg.drill, "material": self.material, "wear_um": wear,
+                              "hardness_factor": hard, "spindle_angle_rad": angle,
+                              "model": cfg.drilling, "dt_s": dt}
+        # tool temperature from the fault-free mean load (one pass), then the load with it
+        base = drilling_load(depth, n, feed, rng=None, **kw)
+        power = np.abs(base.torque_nm * n) * 2.0 * math.pi / 60.0
+        temp = tool_temperature(power, dt_s=dt, thermal=cfg.tool_thermal,
+                                initial_c=self.temperature_c)
+        self.temperature_c = float(temp[-1])
+        load = drilling_load(depth, n, feed, rng=self.rng, tool_temperature_c=temp,
+                             walk_direction_rad=self.walk_direction_rad, **kw)
+        prog = np.clip(depth / self.hole_depth_mm, 0.0, 1.0)
+        load = self._faults(load, ci, hole, n, prog)
+        self._holes_update(ci, hole, depth, feed, load, temp, wear, hard)
+        truth = {"hole": hole, "tip_depth_mm": depth, "cutting_torque_nm": load.torque_nm,
+                 "thrust_n": load.thrust_n, "fx_n": load.fx_n, "fy_n": load.fy_n,
+                 "tool_temperature_c": temp, "wear_um": wear}
+        keep = (depth > 0.0) | (load.torque_nm != 0.0)
+        return self._emit(ci, load, {"X1": load.fx_n, "Y1": load.fy_n, "Z1": load.thrust_n},
+                          truth, keep)
+
+    def _holes_update(self, ci: CuttingInput, hole: NDArray[np.int64],
+                      depth: NDArray[np.float64], feed: NDArray[np.float64], load: Any,
+                      temp: NDArray[np.float64], wear: NDArray[np.float64],
+                      hard: NDArray[np.float64]) -> None:
+        cone = self.cfg.drill.cone_length_mm
+        for h in np.unique(hole[(hole >= 0) & (depth > 0.0)]):
+            row = self.holes[int(h)]
+            sel = (hole == h) & (depth > 0.0)
+            idx = np.flatnonzero(sel)
+            row["cut_last_cycle"] = int(ci.cycle[idx[-1]])
+            row["extraction_s"] = float(ci.time_s[idx[-1]])
+            row["tool_temperature_extraction_c"] = float(temp[idx[-1]])
+            row["tool_temperature_max_c"] = max(row.get("tool_temperature_max_c", -1e9),
+                                                float(temp[sel].max()))
+            full = sel & (depth >= cone) & (feed > 0.0)
+            if full.any() and "full_engagement_first_cycle" not in row:
+                row["full_engagement_first_cycle"] = int(ci.cycle[np.argmax(full)])
+            acc = self._acc.setdefault(int(h), [0.0, 0.0, 0.0])
+            acc[0] += float(load.torque_nm[full].sum())
+            acc[1] += float(load.thrust_n[full].sum())
+            acc[2] += float(full.sum())
+            if acc[2]:
+                row["mean_cutting_torque_nm"] = acc[0] / acc[2]
+                row["mean_thrust_n"] = acc[1] / acc[2]
+            w, hf = float(wear[idx[0]]), float(hard[idx[0]])
+            row["wear_um"] = w
+            row["hardness_factor"] = hf
+            common: dict[str, Any] = {"drill": self.cfg.drill, "material": self.material,
+                                      "wear_um": w,
+                      "hardness_factor": hf, "model": self.cfg.drilling}
+            row["model_torque_nm"] = float(drill_torque_nm(self.feed_mm_per_rev,
+                                                           self.speed_rpm, **common))
+            row["model_thrust_n"] = float(drill_thrust_n(self.feed_mm_per_rev,
+                                                         self.speed_rpm, **common))
 
 
-def _write(rec: Recording, path: Path) -> list[Path]:
-    from cnctwin.iotools.capture4analysis import write_capture4analysis
+class TappingProcess(_Process):
+    """Cutting hook for rigid tapping (:func:`cnctwin.sim.cutting.tapping_load`).
 
-    return list(write_capture4analysis(rec, path))
+    The spindle runs in position control coupled to Z (interpolator); the commanded speed is
+    negative while the tap reverses out. Faults (e.g. :class:`~cnctwin.sim.faults.LooseTool`)
+    act on the torque and on the axial force, which is the Z disturbance force.
+    """
+
+    def __init__(self, cfg: ScenarioConfig, *, material: Material, **kw: Any) -> None:
+        super().__init__(**kw)
+        self.cfg = cfg
+        self.material = material
+
+    def __call__(self, ci: CuttingInput) -> CuttingOutput:
+        z = ci.position["Z1"]
+        depth = self.surface_z_mm - z
+        n = ci.spindle_speed_rpm
+        hole = self._hole_index(depth, ci)
+        hard = hardness_factor(self.faults, hole)
+        load = tapping_load(depth, n, tap=self.cfg.tap, material=self.material,
+                            hardness_factor=hard)
+        load = self._faults(load, ci, hole, n, None)
+        for h in np.unique(hole[(hole >= 0) & (depth > 0.0)]):
+            row = self.holes[int(h)]
+            sel = (hole == h) & (depth > 0.0)
+            row["cut_last_cycle"] = int(ci.cycle[np.flatnonzero(sel)[-1]])
+            ext = sel & (n < 0.0)
+            if ext.any():
+                row.setdefault("extraction_first_cycle", int(ci.cycle[np.argmax(ext)]))
+                row["extraction_last_cycle"] = int(ci.cycle[np.flatnonzero(ext)[-1]])
+        truth = {"hole": hole, "tip_depth_mm": depth, "cutting_torque_nm": load.torque_nm,
+                 "thrust_n": load.thrust_n}
+        keep = (depth > 0.0) | (load.torque_nm != 0.0)
+        return self._emit(ci, load, {"Z1": load.thrust_n}, truth, keep)
 
 
-def _write_truth(out: Path | None, truth: dict[str, Any], paths: list[Path]) -> None:
+class MillingProcess(_Process):
+    """Cutting hook for end milling (:func:`cnctwin.sim.cutting.milling_load`).
+
+    Axial depth = ``surface_z_mm`` minus the expected actual Z; feed per tooth from the XY path
+    speed and the commanded spindle speed; feed direction from the XY velocity; full slot
+    (immersion 0..pi) unless ``entry_angle_rad``/``exit_angle_rad`` are given. Forces on the
+    tool are the X1/Y1 disturbance forces (Z1: axial force).
+    """
+
+    def __init__(self, cfg: ScenarioConfig, *, material: Material,
+                 entry_angle_rad: float = 0.0, exit_angle_rad: float = math.pi,
+                 **kw: Any) -> None:
+        super().__init__(**kw)
+        self.cfg = cfg
+        self.material = material
+        self.entry_angle_rad = entry_angle_rad
+        self.exit_angle_rad = exit_angle_rad
+        self._direction = 0.0
+
+    def __call__(self, ci: CuttingInput) -> CuttingOutput:
+        dt = ci.cycle_time_s
+        vx = self._velocity("X1", ci.position["X1"], dt)
+        vy = self._velocity("Y1", ci.position["Y1"], dt)
+        v_mm_min = np.hypot(vx, vy) * 60.0
+        n = np.abs(ci.spindle_speed_rpm)
+        flutes = self.cfg.end_mill.flutes
+        c = np.where((n > 1.0) & (v_mm_min > 1e-3), v_mm_min / np.maximum(n, 1.0) / flutes, 0.0)
+        moving = v_mm_min > 1e-3
+        direction = np.where(moving, np.arctan2(vy, vx), np.nan)
+        direction = pd.Series(direction).ffill().fillna(self._direction).to_numpy()
+        self._direction = float(direction[-1])
+        depth = np.maximum(self.surface_z_mm - ci.position["Z1"], 0.0)
+        hole = np.zeros(depth.size, dtype=np.int64)
+        hard = hardness_factor(self.faults, hole)
+        load = milling_load(np.deg2rad(ci.spindle_pos_deg), c, depth, direction,
+                            tool=self.cfg.end_mill, material=self.material,
+                            entry_angle_rad=self.entry_angle_rad,
+                            exit_angle_rad=self.exit_angle_rad, hardness_factor=hard)
+        load = self._faults(load, ci, hole, ci.spindle_speed_rpm, None)
+        truth = {"axial_depth_mm": depth, "feed_per_tooth_mm": c,
+                 "cutting_torque_nm": load.torque_nm, "fx_n": load.fx_n, "fy_n": load.fy_n,
+                 "axial_force_n": load.thrust_n}
+        keep = depth > 0.0
+        return self._emit(ci, load, {"X1": load.fx_n, "Y1": load.fy_n, "Z1": load.thrust_n},
+                          truth, keep)
+
+
+class _NoLoad(_Process):
+    """Air cut: no process load; reports progress."""
+
+    def __call__(self, ci: CuttingInput) -> CuttingOutput:
+        if self.progress is not None:
+            self.progress(float(ci.time_s[-1]))
+        return CuttingOutput(spindle_torque_nm=np.zeros(len(ci)))
+
+
+# ----------------------------------------------------------------------------- running
+class _EventTee:
+    """Forward chunks to a sink and keep the (small) NC event table."""
+
+    def __init__(self, sink: RecordingSink) -> None:
+        self.sink = sink
+        self.events: list[pd.DataFrame] = []
+
+    def open(self, columns: list[str], meta: Any) -> None:
+        self.sink.open(columns, meta)
+
+    def write(self, chunk: Any) -> None:
+        if len(chunk.events):
+            self.events.append(chunk.events)
+        self.sink.write(chunk)
+
+    def close(self, meta: Any) -> Recording | None:
+        return self.sink.close(meta)
+
+    def event_table(self) -> pd.DataFrame:
+        return pd.concat(self.events, ignore_index=True) if self.events else pd.DataFrame()
+
+
+def _make_sink(out: Path | None, stem: str, fmt: str,
+               max_file_mb: float | None) -> tuple[RecordingSink | None, Path | None]:
+    if fmt not in _FORMATS:
+        raise ConfigError(f"fmt must be one of {_FORMATS}, not {fmt!r}")
     if out is None:
-        return
-    p = out / "truth.json"
-    p.write_text(json.dumps(truth, indent=2, default=_json_default), encoding="utf-8")
-    paths.append(p)
+        return None, None
+    if fmt == "c4a":
+        path = out / f"{stem}.json"
+        return Capture4AnalysisSink(path, max_file_mb=max_file_mb), path
+    path = out / stem
+    return ParquetChunkSink(path), path
+
+
+def _sink_files(sink: Any, path: Path | None) -> list[Path]:
+    if sink is None:
+        return []
+    inner = sink.sink if isinstance(sink, _EventTee) else sink
+    files = list(getattr(inner, "files", []))
+    if isinstance(inner, ParquetChunkSink) and path is not None:
+        return [path]
+    return files
+
+
+def _duration_s(program: Program, machine: Machine) -> float:
+    """Machine time of a program (the interpolator plans it; no sampling)."""
+    from cnctwin.sim.simulation import iter_chunks
+
+    first = next(iter(iter_chunks(program, machine, 1)))
+    return float(getattr(first, "duration_s", 0.0))
+
+
+def _sim_seed(seed: int, *key: int) -> int:
+    return int(np.random.SeedSequence([seed, *key]).generate_state(1)[0])
+
+
+def _simulate(program: Program, cfg: ScenarioConfig, *, seed: int, hook: Any,
+              sink: Any, chunk_cycles: int) -> SimulationResult:
+    return simulate(program, cfg.machine, seed=seed, start_cycle=START_CYCLE,
+                    start_time=START_TIME, cutting=hook, sink=sink, chunk_cycles=chunk_cycles)
+
+
+def _prepare(out: str | Path | None) -> Path | None:
+    if out is None:
+        return None
+    p = Path(out)
+    p.mkdir(parents=True, exist_ok=True)
+    return p
+
+
+def _write_program(out: Path | None, name: str, text: str, paths: list[Path]) -> None:
+    if out is not None:
+        p = out / name
+        p.write_text(text, encoding="utf-8")
+        paths.append(p)
 
 
 def _json_default(o: Any) -> Any:
@@ -303,676 +837,619 @@ def _json_default(o: Any) -> Any:
         return o.tolist()
     if isinstance(o, Path):
         return str(o)
+    if isinstance(o, pd.Timestamp):
+        return o.isoformat()
+    if isinstance(o, pd.DataFrame):
+        return o.to_dict("records")
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
-def _prepare(out_dir: str | Path | None) -> Path | None:
-    if out_dir is None:
-        return None
-    p = Path(out_dir)
-    p.mkdir(parents=True, exist_ok=True)
-    return p
+def _write_truth(out: Path | None, truth: dict[str, Any], paths: list[Path]) -> None:
+    if out is None:
+        return
+    p = out / "truth.json"
+    p.write_text(json.dumps(truth, indent=1, default=_json_default), encoding="utf-8")
+    paths.append(p)
 
 
-def _z_follow(
-    z_des_mm: NDArray[np.float64],
-    thrust_n: NDArray[np.float64],
-    *,
-    lag_s: float,
-    stiffness_n_per_mm: float,
-    cycle_time_s: float,
-    zi: float | None = None,
-) -> tuple[NDArray[np.float64], float]:
-    """Z ENC_POS: first-order follower of DES_POS plus axial compliance (thrust pushes up)."""
-    a = math.exp(-cycle_time_s / lag_s)
-    z0 = float(z_des_mm[0]) if zi is None else zi
-    y, zf = lfilter([1.0 - a], [1.0, -a], z_des_mm, zi=[a * z0])
-    return np.asarray(y + thrust_n / stiffness_n_per_mm), float(zf[0] / a)
+def _base_truth(name: str, seed: int, overrides: Mapping[str, Any] | None,
+                cfg: ScenarioConfig) -> dict[str, Any]:
+    return {"scenario": name, "seed": seed, "overrides": dict(overrides or {}),
+            "start_cycle": START_CYCLE, "start_time": START_TIME.isoformat(),
+            "cycle_time_s": cfg.machine.cycle_time_s, **cfg.to_dict()}
+
+
+def _faults_from(faults: Sequence[Fault | Mapping[str, Any]]) -> tuple[Fault, ...]:
+    """Faults given as objects or as dicts with a ``type`` key (CLI / JSON)."""
+    from cnctwin.sim import faults as fmod
+
+    out: list[Fault] = []
+    for f in faults:
+        if isinstance(f, Mapping):
+            d = dict(f)
+            kind = d.pop("type", None)
+            cls = getattr(fmod, str(kind), None)
+            known = ("LooseTool", "ToolBreakage", "Chatter", "HardnessChange")
+            if kind not in known or cls is None:
+                raise ConfigError(f"fault {f!r}: 'type' must be LooseTool, ToolBreakage, "
+                                  "Chatter or HardnessChange")
+            try:
+                out.append(cls(**d))
+            except TypeError as exc:
+                raise ConfigError(f"fault {f!r}: {exc}") from exc
+        else:
+            out.append(f)
+    return tuple(out)
+
+
+def _rec_time_s(cycle: int, cfg: ScenarioConfig) -> float:
+    return (cycle - START_CYCLE) * cfg.machine.cycle_time_s
 
 
 # ----------------------------------------------------------------------------- scenarios
 def air_cut_sweep(
-    out_dir: str | Path | None = None,
+    out: str | Path | None = None,
     *,
     seed: int = 0,
     overrides: Mapping[str, Any] | None = None,
+    machine: Machine | None = None,
     n_speeds: int = 126,
     max_speed_rpm: float = 18000.0,
-    min_speed_rpm: float = 100.0,
+    min_speed_rpm: float | None = None,
     dwell_s: float = 3.0,
-    ramp_rpm_per_s: float = 4000.0,
+    settle_s: float = 0.5,
+    fmt: str = "c4a",
+    max_file_mb: float | None = None,
+    chunk_cycles: int = 50_000,
     progress: ProgressFn | None = None,
 ) -> ScenarioResult:
     """Air cut at ``n_speeds`` constant spindle speeds up to 18000 rpm (thesis §3.2.2, Fig. 3.8).
 
-    Truth: the speed steps with the cycle range of each steady window (ramp excluded).
+    Program :func:`cnctwin.sim.programs.air_cut_sweep` (``S.. M3`` then ``G4 F dwell_s`` per
+    speed; the NC waits for the speed ramp). Default speeds
+    :data:`~cnctwin.sim.programs.AIR_CUT_SPEEDS_RPM`; otherwise ``n_speeds`` equally spaced from
+    ``min_speed_rpm`` (default ``max_speed_rpm / n_speeds``).
+
+    Truth ``steps``: per speed the cycle range of the steady window (the dwell after
+    ``settle_s``).
     """
-    cfg = ScenarioConfig.build(overrides)
-    m = cfg.machine
-    ct = m.cycle_time_s
-    speeds = np.round(np.linspace(min_speed_rpm, max_speed_rpm, n_speeds), 0)
-    rng = np.random.default_rng(seed)
-    state: SpindleState | None = None
-    traces, cmds, windows = [], [], []
-    pos = 0
-    prev = 0.0
-    for i, s in enumerate(speeds):
-        t_ramp = abs(s - prev) / ramp_rpm_per_s
-        n = round((t_ramp + dwell_s) / ct)
-        cmd = _ramp(np.full(n, s), prev, ramp_rpm_per_s, ct)
-        tr = simulate_spindle(
-            cmd, 0.0, m.spindle, cycle_time_s=ct, inner_steps=m.inner_steps, state=state, rng=rng
-        )
-        state = tr.state
-        settle = round((t_ramp + 0.5) / ct)
-        windows.append(
-            {"speed_rpm": float(s), "first_cycle": pos + settle, "last_cycle": pos + n - 1}
-        )
-        traces.append(tr)
-        cmds.append(cmd)
-        pos += n
-        prev = float(s)
-        if progress:
-            progress((i + 1) / n_speeds, f"{s:.0f} rpm")
-    trace = SpindleTrace.concatenate(traces)
-    rec = _recording(m, 0, trace, np.concatenate(cmds))
-    truth = {
-        "scenario": "air_cut_sweep",
-        "seed": seed,
-        "overrides": dict(overrides or {}),
-        **cfg.to_dict(),
-        "steps": windows,
-    }
-    res = ScenarioResult("air_cut_sweep", [rec], [], truth)
-    out = _prepare(out_dir)
-    if out is not None:
-        res.paths += _write(rec, out / "air_cut_sweep.json")
-    _write_truth(out, truth, res.paths)
+    cfg = ScenarioConfig.build(overrides, machine=machine)
+    o = _prepare(out)
+    if n_speeds == 126 and max_speed_rpm == 18000.0 and min_speed_rpm is None:
+        speeds = np.asarray(AIR_CUT_SPEEDS_RPM)
+    else:
+        lo = min_speed_rpm if min_speed_rpm is not None else max_speed_rpm / n_speeds
+        speeds = np.round(np.linspace(lo, max_speed_rpm, n_speeds), 0)
+    text = air_cut_program([float(s) for s in speeds], dwell_s=dwell_s)
+    prog = parse_program(text)
+    res = ScenarioResult("air_cut_sweep", truth=_base_truth("air_cut_sweep", seed, overrides, cfg))
+    _write_program(o, "air_cut_sweep.mpf", text, res.paths)
+    sink, path = _make_sink(o, "air_cut_sweep", fmt, max_file_mb)
+    tee = _EventTee(sink) if sink is not None else None
+    prog_fn = _Progress(progress, _duration_s(prog, cfg.machine), "air cut")
+    hook = _NoLoad(surface_z_mm=0.0, faults=(), rng=np.random.default_rng(seed), truth=None,
+                   daq=None, progress=prog_fn)
+    sim = _simulate(prog, cfg, seed=seed, hook=hook, sink=tee, chunk_cycles=chunk_cycles)
+    if sim.recording is not None:
+        events = sim.recording.events
+        res.recordings.append(sim.recording)
+        res.per_cycle.append(sim.truth["per_cycle"])
+    else:
+        assert tee is not None
+        events = tee.event_table()
+    res.truth["steps"] = _steady_windows(events, settle_cycles=round(settle_s /
+                                                                      cfg.machine.cycle_time_s))
+    res.truth["n_cycles"] = sim.trajectory["n_cycles"]
+    if path is not None:
+        res.recording_paths.append(path)
+        res.paths += _sink_files(tee, path)
+    _write_truth(o, res.truth, res.paths)
     return res
+
+
+def _steady_windows(events: pd.DataFrame, *, settle_cycles: int) -> list[dict[str, Any]]:
+    """Dwell windows after each ``S.. M3`` from the NC block events."""
+    blocks = events[events["kind"] == "block"].sort_values("cycle", kind="stable")
+    rows = blocks[["cycle", "gcode"]].to_numpy()
+    out: list[dict[str, Any]] = []
+    speed: float | None = None
+    for k, (cyc, gcode) in enumerate(rows):
+        g = str(gcode)
+        for word in g.split():
+            if word.startswith("S") and word[1:].replace(".", "", 1).isdigit():
+                speed = float(word[1:])
+        if g.startswith("G4") and speed is not None and k + 1 < len(rows):
+            first = int(cyc) + settle_cycles
+            last = int(rows[k + 1][0]) - 1
+            if last > first:
+                out.append({"speed_rpm": speed, "first_cycle": first, "last_cycle": last})
+    return out
 
 
 def warm_up(
-    out_dir: str | Path | None = None,
+    out: str | Path | None = None,
     *,
     seed: int = 0,
     overrides: Mapping[str, Any] | None = None,
-    speeds_rpm: tuple[float, ...] = (5000.0, 7000.0),
-    duration_s: float = 1500.0,
-    ramp_rpm_per_s: float = 4000.0,
+    machine: Machine | None = None,
+    speeds_rpm: Sequence[float] = (5000.0, 7000.0),
+    minutes: float = 25.0,
+    fmt: str = "c4a",
+    max_file_mb: float | None = 200.0,
+    chunk_cycles: int = 50_000,
     progress: ProgressFn | None = None,
 ) -> ScenarioResult:
-    """Spindle turning ``duration_s`` at each speed from a cold start (thesis §4.2, Fig. 4.4).
+    """Spindle turning ``minutes`` at each speed from a cold start (thesis §4.2, Fig. 4.4).
 
-    One recording per speed; the motor temperature rises and the current falls.
+    One recording per speed (program :func:`cnctwin.sim.programs.warm_up`); the motor warms up
+    and the current falls. Truth ``runs``: per minute the rotor and stator temperature, Kt and
+    the friction torque. Each run is simulated in memory (it needs the per-cycle drive truth;
+    ~1.5 GB peak for 25 min) and then written.
     """
-    cfg = ScenarioConfig.build(overrides)
-    m = cfg.machine
-    ct = m.cycle_time_s
-    res = ScenarioResult(
-        "warm_up",
-        truth={
-            "scenario": "warm_up",
-            "seed": seed,
-            "overrides": dict(overrides or {}),
-            **cfg.to_dict(),
-            "runs": [],
-        },
-    )
-    out = _prepare(out_dir)
+    cfg = ScenarioConfig.build(overrides, machine=machine)
+    o = _prepare(out)
+    res = ScenarioResult("warm_up", truth={**_base_truth("warm_up", seed, overrides, cfg),
+                                           "minutes": minutes, "runs": []})
+    ct = cfg.machine.cycle_time_s
     for i, s in enumerate(speeds_rpm):
-        rng = np.random.default_rng([seed, i])
-        n = round(duration_s / ct)
-        cmd = _ramp(np.full(n, s), 0.0, ramp_rpm_per_s, ct)
-        chunks = []
-        state: SpindleState | None = None
-        step = 50_000
-        for k0 in range(0, n, step):
-            tr = simulate_spindle(
-                cmd[k0 : k0 + step],
-                0.0,
-                m.spindle,
-                cycle_time_s=ct,
-                inner_steps=m.inner_steps,
-                state=state,
-                rng=rng,
-            )
-            state = tr.state
-            chunks.append(tr)
-            if progress:
-                progress((i + min(k0 + step, n) / n) / len(speeds_rpm), f"{s:.0f} rpm")
-        trace = SpindleTrace.concatenate(chunks)
-        rec = _recording(m, 0, trace, cmd)
-        res.recordings.append(rec)
+        text = warm_up_program(float(s), minutes=minutes)
+        prog = parse_program(text)
+        stem = f"warm_up_{int(s)}rpm"
+        _write_program(o, f"{stem}.mpf", text, res.paths)
+        total = _duration_s(prog, cfg.machine)
+        pf = _Progress(progress, total, f"{s:.0f} rpm", done=i / len(speeds_rpm),
+                       share=1.0 / len(speeds_rpm))
+        hook = _NoLoad(surface_z_mm=0.0, faults=(), rng=np.random.default_rng(seed), truth=None,
+                       daq=None, progress=pf)
+        sim = _simulate(prog, cfg, seed=_sim_seed(seed, i), hook=hook, sink=None,
+                        chunk_cycles=chunk_cycles)
+        rec = sim.recording
+        assert rec is not None
+        pc = sim.truth["per_cycle"]
         minute = round(60.0 / ct)
-        res.truth["runs"].append(
-            {
-                "speed_rpm": float(s),
-                "rotor_temperature_c_per_min": trace.rotor_temperature_c[
-                    minute - 1 :: minute
-                ].tolist(),
-                "stator_temperature_c_per_min": trace.motor_temperature_c[
-                    minute - 1 :: minute
-                ].tolist(),
-                "kt_nm_per_a_per_min": trace.kt_nm_per_a[minute - 1 :: minute].tolist(),
-                "friction_nm_per_min": trace.friction_nm[minute - 1 :: minute].tolist(),
-            }
-        )
-        if out is not None:
-            res.paths += _write(rec, out / f"warm_up_{int(s)}rpm.json")
-    _write_truth(out, res.truth, res.paths)
+        pick = pc.iloc[minute - 1::minute]
+        res.truth["runs"].append({
+            "speed_rpm": float(s),
+            "rotor_temperature_c_per_min": pick["spindle_rotor_temperature_c"].tolist(),
+            "kt_nm_per_a_per_min": pick["spindle_kt_nm_per_a"].tolist(),
+            "friction_nm_per_min": pick["spindle_friction_nm"].tolist(),
+            "stator_temperature_c_per_min": _lf_per_minute(rec, "MOTOR_TEMP|SP1", minute),
+            "recording": f"{stem}.json" if fmt == "c4a" else stem,
+        })
+        if o is not None:
+            res.recording_paths.append(_write_recording(rec, o, stem, fmt, max_file_mb,
+                                                        res.paths))
+            del rec, sim, pc
+        else:
+            res.recordings.append(rec)
+            res.per_cycle.append(pc)
+    _write_truth(o, res.truth, res.paths)
     return res
 
 
-@dataclass
-class _HoleResult:
-    trace: SpindleTrace
-    cmd: NDArray[np.float64]
-    extra: dict[str, NDArray[np.float64]]
-    mz: NDArray[np.float64]
-    fz: NDArray[np.float64]
-    fx: NDArray[np.float64]
-    fy: NDArray[np.float64]
-    cut_start: int
-    cut_end: int
-    tool_temp: NDArray[np.float64]
-    onsets: list[float | None]
+def _lf_per_minute(rec: Recording, signal: str, minute: int) -> list[float]:
+    lf = rec.lf
+    if lf is None or not len(lf):
+        return []
+    s = lf[lf["signal"] == signal]
+    c = s["cycle"].to_numpy() - int(rec.cycles[0])
+    v = s["value"].to_numpy()
+    targets = np.arange(minute - 1, int(rec.cycles[-1] - rec.cycles[0]) + 1, minute)
+    idx = np.searchsorted(c, targets, side="right") - 1
+    return [float(v[k]) for k in idx if k >= 0]
 
 
-def _drill_holes(
-    cfg: ScenarioConfig,
-    *,
-    material: Material,
-    speed_rpm: float,
-    feed_mm_per_rev: float,
-    depth_mm: float,
-    n_holes: int,
-    first_hole: int,
-    start_cycle: int,
-    state: SpindleState | None,
-    tool_temp0: float | None,
-    z_state: float | None,
-    rng: np.random.Generator,
-    gap_s: float,
-    faults: tuple[Fault, ...] = (),
-    wear_um: NDArray[np.float64] | None = None,
-) -> tuple[list[_HoleResult], SpindleState, float, float]:
-    """Drill ``n_holes`` blind holes with constant feed (G1 down, G0 out), one chunk per hole."""
-    m = cfg.machine
-    ct = m.cycle_time_s
-    d = cfg.drill
-    clearance = 2.0
-    feed_mm_s = feed_mm_per_rev * speed_rpm / 60.0
-    rapid_mm_s = 20000.0 / 60.0
-    results = []
-    st = state
-    temp = tool_temp0
-    zs = z_state
-    for j in range(n_holes):
-        hole = first_hole + j
-        v0 = st.speed_rpm if st is not None else 0.0
-        # spin up (4000 rpm/s) and settle 0.5 s before the first approach
-        n_spin = round((abs(speed_rpm - v0) / 4000.0 + 0.5) / ct) if j == 0 else 0
-        n_app = round(clearance / rapid_mm_s / ct) + 1
-        n_cut = round((depth_mm + clearance * 0.5) / feed_mm_s / ct)
-        n_dwell = round(0.1 / ct)
-        n_ret = round((depth_mm + clearance) / rapid_mm_s / ct) + 1
-        n_gap = round(gap_s / ct)
-        z = np.concatenate(
-            [
-                np.full(n_spin, clearance),
-                np.linspace(clearance, clearance * 0.5, n_app),
-                clearance * 0.5 - feed_mm_s * ct * np.arange(1, n_cut + 1),
-                np.full(n_dwell, -depth_mm),
-                np.linspace(-depth_mm, clearance, n_ret),
-                np.full(n_gap, clearance),
-            ]
-        )
-        z = np.minimum(z, clearance)
-        z[n_spin + n_app : n_spin + n_app + n_cut] = np.maximum(
-            z[n_spin + n_app : n_spin + n_app + n_cut], -depth_mm
-        )
-        n = z.size
-        v_mm_s = np.gradient(z, ct)
-        cmd = _ramp(np.full(n, speed_rpm), st.speed_rpm if st is not None else 0.0, 4000.0, ct)
-        feed = np.where(v_mm_s < -1e-9, -v_mm_s * 60.0 / np.maximum(cmd, 1.0), 0.0)
-        depth = -z
-        wear = float(wear_um[j]) if wear_um is not None else 0.0
-        hard = float(hardness_factor(faults, hole))
-        angle0 = st.vector[1] if st is not None else 0.0
-        angle = angle0 + np.cumsum(cmd) * ct * 2.0 * math.pi / 60.0
-        # tool temperature needs the load, the load (slightly) the temperature: use the
-        # temperature of the previous sample's power (one pass with cold-tool load first)
-        base = drilling_load(
-            depth,
-            cmd,
-            feed,
-            drill=d,
-            material=material,
-            wear_um=wear,
-            hardness_factor=hard,
-            spindle_angle_rad=angle,
-            model=cfg.drilling,
-            rng=None,
-            dt_s=ct,
-        )
-        power = base.torque_nm * cmd * 2.0 * math.pi / 60.0
-        tt = tool_temperature(power, dt_s=ct, thermal=cfg.tool_thermal, initial_c=temp)
-        load = drilling_load(
-            depth,
-            cmd,
-            feed,
-            drill=d,
-            material=material,
-            wear_um=wear,
-            hardness_factor=hard,
-            spindle_angle_rad=angle,
-            tool_temperature_c=tt,
-            walk_direction_rad=0.7,
-            model=cfg.drilling,
-            rng=rng,
-            dt_s=ct,
-        )
-        t_abs = (start_cycle + np.arange(n)) * ct
-        cut_idx = np.flatnonzero(load.engagement > 0)
-        prog = np.zeros(n)
-        if cut_idx.size:
-            prog[cut_idx] = np.linspace(0.0, 1.0, cut_idx.size)
-        load, onsets = apply_faults(
-            faults, load, time_s=t_abs, hole=hole, speed_rpm=cmd, hole_progress=prog, rng=rng
-        )
-        tr = simulate_spindle(
-            cmd,
-            load.torque_nm,
-            m.spindle,
-            cycle_time_s=ct,
-            inner_steps=m.inner_steps,
-            state=st,
-            rng=rng,
-        )
-        st = tr.state
-        temp = float(tt[-1])
-        z_enc, zs = _z_follow(
-            z, load.thrust_n, lag_s=0.004, stiffness_n_per_mm=5.0e4, cycle_time_s=ct, zi=zs
-        )
-        x_enc = load.fx_n / 2.0e4
-        y_enc = load.fy_n / 2.0e4
-        extra = {
-            "DES_POS|Z1": z,
-            "ENC_POS|Z1": z_enc,
-            "DES_POS|X1": np.zeros(n),
-            "ENC_POS|X1": x_enc,
-            "DES_POS|Y1": np.zeros(n),
-            "ENC_POS|Y1": y_enc,
-        }
-        cs = int(cut_idx[0]) if cut_idx.size else 0
-        ce = int(cut_idx[-1]) if cut_idx.size else 0
-        results.append(
-            _HoleResult(
-                tr,
-                cmd,
-                extra,
-                load.torque_nm,
-                load.thrust_n,
-                load.fx_n,
-                load.fy_n,
-                start_cycle + cs,
-                start_cycle + ce,
-                tt,
-                onsets,
-            )
-        )
-        start_cycle += n
-    assert st is not None
-    return results, st, float(temp if temp is not None else 25.0), float(zs or 0.0)
+def _write_recording(rec: Recording, out: Path, stem: str, fmt: str,
+                     max_file_mb: float | None, paths: list[Path]) -> Path:
+    """Write an in-memory recording as C4A (chained) or a Parquet chunk directory."""
+    if fmt not in _FORMATS:
+        raise ConfigError(f"fmt must be one of {_FORMATS}, not {fmt!r}")
+    if fmt == "c4a":
+        from cnctwin.iotools.capture4analysis import write_capture4analysis
+
+        path = out / f"{stem}.json"
+        paths += list(write_capture4analysis(rec, path, max_file_mb=max_file_mb))
+        return path
+    from cnctwin.sim.recorder import RecordedChunk
+
+    path = out / stem
+    sink = ParquetChunkSink(path)
+    cols = [c for c in rec.hf.columns if c != "time"]
+    sink.open(cols, rec.meta)
+    step = 50_000
+    cyc = rec.cycles
+    for a in range(0, cyc.size, step):
+        part = rec.hf.iloc[a:a + step]
+        lf = rec.lf if a == 0 and rec.lf is not None else pd.DataFrame(columns=["cycle"])
+        ev = rec.events if a == 0 and rec.events is not None else pd.DataFrame(columns=["kind"])
+        sink.write(RecordedChunk(cycles=cyc[a:a + step],
+                                 hf={c: part[c].to_numpy() for c in cols}, lf=lf, events=ev))
+    sink.close(rec.meta)
+    paths.append(path)
+    return path
 
 
-def _assemble(
-    cfg: ScenarioConfig, holes: list[_HoleResult], start_cycle: int, rng: np.random.Generator
-) -> tuple[Recording, ExternalChannel]:
-    m = cfg.machine
-    trace = SpindleTrace.concatenate([h.trace for h in holes])
-    cmd = np.concatenate([h.cmd for h in holes])
-    extra = {k: np.concatenate([h.extra[k] for h in holes]) for k in holes[0].extra}
-    rec = _recording(m, start_cycle, trace, cmd, extra)
-    t = np.arange(len(trace)) * m.cycle_time_s
-    dyn = dynamometer_channel(
-        t,
-        np.concatenate([h.mz for h in holes]),
-        np.concatenate([h.fz for h in holes]),
-        fx_n=np.concatenate([h.fx for h in holes]),
-        fy_n=np.concatenate([h.fy for h in holes]),
-        sensor=cfg.dynamometer,
-        rng=rng,
-    )
-    rec.external["dynamometer"] = dyn
-    return rec, dyn
+THESIS_VALIDATION_CUTS: tuple[tuple[str, float, float], ...] = (
+    ("aisi1045", 2400.0, 0.16),
+    ("grey_cast_iron", 2400.0, 0.30),
+    ("aisi1045", 2800.0, 0.14),
+    ("grey_cast_iron", 3200.0, 0.40),
+    ("aisi1045", 3200.0, 0.125),
+)
+"""Thesis drilling cuts (§4.3 calibration + Table 4.1): material, speed [rpm], feed [mm/rev]."""
 
 
 def drilling_validation(
-    out_dir: str | Path | None = None,
+    out: str | Path | None = None,
     *,
     seed: int = 0,
     overrides: Mapping[str, Any] | None = None,
+    machine: Machine | None = None,
     depth_mm: float = 20.0,
+    cuts: Sequence[tuple[str, float, float]] = THESIS_VALIDATION_CUTS,
+    fmt: str = "c4a",
+    max_file_mb: float | None = None,
+    chunk_cycles: int = 50_000,
     progress: ProgressFn | None = None,
 ) -> ScenarioResult:
-    """The five thesis drilling cuts with the dynamometer attached (thesis §4.3, Table 4.1).
+    """The thesis drilling cuts with the dynamometer attached (thesis §4.3, Table 4.1).
 
-    Steel 2400/0.16, cast iron 2400/0.3, steel 2800/0.14, cast iron 3200/0.4, steel
-    3200/0.125 (rpm / mm/rev), 8.5 mm carbide drill, one recording + dynamometer CSV per cut.
-    Truth per cut: the model's mean full-engagement torque, the first full-engagement cycle and
-    the dynamometer clock.
+    Per cut (material, rpm, mm/rev) one program
+    (:func:`~cnctwin.sim.programs.drilling_validation_program`, G95, CYCLE81, 8.5 mm carbide
+    drill), one recording and one dynamometer CSV on its own clock. Truth per cut: the model's
+    mean full-engagement torque, the first full-engagement cycle, the last cycle in the
+    material, the simulated mean torque and the dynamometer session clock.
     """
-    cfg = ScenarioConfig.build(overrides)
-    cuts = (
-        ("aisi1045", 2400.0, 0.16),
-        ("grey_cast_iron", 2400.0, 0.30),
-        ("aisi1045", 2800.0, 0.14),
-        ("grey_cast_iron", 3200.0, 0.40),
-        ("aisi1045", 3200.0, 0.125),
-    )
-    out = _prepare(out_dir)
-    res = ScenarioResult(
-        "drilling_validation",
-        truth={
-            "scenario": "drilling_validation",
-            "seed": seed,
-            "overrides": dict(overrides or {}),
-            **cfg.to_dict(),
-            "cuts": [],
-        },
-    )
+    cfg = ScenarioConfig.build(overrides, machine=machine)
+    o = _prepare(out)
+    res = ScenarioResult("drilling_validation",
+                         truth={**_base_truth("drilling_validation", seed, overrides, cfg),
+                                "depth_mm": depth_mm, "cuts": []})
     for i, (mat, n, f) in enumerate(cuts):
-        rng = np.random.default_rng([seed, i])
+        if mat not in cfg.materials:
+            raise ConfigError(f"cut {i}: unknown material {mat!r}; known: {sorted(cfg.materials)}")
         material = cfg.materials[mat]
-        holes, _, _, _ = _drill_holes(
-            cfg,
-            material=material,
-            speed_rpm=n,
-            feed_mm_per_rev=f,
-            depth_mm=depth_mm,
-            n_holes=1,
-            first_hole=0,
-            start_cycle=0,
-            state=None,
-            tool_temp0=None,
-            z_state=None,
-            rng=rng,
-            gap_s=1.0,
-        )
-        rec, dyn = _assemble(cfg, holes, 0, rng)
-        res.recordings.append(rec)
-        ct = cfg.machine.cycle_time_s
-        full = holes[0].cut_start + math.ceil(cfg.drill.cone_length_mm / (f * n / 60.0) / ct)
         tag = f"{i + 1}_{mat}_{int(n)}rpm_{f:g}".replace(".", "p")
-        res.truth["cuts"].append(
-            {
-                "material": mat,
-                "speed_rpm": n,
-                "feed_mm_per_rev": f,
-                "model_mean_torque_nm": float(
-                    drill_torque_nm(f, n, drill=cfg.drill, material=material, model=cfg.drilling)
-                ),
-                "full_engagement_first_cycle": full,
-                "cut_last_cycle": holes[0].cut_end,
-                "recording": f"drill_{tag}.json",
-                "dynamometer_csv": f"dynamometer_{tag}.csv",
-            }
-        )
-        if out is not None:
-            res.paths += _write(rec, out / f"drill_{tag}.json")
-            res.paths.append(write_dynamometer_csv(dyn, out / f"dynamometer_{tag}.csv"))
-        if progress:
-            progress((i + 1) / len(cuts), f"{mat} {n:.0f} rpm {f} mm/rev")
-    _write_truth(out, res.truth, res.paths)
+        text = drilling_validation_program(n, f, depth_mm)
+        prog = parse_program(text)
+        _write_program(o, f"drill_{tag}.mpf", text, res.paths)
+        rng = np.random.default_rng([seed, i, 1])
+        daq = _DynamometerDAQ(cfg.dynamometer, np.random.default_rng([seed, i, 2]), o,
+                              f"dynamometer_{tag}")
+        tp = _TruthParquet(o / f"truth_per_cycle_{tag}.parquet") if o is not None else None
+        pf = _Progress(progress, _duration_s(prog, cfg.machine), f"{mat} {n:.0f} rpm",
+                       done=i / len(cuts), share=1.0 / len(cuts))
+        hook = DrillingProcess(cfg, material=material, feed_mm_per_rev=f, speed_rpm=n,
+                               hole_depth_mm=depth_mm, surface_z_mm=0.0, faults=(), rng=rng,
+                               truth=tp, daq=daq, progress=pf)
+        sink, path = _make_sink(o, f"drill_{tag}", fmt, max_file_mb)
+        sim = _simulate(prog, cfg, seed=_sim_seed(seed, i), hook=hook, sink=sink,
+                        chunk_cycles=chunk_cycles)
+        daq.close()
+        hole = hook.hole_rows()[0] if hook.holes else {}
+        res.truth["cuts"].append({
+            "material": mat, "speed_rpm": n, "feed_mm_per_rev": f,
+            "model_mean_torque_nm": float(drill_torque_nm(f, n, drill=cfg.drill,
+                                                          material=material,
+                                                          model=cfg.drilling)),
+            "simulated_mean_torque_nm": hole.get("mean_cutting_torque_nm"),
+            "cut_first_cycle": hole.get("cut_first_cycle"),
+            "full_engagement_first_cycle": hole.get("full_engagement_first_cycle"),
+            "cut_last_cycle": hole.get("cut_last_cycle"),
+            "recording": path.name if path is not None else None,
+            "dynamometer": daq.sessions,
+        })
+        if sim.recording is not None:
+            rec = sim.recording
+            if daq.channels:
+                rec.external["dynamometer"] = daq.channels[0]
+            res.recordings.append(rec)
+            res.per_cycle.append(sim.truth["per_cycle"])
+        if path is not None:
+            res.recording_paths.append(path)
+            res.paths += _sink_files(sink, path)
+            res.paths += daq.paths
+            if tp is not None and tp.close() is not None:
+                res.paths.append(tp.path)
+    _write_truth(o, res.truth, res.paths)
     return res
 
 
+def _wear_program(n_holes: int, holes_per_set: int, gap_s: float, **kw: Any) -> str:
+    """:func:`~cnctwin.sim.programs.hole_pattern` with a ``G4`` pause before each set > 1."""
+    text = hole_pattern(n_holes, set_size=holes_per_set, **kw)
+    if gap_s <= 0:
+        return text
+    lines = []
+    for line in text.splitlines():
+        if line.startswith("; set ") and line.strip() != "; set 1":
+            lines.append(f"G4 F{gap_s:g}")
+        lines.append(line)
+    return "\n".join(lines) + "\n"
+
+
 def tool_wear_run(
-    out_dir: str | Path | None = None,
+    out: str | Path | None = None,
     *,
     seed: int = 0,
     overrides: Mapping[str, Any] | None = None,
+    machine: Machine | None = None,
     n_holes: int = 2676,
     holes_per_set: int = 6,
+    start_hole: int = 0,
     depth_mm: float = 20.0,
     speed_rpm: float = 2400.0,
     feed_mm_per_min: float = 400.0,
-    gap_in_set_s: float = 1.5,
-    gap_between_sets_s: float = 60.0,
-    faults: tuple[Fault, ...] = (),
+    gap_between_sets_s: float = 30.0,
+    cycle: str = "CYCLE81",
+    walk_direction_rad: float = 0.7,
+    faults: Sequence[Fault | Mapping[str, Any]] = (),
+    dynamometer: bool = True,
+    fmt: str = "parquet",
+    max_file_mb: float | None = 500.0,
+    chunk_cycles: int = 50_000,
     progress: ProgressFn | None = None,
 ) -> ScenarioResult:
     """Tool-wear run: AISI 1045, 20 mm holes, 2400 rpm, 400 mm/min, sets of 6 (thesis §5.1-5.3).
 
-    Streamed: one recording + dynamometer CSV per set (``wear_set_NNNN.json``), a thermal-camera
-    CSV (one reading per hole after extraction) and ``holes.csv`` with the true wear, tool
-    temperature and model torque per hole. Only the last set is kept in memory.
+    Program :func:`~cnctwin.sim.programs.hole_pattern` (CYCLE81, holes in sets of
+    ``holes_per_set`` along Y) with a ``G4 F gap_between_sets_s`` pause between sets (the
+    spindle keeps turning, the tool cools: [E] 30 s, thesis §5.2 shows the tool temperature
+    rising through each set). Streamed to ``out`` chunk by chunk with bounded memory: the
+    recording (Parquet chunk directory by default, or chained Capture4Analysis files), the
+    dynamometer (one CSV session per set, own clock), the thermal camera (one reading per hole,
+    ``delay_s`` after extraction, own clock), ``holes.csv`` (true wear, temperatures, model and
+    simulated torque per hole) and ``truth_per_cycle.parquet``.
+
+    Parameters
+    ----------
+    start_hole : int, default 0
+        Holes the drill had already drilled (wear of hole k is ``flank_wear_um(start_hole+k)``).
+    faults : sequence
+        :class:`~cnctwin.sim.faults.ToolBreakage`, :class:`~cnctwin.sim.faults.Chatter`,
+        :class:`~cnctwin.sim.faults.HardnessChange` ... (or dicts with ``type``); hole numbers
+        count from ``start_hole``.
+    dynamometer : bool, default True
+        Record the dynamometer.
     """
-    cfg = ScenarioConfig.build(overrides)
-    m = cfg.machine
-    ct = m.cycle_time_s
-    material = cfg.materials["aisi1045"]
+    cfg = ScenarioConfig.build(overrides, machine=machine)
+    o = _prepare(out)
+    flist = _faults_from(faults)
     feed = feed_mm_per_min / speed_rpm
-    out = _prepare(out_dir)
-    res = ScenarioResult(
-        "tool_wear_run",
-        truth={
-            "scenario": "tool_wear_run",
-            "seed": seed,
-            "overrides": dict(overrides or {}),
-            **cfg.to_dict(),
-            "n_holes": n_holes,
-            "holes_per_set": holes_per_set,
-            "depth_mm": depth_mm,
-            "speed_rpm": speed_rpm,
-            "feed_mm_per_rev": feed,
-            "faults": [fault_to_dict(f) for f in faults],
-            "fault_onsets_s": [None] * len(faults),
-        },
-    )
-    rng = np.random.default_rng(seed)
-    state: SpindleState | None = None
-    temp: float | None = None
-    zs: float | None = None
-    cycle = 0
-    rows = []
-    cam_t, cam_hole, cam_temp = [], [], []
-    n_sets = math.ceil(n_holes / holes_per_set)
-    for s in range(n_sets):
-        first = s * holes_per_set
-        k = min(holes_per_set, n_holes - first)
-        wear = flank_wear_um(np.arange(first, first + k), curve=cfg.wear)
-        if s > 0:
-            # cool down between sets: spindle keeps turning, tool cools (exact first order)
-            temp = cfg.tool_thermal.ambient_temperature_c + (
-                (temp or 25.0) - cfg.tool_thermal.ambient_temperature_c
-            ) * math.exp(-gap_between_sets_s / cfg.tool_thermal.time_constant_s)
-            cycle += round(gap_between_sets_s / ct)
-        holes, state, temp, zs = _drill_holes(
-            cfg,
-            material=material,
-            speed_rpm=speed_rpm,
-            feed_mm_per_rev=feed,
-            depth_mm=depth_mm,
-            n_holes=k,
-            first_hole=first,
-            start_cycle=cycle,
-            state=state,
-            tool_temp0=temp,
-            z_state=zs,
-            rng=rng,
-            gap_s=gap_in_set_s,
-            faults=faults,
-            wear_um=wear,
-        )
-        rec, dyn = _assemble(cfg, holes, cycle, rng)
-        for j, h in enumerate(holes):
-            for q, o in enumerate(h.onsets):
-                if o is not None and res.truth["fault_onsets_s"][q] is None:
-                    res.truth["fault_onsets_s"][q] = o
-            rows.append(
-                {
-                    "hole": first + j,
-                    "set": s,
-                    "wear_um": float(wear[j]),
-                    "cut_first_cycle": h.cut_start,
-                    "cut_last_cycle": h.cut_end,
-                    "model_torque_nm": float(
-                        drill_torque_nm(
-                            feed,
-                            speed_rpm,
-                            drill=cfg.drill,
-                            material=material,
-                            wear_um=wear[j],
-                            model=cfg.drilling,
-                        )
-                    ),
-                    "tool_temperature_after_c": float(h.tool_temp[-1]),
-                    "tool_temperature_extraction_c": float(np.max(h.tool_temp)),
-                }
-            )
-            cam_t.append((h.cut_end + 60) * ct)
-            cam_hole.append(first + j)
-            cam_temp.append(float(np.max(h.tool_temp)))
-        cycle += sum(len(h.trace) for h in holes)
-        res.recordings = [rec]
-        if out is not None:
-            res.paths += _write(rec, out / f"wear_set_{s + 1:04d}.json")
-            res.paths.append(write_dynamometer_csv(dyn, out / f"dynamometer_set_{s + 1:04d}.csv"))
-        if progress:
-            progress((s + 1) / n_sets, f"hole {first + k}/{n_holes}")
-    cam = thermal_camera_channel(cam_t, cam_hole, cam_temp, camera=cfg.camera, rng=rng)
-    res.recordings[-1].external["thermal_camera"] = cam
+    text = _wear_program(n_holes, holes_per_set, gap_between_sets_s, depth_mm=depth_mm,
+                         speed_rpm=speed_rpm, feedrate_mm_min=feed_mm_per_min, cycle=cycle)
+    prog = parse_program(text)
+    gap_blocks = [k for k, b in enumerate(prog.blocks) if b.kind == "dwell"]
+    res = ScenarioResult("tool_wear_run", truth={
+        **_base_truth("tool_wear_run", seed, overrides, cfg), "n_holes": n_holes,
+        "holes_per_set": holes_per_set, "start_hole": start_hole, "depth_mm": depth_mm,
+        "speed_rpm": speed_rpm, "feed_mm_per_rev": feed, "feed_mm_per_min": feed_mm_per_min,
+        "gap_between_sets_s": gap_between_sets_s, "cycle": cycle,
+        "walk_direction_rad": walk_direction_rad, "faults": [fault_to_dict(f) for f in flist]})
+    _write_program(o, "tool_wear_run.mpf", text, res.paths)
+    daq = (_DynamometerDAQ(cfg.dynamometer, np.random.default_rng([seed, 2]), o, "dynamometer")
+           if dynamometer else None)
+    tp = _TruthParquet(o / "truth_per_cycle.parquet") if o is not None else None
+    pf = _Progress(progress, _duration_s(prog, cfg.machine), "wear run")
+    hook = DrillingProcess(cfg, material=cfg.materials["aisi1045"], feed_mm_per_rev=feed,
+                           speed_rpm=speed_rpm, hole_depth_mm=depth_mm,
+                           walk_direction_rad=walk_direction_rad, surface_z_mm=0.0,
+                           faults=flist, rng=np.random.default_rng([seed, 1]), truth=tp,
+                           daq=daq, daq_off_blocks=gap_blocks, progress=pf,
+                           first_hole=start_hole)
+    sink, path = _make_sink(o, "tool_wear_run", fmt, max_file_mb)
+    sim = _simulate(prog, cfg, seed=seed, hook=hook, sink=sink, chunk_cycles=chunk_cycles)
+    if daq is not None:
+        daq.close()
+    rows = hook.hole_rows()
+    th = cfg.tool_thermal
+    for r in rows:
+        r["set"] = (r["hole"] - start_hole) // holes_per_set
+        r["position_in_set"] = (r["hole"] - start_hole) % holes_per_set
+        # camera reading delay_s after extraction: the tool cools freely (same lumped model)
+        r["tool_temperature_camera_c"] = th.ambient_temperature_c + (
+            r["tool_temperature_extraction_c"] - th.ambient_temperature_c
+        ) * math.exp(-cfg.camera.delay_s / th.time_constant_s)
+    cam = None
+    if rows:
+        cam = thermal_camera_channel([r["extraction_s"] for r in rows],
+                                     [r["hole"] for r in rows],
+                                     [r["tool_temperature_camera_c"] for r in rows],
+                                     camera=cfg.camera, rng=np.random.default_rng([seed, 3]))
     res.truth["holes"] = rows
-    res.truth["final_wear_um"] = float(flank_wear_um(n_holes - 1, curve=cfg.wear))
-    if out is not None:
-        res.paths.append(write_thermal_camera_csv(cam, out / "thermal_camera.csv"))
-        p = out / "holes.csv"
+    res.truth["fault_onsets_s"] = hook.onsets
+    res.truth["final_wear_um"] = float(flank_wear_um(start_hole + n_holes - 1, curve=cfg.wear))
+    res.truth["dynamometer_sessions"] = daq.sessions if daq is not None else []
+    res.truth["n_cycles"] = sim.trajectory["n_cycles"]
+    if sim.recording is not None:
+        rec = sim.recording
+        if daq is not None:
+            for k, ch in enumerate(daq.channels):
+                rec.external["dynamometer" if k == 0 else f"dynamometer_{k + 1:04d}"] = ch
+        if cam is not None:
+            rec.external["thermal_camera"] = cam
+        res.recordings.append(rec)
+        res.per_cycle.append(sim.truth["per_cycle"])
+    if o is not None and path is not None:
+        res.recording_paths.append(path)
+        res.paths += _sink_files(sink, path)
+        if daq is not None:
+            res.paths += daq.paths
+        if cam is not None:
+            res.paths.append(write_thermal_camera_csv(cam, o / "thermal_camera.csv"))
+        p = o / "holes.csv"
         pd.DataFrame(rows).to_csv(p, index=False)
         res.paths.append(p)
-    _write_truth(out, res.truth, res.paths)
+        if tp is not None and tp.close() is not None:
+            res.paths.append(tp.path)
+    _write_truth(o, res.truth, res.paths)
     return res
 
 
 def loose_tap(
-    out_dir: str | Path | None = None,
+    out: str | Path | None = None,
     *,
     seed: int = 0,
     overrides: Mapping[str, Any] | None = None,
+    machine: Machine | None = None,
     n_holes: int = 4,
     loose_from_hole: int = 2,
     depth_mm: float = 12.0,
     speed_rpm: float = 400.0,
+    fmt: str = "c4a",
+    max_file_mb: float | None = None,
+    chunk_cycles: int = 50_000,
     progress: ProgressFn | None = None,
 ) -> ScenarioResult:
     """Rigid tapping M8x1.25 in steel; the tap comes loose on extraction (thesis §5.4, Fig 5.10).
 
-    The spindle is in position control (mode 1) following the tapping position command; Z
-    follows synchronously (pitch per revolution). From ``loose_from_hole`` on, a
-    :class:`~cnctwin.sim.faults.LooseTool` makes torque, current and Z position fluctuate while
-    the tap turns backwards.
+    Program :func:`~cnctwin.sim.programs.tapping_program` (CYCLE84): the spindle is in position
+    control coupled to Z. From hole ``loose_from_hole`` (0-based) on, a
+    :class:`~cnctwin.sim.faults.LooseTool` (override its fields with ``loose_tool.<field>``)
+    adds a fluctuating torque (spindle current) and axial force (Z disturbance -> Z ENC_POS)
+    while the tap reverses out. Truth per hole: cut and extraction cycle ranges; fault onset.
     """
-    cfg = ScenarioConfig.build(overrides)
-    m = cfg.machine
-    ct = m.cycle_time_s
-    tap = cfg.tap
-    material = cfg.materials["aisi1045"]
-    fault = LooseTool(start_hole=loose_from_hole)
-    rng = np.random.default_rng(seed)
-    out = _prepare(out_dir)
-    clearance = 3.0
-    deg_per_s = speed_rpm * 6.0
-    total_deg = (depth_mm + clearance) / tap.pitch_mm * 360.0
-    n_move = round(total_deg / deg_per_s / ct)
-    acc_n = round(0.08 / ct)
-    prof = np.ones(n_move)
-    prof[:acc_n] = np.linspace(0, 1, acc_n)
-    prof[-acc_n:] = np.linspace(1, 0, acc_n)
-    prof_deg = np.cumsum(prof) * total_deg / prof.sum()
-    n_wait = round(0.5 / ct)
-    st: SpindleState | None = SpindleState.initial(m.spindle)
-    pieces: list[SpindleTrace] = []
-    cmds, extras_z, extras_zenc, mz, fz = [], [], [], [], []
-    onset: float | None = None
-    zs: float | None = None
-    cycle = 0
-    base_deg = 0.0
-    for h in range(n_holes):
-        pos = (
-            np.concatenate(
-                [
-                    np.full(n_wait, 0.0),
-                    prof_deg,
-                    np.full(n_wait // 2, total_deg),
-                    total_deg - prof_deg,
-                    np.full(n_wait, 0.0),
-                ]
-            )
-            + base_deg
-        )
-        n = pos.size
-        z = clearance - (pos - base_deg) / 360.0 * tap.pitch_mm
-        speed = np.gradient(pos, ct) / 6.0
-        load = tapping_load(-z, speed, tap=tap, material=material)
-        t_abs = (cycle + np.arange(n)) * ct
-        load, on = apply_faults([fault], load, time_s=t_abs, hole=h, speed_rpm=speed, rng=rng)
-        if on[0] is not None and onset is None:
-            onset = on[0]
-        tr = simulate_spindle(
-            speed,
-            load.torque_nm,
-            m.spindle,
-            cycle_time_s=ct,
-            inner_steps=m.inner_steps,
-            state=st,
-            rng=rng,
-            position_cmd_deg=pos,
-            mode=1,
-        )
-        st = tr.state
-        z_enc, zs = _z_follow(
-            z, load.thrust_n, lag_s=0.004, stiffness_n_per_mm=5.0e4, cycle_time_s=ct, zi=zs
-        )
-        pieces.append(tr)
-        cmds.append(speed)
-        extras_z.append(z)
-        extras_zenc.append(z_enc)
-        mz.append(load.torque_nm)
-        fz.append(load.thrust_n)
-        cycle += n
-        base_deg = float(pos[-1])
-        if progress:
-            progress((h + 1) / n_holes, f"tap {h + 1}/{n_holes}")
-    trace = SpindleTrace.concatenate(pieces)
-    rec = _recording(
-        m,
-        0,
-        trace,
-        np.concatenate(cmds),
-        {"DES_POS|Z1": np.concatenate(extras_z), "ENC_POS|Z1": np.concatenate(extras_zenc)},
-    )
-    t = np.arange(len(trace)) * ct
-    dyn = dynamometer_channel(
-        t, np.concatenate(mz), np.concatenate(fz), sensor=cfg.dynamometer, rng=rng
-    )
-    rec.external["dynamometer"] = dyn
-    truth = {
-        "scenario": "loose_tap",
-        "seed": seed,
-        "overrides": dict(overrides or {}),
-        **cfg.to_dict(),
-        "faults": [fault_to_dict(fault)],
-        "fault_onsets_s": [onset],
-        "n_holes": n_holes,
-        "depth_mm": depth_mm,
-        "speed_rpm": speed_rpm,
-    }
-    res = ScenarioResult("loose_tap", [rec], [], truth)
-    if out is not None:
-        res.paths += _write(rec, out / "loose_tap.json")
-        res.paths.append(write_dynamometer_csv(dyn, out / "dynamometer.csv"))
-    _write_truth(out, truth, res.paths)
+    ov = dict(overrides or {})
+    lt = {k.split(".", 1)[1]: ov.pop(k) for k in list(ov) if k.startswith("loose_tool.")}
+    cfg = ScenarioConfig.build(ov, machine=machine)
+    fault = _replace(LooseTool(start_hole=loose_from_hole), lt, "loose_tool")
+    o = _prepare(out)
+    text = tapping_program(n_holes, pitch_mm=cfg.tap.pitch_mm, depth_mm=depth_mm,
+                           speed_rpm=speed_rpm)
+    prog = parse_program(text)
+    res = ScenarioResult("loose_tap", truth={
+        **_base_truth("loose_tap", seed, overrides, cfg), "n_holes": n_holes,
+        "depth_mm": depth_mm, "speed_rpm": speed_rpm, "faults": [fault_to_dict(fault)]})
+    _write_program(o, "loose_tap.mpf", text, res.paths)
+    daq = _DynamometerDAQ(cfg.dynamometer, np.random.default_rng([seed, 2]), o, "dynamometer")
+    tp = _TruthParquet(o / "truth_per_cycle.parquet") if o is not None else None
+    pf = _Progress(progress, _duration_s(prog, cfg.machine), "tapping")
+    hook = TappingProcess(cfg, material=cfg.materials["aisi1045"], surface_z_mm=0.0,
+                          faults=(fault,), rng=np.random.default_rng([seed, 1]), truth=tp,
+                          daq=daq, progress=pf)
+    sink, path = _make_sink(o, "loose_tap", fmt, max_file_mb)
+    sim = _simulate(prog, cfg, seed=seed, hook=hook, sink=sink, chunk_cycles=chunk_cycles)
+    daq.close()
+    res.truth["holes"] = hook.hole_rows()
+    res.truth["fault_onsets_s"] = hook.onsets
+    res.truth["dynamometer_sessions"] = daq.sessions
+    if sim.recording is not None:
+        rec = sim.recording
+        if daq.channels:
+            rec.external["dynamometer"] = daq.channels[0]
+        res.recordings.append(rec)
+        res.per_cycle.append(sim.truth["per_cycle"])
+    if path is not None:
+        res.recording_paths.append(path)
+        res.paths += _sink_files(sink, path) + daq.paths
+        if tp is not None and tp.close() is not None:
+            res.paths.append(tp.path)
+    _write_truth(o, res.truth, res.paths)
+    return res
+
+
+def _milling_program(side_mm: float, radius_mm: float, gap_mm: float, **kw: Any) -> str:
+    """Square (first corner at the origin) then circle right of it, one program."""
+    sq = square_path(side_mm, **kw).splitlines()
+    sq = [line for line in sq if line.strip() not in ("M30", "M5 M9")]
+    center = (side_mm + gap_mm + radius_mm, side_mm / 2.0)
+    ci = circle_path(radius_mm, center_xy=center, **kw).splitlines()
+    ci = [line for line in ci if not line.startswith(("G90", "T", "S"))]
+    return "\n".join(sq + ci) + "\n"
+
+
+def milling_square_circle(
+    out: str | Path | None = None,
+    *,
+    seed: int = 0,
+    overrides: Mapping[str, Any] | None = None,
+    machine: Machine | None = None,
+    randomize_loop: bool = False,
+    side_mm: float = 40.0,
+    radius_mm: float = 20.0,
+    speed_rpm: float = 6000.0,
+    feed_per_tooth_mm: float = 0.167,
+    depth_mm: float = 0.5,
+    faults: Sequence[Fault | Mapping[str, Any]] = (),
+    fmt: str = "c4a",
+    max_file_mb: float | None = None,
+    chunk_cycles: int = 50_000,
+    progress: ProgressFn | None = None,
+) -> ScenarioResult:
+    """Milling a square and a circle in Al7050-T7451 (thesis §3.1.2, Figs. 3.2 and 3.3).
+
+    16 mm two-flute carbide end mill (``end_mill.*``), 0.5 mm axial depth, 0.167 mm/tooth
+    (F = fz z n = 2004 mm/min at the assumed 6000 rpm), full-slot cut; programs
+    :func:`~cnctwin.sim.programs.square_path` (G64) and :func:`~cnctwin.sim.programs.circle_path`
+    (G3). The recording has every position-loop signal per axis (``DES_POS``, ``CTRL_POS``,
+    ``ENC_POS``, ``CTRL_DIFF``, ``CTRL_DIFF2``, ``CONT_DEV``, ``VEL_FFW``, ``TORQUE_FFW``,
+    ``CMD_SPEED``, ``CURRENT``, ``TORQUE``, ``LOAD``, ``POWER``).
+
+    Parameters
+    ----------
+    out : str or path, optional
+        Output directory; ``None`` keeps ``result.recording`` in memory.
+    seed : int
+        Seed of every random stream (and of the loop draw with ``randomize_loop``).
+    overrides : mapping, optional
+        Dotted overrides, e.g. ``{"axes.X1.kv_m_min_per_mm": 3.1}``.
+    machine : Machine, optional
+        Base machine (e.g. one with hidden loop parameters); overrides apply on top.
+    randomize_loop : bool, default False
+        Draw the X/Y loop parameters with :func:`random_loop_overrides` (``seed``) before
+        ``overrides``; the drawn values are in ``truth["loop_overrides"]``.
+
+    Returns
+    -------
+    ScenarioResult
+        Truth: the paths (corners, circle centre/radius), the feed, the machine (all loop
+        parameters) and the per-cycle cutting forces (``per_cycle`` / Parquet).
+    """
+    drawn = random_loop_overrides(seed) if randomize_loop else {}
+    ov = {**drawn, **dict(overrides or {})}
+    cfg = ScenarioConfig.build(ov, machine=machine)
+    o = _prepare(out)
+    flist = _faults_from(faults)
+    gap = 30.0
+    text = _milling_program(side_mm, radius_mm, gap, speed_rpm=speed_rpm,
+                            feed_per_tooth_mm=feed_per_tooth_mm,
+                            n_flutes=cfg.end_mill.flutes, depth_mm=depth_mm,
+                            tool=cfg.end_mill.tool_number)
+    prog = parse_program(text)
+    feed = feed_per_tooth_mm * cfg.end_mill.flutes * speed_rpm
+    res = ScenarioResult("milling_square_circle", truth={
+        **_base_truth("milling_square_circle", seed, overrides, cfg),
+        "loop_overrides": drawn, "material": "al7050", "speed_rpm": speed_rpm,
+        "feed_per_tooth_mm": feed_per_tooth_mm, "feed_mm_min": feed, "depth_mm": depth_mm,
+        "square": {"corners_mm": [[0.0, 0.0], [side_mm, 0.0], [side_mm, side_mm],
+                                  [0.0, side_mm]], "direction": "ccw"},
+        "circle": {"center_mm": [side_mm + gap + radius_mm, side_mm / 2.0],
+                   "radius_mm": radius_mm, "direction": "ccw"},
+        "faults": [fault_to_dict(f) for f in flist]})
+    _write_program(o, "milling_square_circle.mpf", text, res.paths)
+    daq = _DynamometerDAQ(cfg.dynamometer, np.random.default_rng([seed, 2]), o, "dynamometer")
+    tp = _TruthParquet(o / "truth_per_cycle.parquet") if o is not None else None
+    pf = _Progress(progress, _duration_s(prog, cfg.machine), "milling")
+    hook = MillingProcess(cfg, material=cfg.materials["al7050"], surface_z_mm=0.0,
+                          faults=flist, rng=np.random.default_rng([seed, 1]), truth=tp,
+                          daq=daq, progress=pf)
+    sink, path = _make_sink(o, "milling_square_circle", fmt, max_file_mb)
+    sim = _simulate(prog, cfg, seed=seed, hook=hook, sink=sink, chunk_cycles=chunk_cycles)
+    daq.close()
+    res.truth["fault_onsets_s"] = hook.onsets
+    res.truth["dynamometer_sessions"] = daq.sessions
+    if sim.recording is not None:
+        rec = sim.recording
+        if daq.channels:
+            rec.external["dynamometer"] = daq.channels[0]
+        res.recordings.append(rec)
+        res.per_cycle.append(sim.truth["per_cycle"])
+    if path is not None:
+        res.recording_paths.append(path)
+        res.paths += _sink_files(sink, path) + daq.paths
+        if tp is not None and tp.close() is not None:
+            res.paths.append(tp.path)
+    _write_truth(o, res.truth, res.paths)
     return res
 
 
@@ -982,22 +1459,36 @@ SCENARIOS: dict[str, Callable[..., ScenarioResult]] = {
     "drilling_validation": drilling_validation,
     "tool_wear_run": tool_wear_run,
     "loose_tap": loose_tap,
+    "milling_square_circle": milling_square_circle,
 }
 """Scenario name -> function."""
 
 
 def run_scenario(
     name: str,
-    out_dir: str | Path | None = None,
+    out: str | Path | None = None,
     *,
     seed: int = 0,
     overrides: Mapping[str, Any] | None = None,
     progress: ProgressFn | None = None,
     **options: Any,
 ) -> ScenarioResult:
-    """Run a scenario by name (:data:`SCENARIOS`); ``options`` go to the scenario function."""
+    """Run a scenario by name (:data:`SCENARIOS`); ``options`` go to the scenario function.
+
+    Raises
+    ------
+    ConfigError
+        Unknown scenario or option (the message lists the valid ones).
+    """
+    import inspect
+
     try:
         fn = SCENARIOS[name]
     except KeyError:
         raise ConfigError(f"unknown scenario {name!r}; known: {', '.join(SCENARIOS)}") from None
-    return fn(out_dir, seed=seed, overrides=overrides, progress=progress, **options)
+    valid = [p for p in inspect.signature(fn).parameters
+             if p not in ("out", "seed", "overrides", "progress", "machine")]
+    bad = sorted(set(options) - set(valid))
+    if bad:
+        raise ConfigError(f"scenario {name!r} has no option(s) {bad}; options: {valid}")
+    return fn(out, seed=seed, overrides=overrides, progress=progress, **options)
