@@ -49,3 +49,18 @@ def test_select_and_conversions() -> None:
     assert table.schema.field("CURRENT|SP1").metadata == {b"unit": b"A"}
     with pytest.raises(SignalNotFoundError, match="CURRENT\\|SP1"):
         rec.signal("TORQUE", "SP1")
+
+
+def test_sections_between_gaps_use_their_own_anchors_when_monotonic() -> None:
+    t0 = pd.Timestamp("2024-01-01T00:00:00Z")
+    cycles = np.array([0, 1, 2, 1000, 1001])
+    gaps = find_gaps(cycles)
+    # the gap lasted 10 s of wall time although only 997 cycles (1.994 s) are missing
+    anchors = [(0, t0), (1000, t0 + pd.Timedelta(seconds=12))]
+    times = cycles_to_time(cycles, anchors, cycle_time_s=0.002, gaps=gaps)
+    assert times[3] == t0 + pd.Timedelta(seconds=12)
+    assert times[2] == t0 + pd.Timedelta(milliseconds=4)
+    # anchors that would make time run backwards: the counter stays the clock
+    back = [(0, t0), (1000, t0 - pd.Timedelta(seconds=1))]
+    times = cycles_to_time(cycles, back, cycle_time_s=0.002, gaps=gaps)
+    assert times.is_monotonic_increasing

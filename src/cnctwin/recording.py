@@ -227,11 +227,20 @@ def find_gaps(cycles: NDArray[np.int64]) -> list[CounterGap]:
     return [CounterGap(int(c[i]), int(c[i + 1])) for i in idx]
 
 
+def _int_median(values: NDArray[np.int64]) -> int:
+    # integer median: np.median goes through float64, which rounds epoch nanoseconds
+    # (~1.7e18) to 256 ns steps
+    srt = np.sort(values)
+    mid = srt.size // 2
+    return int(srt[mid]) if srt.size % 2 else (int(srt[mid - 1]) + int(srt[mid])) // 2
+
+
 def cycles_to_time(
     cycles: ArrayLike,
     anchors: Sequence[tuple[int, pd.Timestamp]],
     *,
     cycle_time_s: float,
+    gaps: Sequence[CounterGap] = (),
 ) -> pd.DatetimeIndex:
     """UTC time of each cycle from (cycle, time) anchors.
 
@@ -239,6 +248,14 @@ def cycles_to_time(
     anchors set the absolute time; with several anchors the median offset is used, so a single
     late wall-clock stamp (the HFTimestamp is written when a chunk is sent) does not bend the
     time axis.
+
+    A counter gap need not last as long as its missing cycles (the real Capture4Analysis sample
+    jumps 3860 cycles while its wall-clock anchors advance 8 s less), so with ``gaps`` every
+    contiguous section between gaps gets the median offset of its own anchors; a section without
+    anchors takes the offset of the nearest section that has some. Time must not run backwards:
+    if the sections' anchors would make it do so (they do in that sample: the anchors after the
+    gap lie 0.28 s *before* the last cycle ahead of it), the whole recording follows the counter
+    with the median offset of all anchors, as without ``gaps``.
 
     Parameters
     ----------
@@ -248,6 +265,8 @@ def cycles_to_time(
         Known (cycle, UTC time) pairs. If empty, times start at the Unix epoch.
     cycle_time_s : float
         Position-control cycle time [s].
+    gaps : sequence of CounterGap, optional
+        Counter gaps that split the recording into separately anchored sections.
 
     Returns
     -------
@@ -257,19 +276,29 @@ def cycles_to_time(
     c = np.asarray(cycles, dtype=np.int64)
     step_ns = round(cycle_time_s * 1e9)
     if len(anchors) == 0:
-        base_ns = 0
         base_cycle = int(c[0]) if c.size else 0
-    else:
-        a_cyc = np.array([a[0] for a in anchors], dtype=np.int64)
-        a_ns = np.array([pd.Timestamp(a[1]).value for a in anchors], dtype=np.int64)
-        base_cycle = int(a_cyc[0])
-        offsets = a_ns - (a_cyc - base_cycle) * step_ns
-        # integer median: np.median goes through float64, which rounds epoch nanoseconds
-        # (~1.7e18) to 256 ns steps
-        srt = np.sort(offsets)
-        mid = srt.size // 2
-        base_ns = int(srt[mid]) if srt.size % 2 else (int(srt[mid - 1]) + int(srt[mid])) // 2
-    ns = base_ns + (c - base_cycle) * step_ns
+        ns = (c - base_cycle) * step_ns
+        return pd.DatetimeIndex(pd.to_datetime(ns, unit="ns", utc=True), name="time")
+    a_cyc = np.array([a[0] for a in anchors], dtype=np.int64)
+    a_ns = np.array([pd.Timestamp(a[1]).value for a in anchors], dtype=np.int64)
+    base_cycle = int(a_cyc[0])
+    offsets = a_ns - (a_cyc - base_cycle) * step_ns
+    # section k holds the cycles after gap k-1 up to gap k (an anchor inside a gap belongs to
+    # the section after it)
+    bounds = np.array(sorted(g.after_cycle for g in gaps), dtype=np.int64)
+    a_sec = np.searchsorted(bounds, a_cyc, side="left")
+    n_sec = bounds.size + 1
+    sec_off = np.full(n_sec, np.iinfo(np.int64).min, dtype=np.int64)
+    for k in np.unique(a_sec):
+        sec_off[k] = _int_median(offsets[a_sec == k])
+    have = np.flatnonzero(sec_off != np.iinfo(np.int64).min)
+    for k in range(n_sec):  # sections without anchors: nearest anchored section
+        if sec_off[k] == np.iinfo(np.int64).min:
+            sec_off[k] = sec_off[have[np.argmin(np.abs(have - k))]]
+    c_sec = np.searchsorted(bounds, c, side="left")
+    ns = sec_off[c_sec] + (c - base_cycle) * step_ns
+    if n_sec > 1 and np.any(np.diff(ns) <= 0):
+        ns = _int_median(offsets) + (c - base_cycle) * step_ns
     return pd.DatetimeIndex(pd.to_datetime(ns, unit="ns", utc=True), name="time")
 
 
@@ -352,7 +381,8 @@ class Recording:
                 0,
                 "time",
                 cycles_to_time(
-                    hf.index.to_numpy(), self.meta.time_anchors, cycle_time_s=self.meta.cycle_time_s
+                    hf.index.to_numpy(), self.meta.time_anchors,
+                    cycle_time_s=self.meta.cycle_time_s, gaps=self.meta.gaps,
                 ),
             )
         self.hf = hf

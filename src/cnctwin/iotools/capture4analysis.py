@@ -51,6 +51,7 @@ from cnctwin.iotools._jsonscan import (
 from cnctwin.recording import (
     CYCLE_COUNTER_MODULUS,
     EVENT_COLUMNS,
+    CounterGap,
     Recording,
     RecordingMeta,
     cycles_to_time,
@@ -803,7 +804,7 @@ def _events_frame(events: list[dict[str, Any]], issues: list[str]) -> pd.DataFra
 
 def _lf_frame(
     lf: list[dict[str, Any]], anchors: list[tuple[int, pd.Timestamp]], cycle_time_s: float,
-    issues: list[str], attrs: dict[str, Any],
+    issues: list[str], attrs: dict[str, Any], gaps: list[CounterGap],
 ) -> pd.DataFrame:
     if not lf:
         return pd.DataFrame({
@@ -836,7 +837,7 @@ def _lf_frame(
         addr = str(e.get("address", ""))
         if "value_type" in e:
             types.setdefault(addr, str(e["value_type"]))
-    time = cycles_to_time(cycles, anchors, cycle_time_s=cycle_time_s)
+    time = cycles_to_time(cycles, anchors, cycle_time_s=cycle_time_s, gaps=gaps)
     df = pd.DataFrame({
         "cycle": cycles,
         "time": pd.Series(time, dtype="datetime64[ns, UTC]"),
@@ -975,8 +976,10 @@ def _assemble(parts: list[_FilePart], reader: _Reader, files: list[str]) -> Reco
                 f"time anchors disagree with the cycle counter by up to {spread_ms / 1e3:.3f} s: "
                 f"{int(far.sum())} of {len(anchors)} anchors (cycles {int(a_c[far].min())}.."
                 f"{int(a_c[far].max())}) are off the median by "
-                f"{float(np.median(off[far] - med)) / 1e9:+.3f} s; the time column follows the "
-                "counter with the median offset (wall clock stepped, or the counter jumped)"
+                f"{float(np.median(off[far] - med)) / 1e9:+.3f} s; sections between "
+                "counter gaps are timed by their own anchors where time stays monotonic, else the "
+                "counter with the median offset is the clock (wall clock stepped, or the counter "
+                "jumped)"
             )
 
     # HF: columns in the first file's order; later files mapped by name
@@ -1054,7 +1057,9 @@ def _assemble(parts: list[_FilePart], reader: _Reader, files: list[str]) -> Reco
         )
 
     hf = pd.DataFrame(values.T, index=pd.Index(cycles, name="cycle"), columns=names, copy=False)
-    hf.insert(0, "time", cycles_to_time(cycles, anchors, cycle_time_s=cycle_time_s))
+    hf.insert(
+        0, "time", cycles_to_time(cycles, anchors, cycle_time_s=cycle_time_s, gaps=gaps)
+    )
 
     # events (repeated boundary event dropped) and LF
     events: list[dict[str, Any]] = []
@@ -1064,7 +1069,7 @@ def _assemble(parts: list[_FilePart], reader: _Reader, files: list[str]) -> Reco
     for p in parts:
         events.extend(p.events)
     lf = [e for p in parts for e in p.lf]
-    lf_df = _lf_frame(lf, anchors, cycle_time_s, issues, attrs)
+    lf_df = _lf_frame(lf, anchors, cycle_time_s, issues, attrs, gaps)
     ev_df = _events_frame(events, issues)
 
     axis_map = dict(sorted(reader.seen_axes.items()))
