@@ -1,0 +1,1043 @@
+"""TwinChain: calibrate the spindle twin from Recordings and estimate the cutting torque.
+
+The orchestrator of thesis chapter 4 in the style of pvlib's ``ModelChain``: a chain is built
+from a machine description and a handful of options (model slots take a name or a callable),
+:meth:`TwinChain.calibrate` identifies the spindle from an air-cut sweep and one cut with a
+dynamometer, and :meth:`TwinChain.run_model_from_measured` estimates the cutting torque of any
+recording. Results land in a :class:`TwinChainResult`.
+
+Every analysis reads :class:`~cnctwin.recording.Recording` objects only (HF current and speed,
+LF motor temperature / |I| / Iq, the Z position, the dynamometer channel); nothing here reads
+simulator internals, so the same calls run on a real campaign.
+
+Presets:
+
+* :meth:`TwinChain.thesis_method`: the thesis as published (region from data, ``I = a n + b`` on
+  the plateau means, Kt from the first 0.6 s of the calibration cut, no temperature or
+  acceleration term).
+* :meth:`TwinChain.improved_method`: the same physics with the error sources of the thesis
+  method removed (see its Notes).
+
+Examples
+--------
+>>> chain = TwinChain.improved_method()
+>>> chain.options.temperature_compensation
+True
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike, NDArray
+from scipy import signal as sps
+
+from cnctwin.analysis.align import external_on_hf
+from cnctwin.analysis.filters import lowpass
+from cnctwin.analysis.segments import cutting_regions, lf_on_hf, speed_plateaus, spindle_speed_rpm
+from cnctwin.exceptions import ConfigError, IdentificationError, SignalNotFoundError
+from cnctwin.recording import Recording
+from cnctwin.spindle import (
+    RPM_TO_RAD_S,
+    FrictionFit,
+    LinearRegion,
+    SpindleModel,
+    air_cut_statistics,
+    fit_friction,
+    identify_inertia,
+    linear_region,
+    plateau_segments,
+)
+
+__all__ = [
+    "FRICTION_MODELS",
+    "REGION_MODELS",
+    "CutEstimate",
+    "FrictionCurve",
+    "TwinChain",
+    "TwinChainOptions",
+    "TwinChainResult",
+    "align_dynamometer",
+    "field_weakening_onset_rpm",
+    "find_cuts",
+    "fit_friction_stribeck",
+    "ripple_free_means",
+    "temperature_coefficient_from_warm_up",
+]
+
+NDFEB_KT_TEMP_COEFF_PER_K = -0.00105
+"""Relative change of Kt per kelvin of magnet temperature [1/K]: the middle of the NdFeB
+remanence coefficient range -0.09 ... -0.12 %/K (physics-and-performance.md §2)."""
+
+
+# ====================================================================== friction models
+@dataclass(frozen=True)
+class FrictionCurve:
+    """Air-cut current versus speed: ``I = a n + b + s exp(-n / n_s)`` [A].
+
+    Attributes
+    ----------
+    line : FrictionFit
+        The straight part (``a = B/Kt`` [A/rpm], ``b = tau_f/Kt`` [A]); for the linear model
+        this is the whole curve.
+    stribeck_a : float
+        Low-speed excess current ``s`` [A] (0 for the linear model).
+    stribeck_speed_rpm : float
+        Decay speed ``n_s`` [rpm] (NaN for the linear model).
+    model : str
+        Name of the friction model.
+    """
+
+    line: FrictionFit
+    stribeck_a: float = 0.0
+    stribeck_speed_rpm: float = float("nan")
+    model: str = "linear"
+
+    def current_a(self, speed_rpm: ArrayLike) -> NDArray[np.float64]:
+        """Air-cut current predicted at ``speed_rpm`` [A]."""
+        n = np.abs(np.asarray(speed_rpm, dtype=np.float64))
+        out = self.line.current_a(n)
+        if self.stribeck_a:
+            out = out + self.stribeck_a * np.exp(-n / self.stribeck_speed_rpm)
+        return np.asarray(out, dtype=np.float64)
+
+
+def _fit_linear(speed_rpm: ArrayLike, current_a: ArrayLike, lo_rpm: float,
+                hi_rpm: float) -> FrictionCurve:
+    return FrictionCurve(fit_friction(speed_rpm, current_a, lo_rpm, hi_rpm))
+
+
+def fit_friction_stribeck(
+    speed_rpm: ArrayLike,
+    current_a: ArrayLike,
+    lo_rpm: float,
+    hi_rpm: float,
+    *,
+    decay_grid_rpm: Sequence[float] = tuple(np.geomspace(100.0, 2000.0, 40)),
+) -> FrictionCurve:
+    """Line plus a decaying low-speed (Stribeck) term through air-cut means.
+
+    Parameters
+    ----------
+    speed_rpm, current_a : array-like
+        Plateau speeds [rpm] and mean currents [A].
+    lo_rpm, hi_rpm : float
+        Speed range used [rpm]; unlike the thesis' linear region it may start far below the
+        lower limit, because the curved low-speed part is modelled instead of cut away.
+    decay_grid_rpm : sequence of float
+        Candidate decay speeds ``n_s`` [rpm]; the one with the least residual wins (the model
+        is linear in ``a, b, s`` for a fixed ``n_s``).
+
+    Returns
+    -------
+    FrictionCurve
+        ``line`` holds ``a``, ``b`` with their statistics from the final fit.
+
+    Notes
+    -----
+    ``Kt I = B n + tau_f + tau_s exp(-n/n_s)`` (Stribeck/mixed lubrication on top of Eq. 3.1).
+    The thesis cuts the curved low-speed part away (1100 rpm lower limit); what is left of the
+    decaying term just above the limit still tilts a straight line: the slope comes out low and
+    the offset high by about ``s exp(-n_lo/n_s)`` (1-3 % of ``tau_f`` on the thesis machine).
+    Modelling the term removes that bias and lets the fit use the low speeds, which pin
+    ``tau_f`` best.
+    """
+    n = np.abs(np.asarray(speed_rpm, dtype=np.float64))
+    i = np.abs(np.asarray(current_a, dtype=np.float64))
+    m = np.isfinite(n) & np.isfinite(i) & (n >= lo_rpm) & (n <= hi_rpm)
+    x, y = n[m], i[m]
+    if x.size < 6:
+        raise IdentificationError(
+            f"the Stribeck friction fit needs at least 6 plateaus in [{lo_rpm:.0f}, "
+            f"{hi_rpm:.0f}] rpm, got {x.size}"
+        )
+    best: tuple[float, float, NDArray[np.float64]] | None = None
+    for ns in decay_grid_rpm:
+        a_mat = np.column_stack([x, np.ones_like(x), np.exp(-x / ns)])
+        sol, *_ = np.linalg.lstsq(a_mat, y, rcond=None)
+        if sol[2] < 0:
+            continue
+        rss = float(np.sum((a_mat @ sol - y) ** 2))
+        if best is None or rss < best[0]:
+            best = (rss, float(ns), sol)
+    if best is None:
+        return _fit_linear(x, y, lo_rpm, hi_rpm)
+    _, ns, sol = best
+    # statistics of a, b from the line through the Stribeck-corrected means
+    line = fit_friction(x, y - sol[2] * np.exp(-x / ns))
+    return FrictionCurve(line, stribeck_a=float(sol[2]), stribeck_speed_rpm=ns,
+                         model="stribeck")
+
+
+FrictionModel = Callable[[ArrayLike, ArrayLike, float, float], FrictionCurve]
+FRICTION_MODELS: dict[str, FrictionModel] = {
+    "linear": _fit_linear,
+    "stribeck": fit_friction_stribeck,
+}
+"""Friction model name -> ``f(speed_rpm, current_a, lo_rpm, hi_rpm) -> FrictionCurve``."""
+
+
+# ====================================================================== region models
+def field_weakening_onset_rpm(stats: pd.DataFrame, *, spindle: str = "SP1",
+                              threshold: float = 1.01) -> float | None:
+    """Lowest plateau speed where the drive applies field-weakening current [rpm].
+
+    Parameters
+    ----------
+    stats : pandas.DataFrame
+        :func:`~cnctwin.spindle.air_cut_statistics` with the LF means of the smoothed absolute
+        current (r0068) and Iq (r0078).
+    spindle : str
+        Spindle axis.
+    threshold : float, default 1.01
+        ``|I| / |Iq|`` above which Id is counted as present.
+
+    Returns
+    -------
+    float or None
+        The speed, or None if the LF currents are not recorded or never diverge.
+
+    Notes
+    -----
+    Thesis Fig. 3.8c: the smoothed absolute current rises away from Iq once field weakening
+    injects negative Id (|I| = sqrt(Id^2 + Iq^2)). Thesis §4.1 searches the linear region only
+    below this speed (7000 rpm from the drive parameters); here it is read from the data.
+    """
+    ci = f"CURRENT_ABS_SMOOTHED|{spindle} (LF) mean"
+    cq = f"IQ_ACT|{spindle} (LF) mean"
+    if ci not in stats or cq not in stats:
+        return None
+    ratio = stats[ci].abs() / stats[cq].abs().replace(0.0, np.nan)
+    n = stats["speed_rpm"].abs().to_numpy()
+    above = np.flatnonzero((ratio.to_numpy() > threshold) & (n > 500.0))
+    return float(n[above[0]]) if above.size else None
+
+
+RegionModel = Callable[..., LinearRegion]
+
+
+def _region_auto(stats: pd.DataFrame, segments: Sequence[NDArray[np.float64]], *,
+                 fs_hz: float, poles: int | None, fw_rpm: float | None) -> LinearRegion:
+    """Thesis §4.1 criteria (:func:`~cnctwin.spindle.linear_region`) below field weakening."""
+    keep = np.ones(len(stats), dtype=bool)
+    if fw_rpm is not None:
+        keep &= stats["speed_rpm"].abs().to_numpy() < fw_rpm
+    idx = np.flatnonzero(keep)
+    return linear_region(
+        stats["speed_rpm"].abs().to_numpy()[idx], stats["current_a"].to_numpy()[idx],
+        segments=[segments[int(k)] for k in idx], fs_hz=fs_hz, poles=poles,
+    )
+
+
+REGION_MODELS: dict[str, RegionModel] = {"auto": _region_auto}
+"""Region model name -> ``f(stats, segments, *, fs_hz, poles, fw_rpm) -> LinearRegion``."""
+
+
+def ripple_free_means(
+    speed_rpm: ArrayLike,
+    segments: Sequence[ArrayLike],
+    *,
+    poles: int,
+    fs_hz: float,
+) -> NDArray[np.float64]:
+    """Plateau mean currents with the stator-frequency ripple fitted out [A].
+
+    Parameters
+    ----------
+    speed_rpm : array-like
+        Plateau speeds [rpm].
+    segments : sequence of array-like
+        Raw current samples of each plateau [A] (:func:`~cnctwin.spindle.plateau_segments`).
+    poles : int
+        Motor pole count (thesis Eq. 4.1).
+    fs_hz : float
+        Sample rate [Hz].
+
+    Returns
+    -------
+    numpy.ndarray
+        Per plateau the constant of the least-squares fit ``c + s sin(2 pi f t) +
+        k cos(2 pi f t)`` at the folded stator frequency ``f = fold(N p / 120, fs)``; NaN
+        where ``f`` is below one cycle per plateau (the line folds onto DC and cannot be told
+        from the mean).
+
+    Notes
+    -----
+    The current is sampled once per 2 ms cycle, so the stator ripple (thesis Fig. 4.3) folds
+    about 250 Hz. A plain mean over ``T`` seconds keeps up to ``A / (pi f T)`` of a ripple of
+    amplitude ``A`` folded to ``f`` (and all of it at ``f`` = 0, e.g. 8 poles at 3750 rpm);
+    with ~0.08 A ripple that is several mA, a percent of the friction slope. Fitting the
+    sinusoid with the constant removes it (thesis Fig. 4.3b: the stator component does not
+    move the average).
+    """
+    from cnctwin.analysis.filters import fold_frequency, stator_frequency_hz
+
+    n = np.abs(np.asarray(speed_rpm, dtype=np.float64))
+    out = np.full(n.size, np.nan)
+    for k, seg in enumerate(segments):
+        y = np.asarray(seg, dtype=np.float64)
+        ok = np.isfinite(y)
+        if ok.sum() < 10:
+            continue
+        t = np.arange(y.size)[ok] / fs_hz
+        f = float(fold_frequency(stator_frequency_hz(n[k], poles), fs_hz))
+        if f * y.size / fs_hz < 1.0:
+            continue
+        a = np.column_stack([np.ones(t.size), np.sin(2 * np.pi * f * t),
+                             np.cos(2 * np.pi * f * t)])
+        sol, *_ = np.linalg.lstsq(a, y[ok], rcond=None)
+        out[k] = float(sol[0])
+    return out
+
+
+# ====================================================================== temperature
+def temperature_coefficient_from_warm_up(
+    rec: Recording, *, spindle: str = "SP1", min_duration_s: float = 60.0
+) -> tuple[float, float]:
+    """Relative change of the air-cut current per kelvin of motor temperature (thesis §4.2).
+
+    Parameters
+    ----------
+    rec : Recording
+        A long constant-speed air run with the LF motor temperature (r0035), e.g. the warm-up.
+    spindle : str
+        Spindle axis.
+    min_duration_s : float, default 60
+        Shortest constant-speed stretch used [s].
+
+    Returns
+    -------
+    coeff_per_k : float
+        ``d ln(I_air) / dT`` [1/K] (negative: the current falls as the motor warms, Fig. 4.4).
+    speed_rpm : float
+        Speed of the stretch used [rpm].
+
+    Notes
+    -----
+    The current is averaged over 10 s blocks and regressed on the block-mean motor
+    temperature. The coefficient lumps friction and Kt drift and refers to the *winding*
+    temperature the drive reports, while the bearings and magnets heat at their own rate; it
+    is a compensation for continuous operation, not a physical parameter.
+    """
+    temp = lf_on_hf(rec, "MOTOR_TEMP", spindle)
+    if temp is None:
+        raise SignalNotFoundError("the warm-up run has no LF motor temperature (r0035)")
+    pl = speed_plateaus(rec, spindle=spindle, min_duration_s=min_duration_s)
+    if pl.empty:
+        raise IdentificationError("no constant-speed stretch in the warm-up run")
+    p = pl.iloc[int(np.argmax(pl["n_cycles"].to_numpy()))]
+    lo = int(np.searchsorted(rec.cycles, int(p["start_cycle"])))
+    hi = int(np.searchsorted(rec.cycles, int(p["end_cycle"]), side="right"))
+    i = rec.signal(f"CURRENT|{spindle}").to_numpy(dtype=np.float64)[lo:hi]
+    t = temp.to_numpy(dtype=np.float64)[lo:hi]
+    blk = max(1, round(10.0 * rec.fs_hz))
+    nb = i.size // blk
+    if nb < 4:
+        raise IdentificationError("the warm-up stretch is shorter than 40 s")
+    ib = np.nanmean(i[: nb * blk].reshape(nb, blk), axis=1)
+    tb = np.nanmean(t[: nb * blk].reshape(nb, blk), axis=1)
+    if np.ptp(tb) < 0.5:
+        raise IdentificationError("the motor temperature rose less than 0.5 K in the warm-up")
+    slope, icpt = np.polyfit(tb, ib, 1)
+    t_ref = float(tb[0])
+    return float(slope / (slope * t_ref + icpt)), float(p["speed_rpm"])
+
+
+# ====================================================================== alignment
+def align_dynamometer(
+    rec: Recording,
+    *,
+    dynamometer: str = "dynamometer",
+    torque_column: str = "mz_nm",
+    spindle: str = "SP1",
+    max_lag_s: float | None = None,
+) -> Recording:
+    """Align the dynamometer clock to the HF clock on the cutting load.
+
+    Parameters
+    ----------
+    rec : Recording
+        Recording with the external dynamometer channel.
+    dynamometer, torque_column : str
+        Channel and torque column.
+    spindle : str
+        Spindle axis.
+    max_lag_s : float, optional
+        Largest offset searched [s]; default any offset with at least half overlap.
+
+    Returns
+    -------
+    Recording
+        Copy with the channel's ``offset_s`` set and ``aligned=True``.
+
+    Notes
+    -----
+    The reference is the spindle current with the run-ups blanked (the inertia current of a
+    run-up has no counterpart in the dynamometer torque) and the air-cut level removed; the
+    lag maximizes the plain (not energy-normalized) cross-correlation, which favours long
+    overlaps. :func:`cnctwin.analysis.align.align_external` normalizes by the energy of the
+    overlap and on a single-hole recording locks onto short partial overlaps (correlation
+    < 0.1 after alignment on the simulated drilling_validation cuts).
+    """
+    if dynamometer not in rec.external:
+        raise SignalNotFoundError(
+            f"no external channel {dynamometer!r}; it has: {', '.join(rec.external) or 'none'}"
+        )
+    ch = rec.external[dynamometer]
+    fs = rec.fs_hz
+    i = np.abs(rec.signal(f"CURRENT|{spindle}").to_numpy(dtype=np.float64))
+    i = np.asarray(pd.Series(i).interpolate(limit_direction="both"), dtype=np.float64)
+    speed, _ = spindle_speed_rpm(rec, spindle)
+    speed = np.asarray(pd.Series(speed).ffill().bfill().fillna(0.0), dtype=np.float64)
+    ramp = np.abs(np.gradient(speed) * fs) > 50.0
+    ramp = np.convolve(ramp.astype(float), np.ones(round(0.4 * fs)), mode="same") > 0
+    base = np.quantile(i[~ramp], 0.1) if (~ramp).any() else 0.0
+    ref = np.where(ramp, base, i) - base
+    ref = lowpass(ref, 20.0, fs_hz=fs, order=2) if ref.size > 30 else ref
+    t_dyn = np.asarray(ch.data.index, dtype=np.float64)
+    tau = np.abs(ch.data[torque_column].to_numpy(dtype=np.float64))
+    grid = np.arange(t_dyn[0], t_dyn[-1], 1.0 / fs)
+    oth = np.interp(grid, t_dyn, tau)
+    oth = lowpass(oth, 20.0, fs_hz=fs, order=2) if oth.size > 30 else oth
+    r = ref - ref.mean()
+    o = oth - oth.mean()
+    c = sps.correlate(r, o, mode="full")
+    lags = sps.correlation_lags(r.size, o.size, mode="full")
+    overlap = np.minimum(lags + o.size, r.size) - np.maximum(lags, 0)
+    t0 = float(rec.time_s[0])
+    offsets = t0 + lags / fs - grid[0]
+    ok = overlap >= 0.5 * min(r.size, o.size)
+    if max_lag_s is not None:
+        ok &= np.abs(offsets) <= max_lag_s
+    if not ok.any():
+        raise IdentificationError("the dynamometer and the recording do not overlap")
+    k = int(np.argmax(np.where(ok, c, -np.inf)))
+    delta = 0.0
+    if 0 < k < c.size - 1:
+        y0, y1, y2 = c[k - 1], c[k], c[k + 1]
+        den = y0 - 2 * y1 + y2
+        if den < 0:
+            delta = float(np.clip(0.5 * (y0 - y2) / den, -0.5, 0.5))
+    offset = float(offsets[k] + delta / fs)
+    out = rec.copy()
+    out.external[dynamometer] = dataclasses.replace(ch, offset_s=offset, drift_ppm=0.0,
+                                                    aligned=True)
+    out.meta.issues.append(
+        f"external channel {dynamometer!r} aligned to the cutting current by plain "
+        f"cross-correlation: offset {offset:.5f} s"
+    )
+    return out
+
+
+def find_cuts(rec: Recording, *, spindle: str = "SP1", z_axis: str | None = "Z1",
+              fraction: float = 0.3) -> pd.DataFrame:
+    """:func:`~cnctwin.analysis.segments.cutting_regions` with a threshold from the load level.
+
+    Parameters
+    ----------
+    rec : Recording
+        Recording with spindle current, speed and (optionally) the Z position.
+    spindle, z_axis : str
+        Axis names.
+    fraction : float, default 0.3
+        Switch-on threshold as a fraction of the cut level: the 99th percentile of |I| at
+        constant speed minus its 5th percentile [-].
+
+    Returns
+    -------
+    pandas.DataFrame
+        As :func:`~cnctwin.analysis.segments.cutting_regions`.
+
+    Notes
+    -----
+    The automatic threshold of ``cutting_regions`` takes the noise from the lower half of the
+    excess current; in a single-hole recording (thesis Fig. 4.5) the drill is in the material
+    for more than half of the constant-speed time and that "noise" is the cut itself, so no
+    region is found. A threshold relative to the load level does not depend on the duty cycle.
+    """
+    cur = np.abs(rec.signal(f"CURRENT|{spindle}").to_numpy(dtype=np.float64))
+    speed, _ = spindle_speed_rpm(rec, spindle)
+    speed = np.asarray(pd.Series(speed).ffill().bfill().fillna(0.0), dtype=np.float64)
+    fs = rec.fs_hz
+    steady = np.abs(np.gradient(speed) * fs) < 50.0
+    steady &= np.abs(speed) > 1.0
+    steady = np.convolve((~steady).astype(float), np.ones(round(0.4 * fs)), mode="same") == 0
+    ok = steady & np.isfinite(cur)
+    if ok.sum() < 10:
+        return cutting_regions(rec, spindle=spindle, z_axis=z_axis)
+    sm = lowpass(np.where(np.isfinite(cur), cur, 0.0), 5.0, fs_hz=fs, order=2) \
+        if cur.size > 30 else cur
+    lvl = float(np.quantile(sm[ok], 0.99) - np.quantile(sm[ok], 0.05))
+    return cutting_regions(rec, spindle=spindle, z_axis=z_axis,
+                           current_threshold=max(fraction * lvl, 1e-3))
+
+
+# ====================================================================== options and results
+@dataclass(frozen=True)
+class TwinChainOptions:
+    """Options of a :class:`TwinChain` (see the constructor for their meaning)."""
+
+    friction_model: str | FrictionModel = "linear"
+    region: str | tuple[float, float] | RegionModel = "auto"
+    fit_from_rpm: float | None = None
+    fit_to_fraction: float = 1.0
+    temperature_compensation: bool = False
+    acceleration_term: bool = False
+    window_s: float = 0.6
+    window_start: str = "cut"
+    local_air_baseline: bool = False
+    kt_temp_coeff_per_k: float = NDFEB_KT_TEMP_COEFF_PER_K
+    poles: int | None = None
+    ripple_free: bool = False
+
+
+@dataclass(frozen=True)
+class CutEstimate:
+    """One cut of a recording: window means and the estimate (a row of Table 4.1).
+
+    Attributes
+    ----------
+    start_cycle, end_cycle : int
+        Averaging window (inclusive HF cycles).
+    region_start_cycle, region_end_cycle : int
+        The cutting region it lies in.
+    speed_rpm : float
+        Mean speed [rpm].
+    current_a : float
+        Mean spindle current [A].
+    air_current_a : float
+        Air-cut current subtracted [A] (local baseline or the friction curve).
+    temperature_c : float
+        Mean LF motor temperature [degC] (NaN if not recorded).
+    accel_torque_nm : float
+        Mean ``J dOmega/dt`` [Nm] (0 without the acceleration term).
+    torque_nm : float
+        Mean measured (dynamometer) torque [Nm] (NaN without dynamometer).
+    predicted_torque_nm : float
+        Mean estimated cutting torque [Nm].
+    """
+
+    start_cycle: int
+    end_cycle: int
+    region_start_cycle: int
+    region_end_cycle: int
+    speed_rpm: float
+    current_a: float
+    air_current_a: float
+    temperature_c: float
+    accel_torque_nm: float
+    torque_nm: float
+    predicted_torque_nm: float
+
+
+@dataclass
+class TwinChainResult:
+    """Everything :class:`TwinChain` identified and estimated.
+
+    Attributes
+    ----------
+    air_cut_stats : pandas.DataFrame
+        Per-plateau statistics of the air cut (:func:`~cnctwin.spindle.air_cut_statistics`).
+    field_weakening_rpm : float or None
+        Field-weakening onset read from the LF |I| / Iq divergence [rpm].
+    region : LinearRegion or None
+        Linear speed-current region (thesis §4.1); None for a given range.
+    fit_range_rpm : tuple of float
+        Speed range of the friction fit [rpm].
+    friction : FrictionCurve
+        Air-cut current curve; ``friction.line`` is Eq. 4.2 (``a`` [A/rpm], ``b`` [A]).
+    spindle_model : SpindleModel
+        ``Kt`` [Nm/A], ``B`` [Nm/rpm], ``tau_f`` [Nm], ``J`` [kg m^2], temperature
+        coefficients [1/K] and the reference (air-cut) motor temperature [degC].
+    calibration : CutEstimate
+        The calibration window (``torque_nm`` is the dynamometer torque Kt was fitted to).
+    warm_up_coeff_per_k : float or None
+        Relative air-cut current change per kelvin of motor temperature from the warm-up
+        run [1/K].
+    validation : pandas.DataFrame
+        One row per cut of the recordings passed to :meth:`TwinChain.run_model_from_measured`:
+        ``recording`` (index), the :class:`CutEstimate` fields, ``error_nm`` and ``error_pct``
+        (|predicted - measured| / |measured| x 100, where a dynamometer is present).
+    cutting_torque : list of pandas.Series
+        Estimated cutting torque per HF cycle of each recording [Nm].
+    """
+
+    air_cut_stats: pd.DataFrame
+    field_weakening_rpm: float | None
+    region: LinearRegion | None
+    fit_range_rpm: tuple[float, float]
+    friction: FrictionCurve
+    spindle_model: SpindleModel
+    calibration: CutEstimate
+    warm_up_coeff_per_k: float | None = None
+    validation: pd.DataFrame = field(default_factory=pd.DataFrame)
+    cutting_torque: list[pd.Series] = field(default_factory=list)
+
+
+# ====================================================================== the chain
+class TwinChain:
+    """Calibrate the spindle twin and estimate the cutting torque (pvlib ModelChain style).
+
+    Parameters
+    ----------
+    machine : cnctwin.sim.machine.Machine, optional
+        Machine description; only names are read (spindle axis, Z axis). No datasheet value
+        is used unless passed explicitly (``poles``).
+    friction_model : {'linear', 'stribeck'} or callable, default 'linear'
+        Air-cut current model (:data:`FRICTION_MODELS`): ``'linear'`` is thesis Eq. 4.2,
+        ``'stribeck'`` adds the decaying low-speed term (:func:`fit_friction_stribeck`).
+    region : 'auto', (lo_rpm, hi_rpm) or callable, default 'auto'
+        Linear region (:data:`REGION_MODELS`): ``'auto'`` applies the thesis §4.1 criteria
+        below the field-weakening onset found in the data.
+    fit_from_rpm : float, optional
+        Start the friction fit here instead of at the region's lower limit [rpm] (for the
+        Stribeck model, which needs the curved low-speed part).
+    temperature_compensation : bool, default False
+        Scale Kt with the LF motor temperature (magnet coefficient ``kt_temp_coeff_per_k``)
+        and measure the warm-up coefficient of the air-cut current.
+    acceleration_term : bool, default False
+        Identify J from the air-cut run-ups and subtract ``J dOmega/dt`` (Eq. 3.1).
+    window_s : float, default 0.6
+        Averaging window [s] (thesis §4.3: 0.6 s).
+    window_start : {'cut', 'engaged'}, default 'cut'
+        ``'cut'``: the window starts where the cutting region starts (thesis); ``'engaged'``:
+        where the low-passed cut current first reaches 90 % of its median over the region.
+    local_air_baseline : bool, default False
+        Subtract the air current measured at the same speed in the same recording (before
+        and after the cut) instead of the friction curve.
+    kt_temp_coeff_per_k : float
+        Relative Kt change per kelvin [1/K] used with temperature compensation.
+    poles : int, optional
+        Motor pole count (datasheet); default estimated from the current spectra.
+    ripple_free : bool, default False
+        Fit the friction curve to plateau means with the stator ripple fitted out
+        (:func:`ripple_free_means`) instead of plain means.
+    spindle, z_axis : str, optional
+        Axis names; default from ``machine`` ('SP1', 'Z1').
+    dynamometer, torque_column : str
+        External channel and column of the measured cutting torque.
+    """
+
+    def __init__(
+        self,
+        machine: Any | None = None,
+        *,
+        friction_model: str | FrictionModel = "linear",
+        region: str | tuple[float, float] | RegionModel = "auto",
+        fit_from_rpm: float | None = None,
+        fit_to_fraction: float = 1.0,
+        temperature_compensation: bool = False,
+        acceleration_term: bool = False,
+        window_s: float = 0.6,
+        window_start: str = "cut",
+        local_air_baseline: bool = False,
+        kt_temp_coeff_per_k: float = NDFEB_KT_TEMP_COEFF_PER_K,
+        poles: int | None = None,
+        ripple_free: bool = False,
+        spindle: str | None = None,
+        z_axis: str | None = None,
+        dynamometer: str = "dynamometer",
+        torque_column: str = "mz_nm",
+        name: str = "custom",
+    ) -> None:
+        if isinstance(friction_model, str) and friction_model not in FRICTION_MODELS:
+            raise ConfigError(f"unknown friction_model {friction_model!r}; valid: "
+                              f"{', '.join(FRICTION_MODELS)} or a callable")
+        if isinstance(region, str) and region not in REGION_MODELS:
+            raise ConfigError(f"unknown region {region!r}; valid: {', '.join(REGION_MODELS)}, "
+                              "(lo_rpm, hi_rpm) or a callable")
+        if window_start not in ("cut", "engaged"):
+            raise ConfigError(f"window_start must be 'cut' or 'engaged', not {window_start!r}")
+        if not window_s > 0:
+            raise ConfigError(f"window_s must be > 0, got {window_s}")
+        self.machine = machine
+        self.options = TwinChainOptions(
+            friction_model=friction_model, region=region, fit_from_rpm=fit_from_rpm,
+            fit_to_fraction=fit_to_fraction,
+            temperature_compensation=temperature_compensation,
+            acceleration_term=acceleration_term, window_s=window_s, window_start=window_start,
+            local_air_baseline=local_air_baseline, kt_temp_coeff_per_k=kt_temp_coeff_per_k,
+            poles=poles, ripple_free=ripple_free,
+        )
+        self.spindle = spindle or str(getattr(machine, "spindle_name", "SP1"))
+        self.z_axis = z_axis if z_axis is not None else "Z1"
+        self.dynamometer = dynamometer
+        self.torque_column = torque_column
+        self.name = name
+        self._result: TwinChainResult | None = None
+
+    def __repr__(self) -> str:
+        o = self.options
+        return (f"TwinChain({self.name}: friction={o.friction_model!r}, region={o.region!r}, "
+                f"temperature={o.temperature_compensation}, accel={o.acceleration_term}, "
+                f"window={o.window_s:g} s from {o.window_start!r})")
+
+    # ------------------------------------------------------------------ presets
+    @classmethod
+    def thesis_method(cls, machine: Any | None = None, **kwargs: Any) -> TwinChain:
+        """The thesis' method (§4.1-4.3).
+
+        Region from data (thesis §4.1 criteria below the field-weakening onset),
+        ``I = a n + b`` on the plateau means (Eq. 4.2), Kt from the mean current and torque of
+        the first 0.6 s of the calibration cut (Eq. 4.3), friction from the line; no
+        temperature and no acceleration term (Eq. 4.4).
+        """
+        opts: dict[str, Any] = dict(friction_model="linear", region="auto",
+                                    temperature_compensation=False, acceleration_term=False,
+                                    window_s=0.6, window_start="cut", local_air_baseline=False,
+                                    name="thesis")
+        opts.update(kwargs)
+        return cls(machine, **opts)
+
+    @classmethod
+    def improved_method(cls, machine: Any | None = None, **kwargs: Any) -> TwinChain:
+        """The thesis' method with its error sources removed.
+
+        Notes
+        -----
+        Each change and the error it removes (numbers from ``docs/validation-spindle.md``):
+
+        1. **Friction model with the low-speed term over a wider range**
+           (``friction_model='stribeck'``, ``fit_from_rpm=300``). What is left of the Stribeck
+           excess just above the thesis' 1100 rpm limit, and the rounded bend below the
+           upper limit, tilt the straight line: slope about 1 % low, offset about 1 % high.
+           Modelling ``s exp(-n/n_s)`` and fitting from 300 rpm removes the tilt; the upper
+           limit stays the data-driven one, below the field-weakening onset.
+        2. **Window in full engagement** (``window_start='engaged'``, ``window_s=1.0``). The
+           first 0.6 s of a drilling cut contain the drill-point entry, where the torque
+           rises and the current follows through the speed loop and the inertia: current
+           and torque means are not over the same load. Starting where the cut current has
+           reached 90 % of its level and averaging 1 s (not 0.6 s) removes the entry and
+           halves the noise; tool heating does not matter for Kt, because current and
+           torque see the same load.
+        3. **Local air-cut baseline** (``local_air_baseline=True``). The air current at the
+           cutting speed is measured in the same recording before/after the cut, so the
+           friction at the *current* bearing temperature is subtracted. The thesis subtracts
+           the friction line of a cold air cut: after a warm-up the friction has dropped
+           (grease viscosity, thesis Fig. 4.4) and the estimate is biased.
+        4. **Temperature compensation of Kt** (``temperature_compensation=True``). Kt falls
+           with magnet temperature (NdFeB, -0.09 ... -0.12 %/K); a Kt calibrated cold
+           over-estimates the torque of a warm machine by ~2 % per 20 K. Kt is scaled with
+           the LF motor temperature (r0035) from the calibration temperature, and the
+           identified Kt, B, tau_f are referred to the air-cut temperature. The warm-up run
+           gives the lumped air-current coefficient (thesis §4.2), used where no local
+           baseline exists (continuous cutting).
+        5. **Acceleration term** (``acceleration_term=True``). J is identified from the
+           air-cut run-ups (least squares on Eq. 3.1 with the identified friction) and
+           ``J dOmega/dt`` is removed from windows where the speed changes.
+        """
+        opts: dict[str, Any] = dict(friction_model="stribeck", region="auto",
+                                    fit_from_rpm=300.0, fit_to_fraction=0.8,
+                                    temperature_compensation=True,
+                                    acceleration_term=True, window_s=1.0,
+                                    window_start="engaged", local_air_baseline=True,
+                                    ripple_free=True, name="improved")
+        opts.update(kwargs)
+        return cls(machine, **opts)
+
+    # ------------------------------------------------------------------ results
+    @property
+    def results(self) -> TwinChainResult:
+        """The result of the last :meth:`calibrate` / :meth:`run_model_from_measured`."""
+        if self._result is None:
+            raise ConfigError("the chain is not calibrated; call calibrate() first")
+        return self._result
+
+    @property
+    def model(self) -> SpindleModel:
+        """The calibrated spindle model."""
+        return self.results.spindle_model
+
+    # ------------------------------------------------------------------ calibration
+    def calibrate(
+        self,
+        air_cut: Recording,
+        calibration_cut: Recording,
+        *,
+        warm_up: Recording | None = None,
+        region_index: int = 0,
+    ) -> TwinChain:
+        """Identify the spindle from an air-cut sweep and one cut with a dynamometer.
+
+        Parameters
+        ----------
+        air_cut : Recording
+            Air-cut sweep (constant-speed plateaus, thesis §3.2.2).
+        calibration_cut : Recording
+            Recording of one cut with the dynamometer channel (thesis: steel, 2400 rpm,
+            0.16 mm/rev).
+        warm_up : Recording, optional
+            Long constant-speed run (thesis §4.2) for the temperature coefficient.
+        region_index : int, default 0
+            Which cutting region of ``calibration_cut`` to use.
+
+        Returns
+        -------
+        TwinChain
+            ``self``; results in :attr:`results`.
+        """
+        o = self.options
+        sp = self.spindle
+        plateaus = speed_plateaus(air_cut, spindle=sp)
+        stats = air_cut_statistics(air_cut, plateaus, spindle=sp)
+        fw = field_weakening_onset_rpm(stats, spindle=sp)
+        region: LinearRegion | None = None
+        p_sorted = plateaus.assign(_n=plateaus["speed_rpm"].abs()).sort_values(
+            "_n", kind="stable")
+        segs = plateau_segments(air_cut, p_sorted, spindle=sp)
+        if isinstance(o.region, tuple):
+            lo, hi = float(o.region[0]), float(o.region[1])
+        else:
+            fn = REGION_MODELS[o.region] if isinstance(o.region, str) else o.region
+            region = fn(stats, segs, fs_hz=air_cut.fs_hz, poles=o.poles, fw_rpm=fw)
+            lo, hi = region.lo_rpm, region.hi_rpm
+        fit_lo = o.fit_from_rpm if o.fit_from_rpm is not None else lo
+        hi = fit_lo + o.fit_to_fraction * (hi - fit_lo)
+        ffn = FRICTION_MODELS[o.friction_model] if isinstance(o.friction_model, str) \
+            else o.friction_model
+        means = stats["current_a"].to_numpy()
+        poles = o.poles if o.poles is not None else (region.poles if region else None)
+        if o.ripple_free and poles is not None:
+            means = ripple_free_means(stats["speed_rpm"].to_numpy(), segs, poles=poles,
+                                      fs_hz=air_cut.fs_hz)
+        friction = ffn(stats["speed_rpm"].abs().to_numpy(), means, fit_lo, hi)
+        t_ref = self._air_cut_temperature(stats, lo, hi)
+        # Kt from the calibration cut (Eq. 4.3)
+        rec = align_dynamometer(calibration_cut, dynamometer=self.dynamometer,
+                                torque_column=self.torque_column, spindle=sp)
+        regions = find_cuts(rec, spindle=sp, z_axis=self.z_axis)
+        if len(regions) <= region_index:
+            raise IdentificationError(
+                f"found {len(regions)} cutting regions in the calibration cut, cannot use "
+                f"index {region_index}; check cutting_regions thresholds"
+            )
+        j = 0.0
+        kt_ref, cal = self._kt(rec, regions.iloc[region_index], friction, t_ref, j)
+        if o.acceleration_term:
+            model0 = self._model(kt_ref, friction, 0.0, t_ref)
+            j = self._inertia(air_cut, model0)
+            kt_ref, cal = self._kt(rec, regions.iloc[region_index], friction, t_ref, j)
+        coeff = None
+        if o.temperature_compensation and warm_up is not None:
+            coeff, _ = temperature_coefficient_from_warm_up(warm_up, spindle=sp)
+        self._result = TwinChainResult(
+            air_cut_stats=stats,
+            field_weakening_rpm=fw,
+            region=region,
+            fit_range_rpm=(float(fit_lo), float(hi)),
+            friction=friction,
+            spindle_model=self._model(kt_ref, friction, j, t_ref),
+            calibration=cal,
+            warm_up_coeff_per_k=coeff,
+        )
+        return self
+
+    def _model(self, kt: float, friction: FrictionCurve, j: float,
+               t_ref: float) -> SpindleModel:
+        o = self.options
+        temp = o.temperature_compensation and np.isfinite(t_ref)
+        return SpindleModel(
+            kt_nm_per_a=kt,
+            b_nm_per_rpm=friction.line.slope_a_per_rpm * kt,
+            tau_f_nm=friction.line.offset_a * kt,
+            j_kgm2=j,
+            kt_temp_coeff_per_k=o.kt_temp_coeff_per_k if temp else 0.0,
+            reference_temperature_c=t_ref if temp else None,
+        )
+
+    def _air_cut_temperature(self, stats: pd.DataFrame, lo: float, hi: float) -> float:
+        col = f"MOTOR_TEMP|{self.spindle} (LF) mean"
+        if col not in stats:
+            return float("nan")
+        n = stats["speed_rpm"].abs()
+        v = stats.loc[(n >= lo) & (n <= hi), col].to_numpy(dtype=np.float64)
+        v = v[np.isfinite(v)]
+        return float(v.mean()) if v.size else float("nan")
+
+    def _inertia(self, air_cut: Recording, model: SpindleModel) -> float:
+        speed, _ = spindle_speed_rpm(air_cut, self.spindle)
+        cur = air_cut.signal(f"CURRENT|{self.spindle}").to_numpy(dtype=np.float64)
+        try:
+            j = identify_inertia(speed, model.kt_nm_per_a * cur, fs_hz=air_cut.fs_hz,
+                                 model=model, min_speed_rpm=300.0)
+        except IdentificationError:
+            return 0.0
+        return max(float(j), 0.0)
+
+    def _kt(self, rec: Recording, region: pd.Series, friction: FrictionCurve, t_ref: float,
+            j: float) -> tuple[float, CutEstimate]:
+        w = self._window_means(rec, region, friction, j, with_torque=True)
+        i_cut = abs(w["current_a"]) - w["air_current_a"]
+        if i_cut <= 1e-3 * max(abs(w["current_a"]), 1e-9) or not abs(w["torque_nm"]) > 0:
+            raise IdentificationError(
+                f"the calibration window current {w['current_a']:.4g} A does not exceed the "
+                f"air current {w['air_current_a']:.4g} A: no cut in the window"
+            )
+        kt_cal = (abs(w["torque_nm"]) + w["accel_torque_nm"]) / i_cut
+        kt_ref = kt_cal
+        o = self.options
+        if o.temperature_compensation and np.isfinite(t_ref) and np.isfinite(w["temperature_c"]):
+            kt_ref = kt_cal / (1.0 + o.kt_temp_coeff_per_k * (w["temperature_c"] - t_ref))
+        cal = CutEstimate(**{**w, "predicted_torque_nm": abs(w["torque_nm"])})
+        return float(kt_ref), cal
+
+    # ------------------------------------------------------------------ windows
+    def _window_means(self, rec: Recording, region: pd.Series, friction: FrictionCurve,
+                      j: float, *, with_torque: bool) -> dict[str, Any]:
+        o = self.options
+        sp = self.spindle
+        fs = rec.fs_hz
+        cyc = rec.cycles
+        r0 = int(np.searchsorted(cyc, int(region["start_cycle"])))
+        r1 = int(np.searchsorted(cyc, int(region["end_cycle"]), side="right"))
+        cur = rec.signal(f"CURRENT|{sp}").to_numpy(dtype=np.float64)
+        speed, _ = spindle_speed_rpm(rec, sp)
+        start = r0
+        if o.window_start == "engaged":
+            seg = np.abs(cur[r0:r1])
+            base = float(np.median(np.abs(cur[max(0, r0 - round(0.3 * fs)):r0]))) \
+                if r0 > 0 else 0.0
+            sm = lowpass(seg, 10.0, fs_hz=fs, order=2) if seg.size > 30 else seg
+            lvl = base + 0.9 * (float(np.median(sm)) - base)
+            hit = np.flatnonzero(sm >= lvl)
+            start = r0 + (int(hit[0]) if hit.size else 0)
+        stop = min(r1, start + round(o.window_s * fs))
+        if stop - start < max(5, round(0.1 * fs)):
+            raise IdentificationError(
+                f"the cut at cycles {region['start_cycle']}-{region['end_cycle']} is shorter "
+                f"than a usable window; shorten window_s (now {o.window_s} s)"
+            )
+        n_mean = float(np.nanmean(speed[start:stop]))
+        i_mean = float(np.nanmean(cur[start:stop]))
+        temp_s = lf_on_hf(rec, "MOTOR_TEMP", sp)
+        temp = float(np.nanmean(temp_s.to_numpy(dtype=np.float64)[start:stop])) \
+            if temp_s is not None else float("nan")
+        acc = 0.0
+        if o.acceleration_term and j > 0:
+            w = speed * RPM_TO_RAD_S
+            acc = j * float(np.nanmean(np.gradient(w)[start:stop] * fs))
+        air = float("nan")
+        if o.local_air_baseline:
+            air = self._local_air(rec, cur, speed, r0, r1, n_mean)
+        if not np.isfinite(air):
+            air = float(friction.current_a(n_mean))
+        torque = float("nan")
+        if with_torque and self.dynamometer in rec.external:
+            ext = external_on_hf(rec, self.dynamometer, columns=[self.torque_column])
+            tv = ext[self.torque_column].to_numpy(dtype=np.float64)[start:stop]
+            if np.isfinite(tv).any():
+                torque = float(np.nanmean(tv))
+        return {
+            "start_cycle": int(cyc[start]),
+            "end_cycle": int(cyc[stop - 1]),
+            "region_start_cycle": int(region["start_cycle"]),
+            "region_end_cycle": int(region["end_cycle"]),
+            "speed_rpm": n_mean,
+            "current_a": i_mean,
+            "air_current_a": air,
+            "temperature_c": temp,
+            "accel_torque_nm": acc,
+            "torque_nm": torque,
+        }
+
+    def _local_air(self, rec: Recording, cur: NDArray[np.float64], speed: NDArray[np.float64],
+                   r0: int, r1: int, n_cut: float) -> float:
+        """Mean air current at the cut speed in the same recording, outside any cut."""
+        fs = rec.fs_hz
+        steady = np.abs(speed - n_cut) <= max(1.0, 1e-3 * abs(n_cut))
+        # drop the first 0.5 s of each steady run (speed loop settling after the run-up)
+        k = round(0.5 * fs)
+        d = np.diff(np.concatenate([[0], steady.astype(np.int8)]))
+        for s in np.flatnonzero(d == 1):
+            steady[s:s + k] = False
+        excl = np.zeros(cur.size, dtype=bool)
+        excl[max(0, r0 - round(0.1 * fs)):min(cur.size, r1 + round(0.3 * fs))] = True
+        m = steady & ~excl
+        if m.sum() < round(0.2 * fs):
+            return float("nan")
+        return float(np.nanmean(np.abs(cur[m])))
+
+    # ------------------------------------------------------------------ estimation
+    def run_model_from_measured(
+        self,
+        recordings: Recording | Sequence[Recording],
+        *,
+        labels: Sequence[str] | None = None,
+    ) -> TwinChain:
+        """Estimate the cutting torque of recordings with the calibrated model.
+
+        Parameters
+        ----------
+        recordings : Recording or sequence of Recording
+            Recordings with spindle current and speed (and a dynamometer, to validate).
+        labels : sequence of str, optional
+            A label per recording for the ``recording`` column (default its index).
+
+        Returns
+        -------
+        TwinChain
+            ``self``; :attr:`results` ``.validation`` and ``.cutting_torque`` are replaced.
+        """
+        res = self.results
+        recs = [recordings] if isinstance(recordings, Recording) else list(recordings)
+        names = list(labels) if labels is not None else [str(k) for k in range(len(recs))]
+        if len(names) != len(recs):
+            raise ConfigError(f"{len(names)} labels for {len(recs)} recordings")
+        rows: list[dict[str, Any]] = []
+        series: list[pd.Series] = []
+        for name, rec in zip(names, recs, strict=True):
+            if self.dynamometer in rec.external and not rec.external[self.dynamometer].aligned:
+                rec = align_dynamometer(rec, dynamometer=self.dynamometer,
+                                        torque_column=self.torque_column, spindle=self.spindle)
+            regions = find_cuts(rec, spindle=self.spindle, z_axis=self.z_axis)
+            tau = self._torque_series(rec, regions)
+            series.append(tau)
+            for _, reg in regions.iterrows():
+                w = self._window_means(rec, reg, res.friction, res.spindle_model.j_kgm2,
+                                       with_torque=True)
+                pred = self._predict(w)
+                rows.append({"recording": name, **w, "predicted_torque_nm": pred})
+        df = pd.DataFrame(rows)
+        if not df.empty:
+            meas = df["torque_nm"].abs()
+            df["error_nm"] = df["predicted_torque_nm"] - meas
+            with np.errstate(divide="ignore", invalid="ignore"):
+                df["error_pct"] = (df["error_nm"].abs() / meas * 100.0)
+        res.validation = df
+        res.cutting_torque = series
+        return self
+
+    def _kt_at(self, temperature_c: float) -> float:
+        m = self.results.spindle_model
+        if m.reference_temperature_c is None or not np.isfinite(temperature_c):
+            return m.kt_nm_per_a
+        return m.kt_nm_per_a * (1.0 + m.kt_temp_coeff_per_k
+                                * (temperature_c - m.reference_temperature_c))
+
+    def _predict(self, w: dict[str, Any]) -> float:
+        """Mean cutting torque of a window [Nm]: ``Kt(T) (I - I_air) - J dOmega/dt``."""
+        kt = self._kt_at(w["temperature_c"])
+        return float(kt * (abs(w["current_a"]) - w["air_current_a"]) - w["accel_torque_nm"])
+
+    def _torque_series(self, rec: Recording, regions: pd.DataFrame) -> pd.Series:
+        res = self.results
+        sp = self.spindle
+        cur = rec.signal(f"CURRENT|{sp}").to_numpy(dtype=np.float64)
+        speed, _ = spindle_speed_rpm(rec, sp)
+        temp_s = lf_on_hf(rec, "MOTOR_TEMP", sp)
+        temp = temp_s.to_numpy(dtype=np.float64) if temp_s is not None else None
+        kt = np.full(cur.size, res.spindle_model.kt_nm_per_a)
+        if temp is not None and res.spindle_model.reference_temperature_c is not None:
+            kt = kt * (1.0 + res.spindle_model.kt_temp_coeff_per_k
+                       * (np.nan_to_num(temp, nan=res.spindle_model.reference_temperature_c)
+                          - res.spindle_model.reference_temperature_c))
+        air = res.friction.current_a(speed)
+        tau = kt * (np.abs(cur) - air) * np.sign(np.where(speed == 0, 1.0, speed))
+        if self.options.acceleration_term and res.spindle_model.j_kgm2 > 0:
+            tau = tau - res.spindle_model.j_kgm2 * np.gradient(speed * RPM_TO_RAD_S) * rec.fs_hz
+        return pd.Series(tau, index=rec.hf.index.copy(), name="cutting_torque_nm")
