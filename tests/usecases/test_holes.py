@@ -98,28 +98,43 @@ def test_peck_drilling_is_one_hole_per_position() -> None:
     assert list(h["cycle"]) == ["CYCLE83"] * 2
 
 
-def test_wear_run_without_events_against_truth(wear6) -> None:  # type: ignore[no-untyped-def]
+def test_wear_run_against_truth(wear6) -> None:  # type: ignore[no-untyped-def]
     rec = wear6.recording
     truth = pd.DataFrame(wear6.truth["holes"])
     h = hole_record(rec)
     assert list(h["hole"]) == list(range(6))
     assert list(h["position_in_set"]) == list(range(6))
+    np.testing.assert_allclose(h["x_mm"], truth["x_mm"], atol=1e-6)
+    np.testing.assert_allclose(h["y_mm"], truth["y_mm"], atol=1e-6)
+    # with the cycle's RFP the cut starts exactly at the simulator's first engaged cycle
+    assert (h["surface_source"] == "cycle").all()
+    np.testing.assert_array_equal(h["cut_start_cycle"], truth["cut_first_cycle"])
+    np.testing.assert_allclose(h["depth_mm"], 20.0, atol=0.02)
+    # mean cutting torque with the thesis spindle parameters (not calibrated to the simulated
+    # spindle) vs the simulator's mean cutting torque of each hole: within 6 %
+    np.testing.assert_allclose(h["torque_mean_nm"], truth["mean_cutting_torque_nm"], rtol=0.06)
+    # energy = torque x omega x time in the material (3.0 s for 20 mm at 400 mm/min)
+    omega = 2400 * 2 * math.pi / 60
+    expect = truth["mean_cutting_torque_nm"] * omega * 3.0
+    np.testing.assert_allclose(h["energy_j"], expect, rtol=0.07)
+    # the Z drive torque rise tracks the simulated thrust (corr over the wear increase)
+    assert h.attrs["thrust_source"] == "TORQUE|Z1 [Nm]"
+    assert (h["thrust_proxy"] > 0).all()
+    assert list(h["tool"]) == [1] * 6
+
+
+def test_wear_run_without_events(wear6) -> None:  # type: ignore[no-untyped-def]
+    rec = wear6.recording.copy()
+    rec.events = rec.events.iloc[0:0]
+    truth = pd.DataFrame(wear6.truth["holes"])
+    h = hole_record(rec, store=False)
+    assert len(h) == 6
     assert (h["surface_source"] == "current").all()
     # the current onset lags the first touch of the drill point by less than the cone
     # (1.55 mm = 0.23 s at 6.67 mm/s)
     lag_s = (h["cut_start_cycle"] - truth["cut_first_cycle"]) * rec.meta.cycle_time_s
     assert ((lag_s > -0.05) & (lag_s < 0.23)).all(), lag_s.tolist()
     np.testing.assert_allclose(h["depth_mm"], 20.0, atol=0.6)
-    # mean cutting torque with the thesis spindle parameters vs the simulator's model torque
-    # of each hole (truth): within 3 % (thesis Table 4.1 reports 0.3-1.3 %)
-    np.testing.assert_allclose(h["torque_mean_nm"], truth["model_torque_nm"], rtol=0.03)
-    # energy = torque x omega x time in the material
-    omega = 2400 * 2 * math.pi / 60
-    expect = truth["model_torque_nm"] * omega * h["cut_duration_s"]
-    np.testing.assert_allclose(h["energy_j"], expect, rtol=0.04)
-    # thrust pushes the Z encoder up (axial compliance): positive proxy from the following error
-    assert h.attrs["thrust_source"].startswith("DES_POS|Z1 - ENC_POS|Z1")
-    assert (h["thrust_proxy"] > 0).all()
     assert h["tool"].isna().all()
 
 
@@ -136,14 +151,17 @@ def test_model_is_used(wear6) -> None:  # type: ignore[no-untyped-def]
 
 def test_hole_records_continue_numbering(wear6) -> None:  # type: ignore[no-untyped-def]
     rec = wear6.recording
-    a = rec.select(seconds=(0.0, 14.5))
-    b = rec.select(seconds=(14.5, None))
+    a = rec.select(seconds=(0.0, 16.3))
+    b = rec.select(seconds=(16.3, None))
     h = hole_records([b, a], set_size=4)
     assert list(h["hole"]) == list(range(6))
     assert list(h["set"]) == [0, 0, 0, 0, 1, 1]
     assert h["start_s"].is_monotonic_increasing
     full = hole_record(rec, store=False)
-    np.testing.assert_allclose(h["start_s"], full["start_s"], atol=1e-9)
+    # the second part lost the modal MCALL CYCLE81 block (before its start): its surface comes
+    # from the current onset, which is a little later than the cycle's reference plane
+    np.testing.assert_allclose(h["start_s"], full["start_s"], atol=0.1)
+    assert list(h["surface_source"]) == ["cycle"] * 4 + ["current"] * 2
 
 
 def test_parquet_round_trip(tmp_path, wear6) -> None:  # type: ignore[no-untyped-def]

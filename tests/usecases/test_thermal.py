@@ -8,14 +8,11 @@ steps once per hole, so the tolerances are wider and the bias is stated.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 import pytest
 
 from cnctwin.exceptions import ConfigError, IdentificationError
-from cnctwin.iotools import read_recording
 from cnctwin.sim.scenarios import tool_wear_run
 from cnctwin.usecases.holes import hole_records
 from cnctwin.usecases.thermal import (
@@ -88,18 +85,15 @@ def test_camera_offset_from_reading_pattern() -> None:
 
 
 @pytest.fixture(scope="module")
-def wear_run(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
-    out = tmp_path_factory.mktemp("wear18")
+def wear_run():  # type: ignore[no-untyped-def]
     # hidden tool thermal parameters (not the defaults): R C = 29.7 s, C / eta = 41.25 J/K
-    res = tool_wear_run(out, n_holes=18, seed=2, overrides={
+    return tool_wear_run(n_holes=18, seed=2, overrides={
         "tool_thermal.resistance_k_per_w": 9.0, "tool_thermal.heat_fraction": 0.08})
-    recs = [read_recording(p) for p in sorted(Path(out).glob("wear_set_*.json"))]
-    return res, recs
 
 
 def test_soft_sensor_on_simulated_camera(wear_run) -> None:  # type: ignore[no-untyped-def]
-    res, recs = wear_run
-    holes = hole_records(recs)
+    res = wear_run
+    holes = hole_records(res.recordings)
     cam = res.recording.external["thermal_camera"]
     by_hole = merge_camera(holes, cam)
     by_time = merge_camera(holes, cam, on="time")
@@ -116,7 +110,7 @@ def test_soft_sensor_on_simulated_camera(wear_run) -> None:  # type: ignore[no-u
     assert m.c_eff_j_per_k == pytest.approx(c_eff, rel=0.15)
     # camera noise 4 °C (simulator ThermalCamera.noise_c): residual at that level
     assert m.rmse_c < 6.0
-    truth = pd.DataFrame(res.truth["holes"])["tool_temperature_extraction_c"].to_numpy()
+    truth = pd.DataFrame(res.truth["holes"])["tool_temperature_camera_c"].to_numpy()
     pred = m.predict(holes)
     assert np.sqrt(np.mean((pred - truth) ** 2)) < 8.0
     # thesis Figure 5.5: about 300 °C after 6 consecutive holes

@@ -149,6 +149,7 @@ def find_plunges(
     Returns
     -------
     list of Plunge
+        A plunge still moving down at the end of the data is left out (incomplete).
 
     Notes
     -----
@@ -169,6 +170,8 @@ def find_plunges(
             merged.append([s, e])
     out: list[Plunge] = []
     for s, e in merged:
+        if e >= z.size - 2:
+            continue  # still moving down when the recording ends: an incomplete plunge
         hi = min(e + 2, z.size)
         bottom = s + int(np.argmin(z[s:hi]))
         speed = -v[s : bottom + 1]

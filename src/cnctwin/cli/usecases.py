@@ -1,0 +1,284 @@
+"""Use-case subcommands: ``cnctwin holes``, ``cnctwin wear``, ``cnctwin anomalies``.
+
+``holes FILE... [--out CSV] [--figures DIR]``
+    Per-hole record (thesis chapter 5) of one or more recordings in time order.
+``wear FILE... [--measured hole:um,...] [--limit-um 300] [--out DIR]``
+    Tool-wear trend: relative increase of the per-hole cutting torque over the new tool (set
+    means remove the heating pattern), calibrated to micrometres on measured points, and the
+    remaining-life forecast.
+``anomalies FILE... [--detector envelope|physics|spectral|tapping] [--learn-s N] [--out DIR]``
+    Teach a detector on the first seconds, score the rest, list the alarms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from cnctwin.exceptions import ConfigError
+
+__all__ = ["register"]
+
+_HOLE_SHOW = ("hole", "set", "position_in_set", "start_s", "depth_mm", "current_mean_a",
+              "torque_mean_nm", "energy_j", "thrust_proxy", "dev_x_maxabs_mm", "dev_y_maxabs_mm",
+              "tool", "cycle")
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add ``holes``, ``wear`` and ``anomalies`` to the ``cnctwin`` command line."""
+    p = sub.add_parser("holes", help="per-hole record of drilling recordings",
+                       description="One row per drilled hole (thesis chapter 5): segmentation "
+                       "from Z motion and NC events, current, torque, energy, deviations.")
+    p.add_argument("files", nargs="+", type=Path, metavar="FILE", help="recordings, time order")
+    p.add_argument("--out", type=Path, help="write the full table to this CSV")
+    p.add_argument("--figures", type=Path, metavar="DIR",
+                   help="write hole-mean and deviation-path figures (PNG) here")
+    p.set_defaults(func=_cmd_holes)
+
+    w = sub.add_parser("wear", help="tool-wear trend, estimate and remaining life",
+                       description="Relative increase of the per-hole cutting torque (set means "
+                       "remove the tool-heating pattern), mapped to flank wear on measured points.")
+    w.add_argument("files", nargs="+", type=Path, metavar="FILE")
+    w.add_argument("--measured", default="", metavar="HOLE:UM,...",
+                   help="measured flank wear, e.g. 100:45,1000:150 (hole index: µm)")
+    w.add_argument("--limit-um", type=float, default=300.0, help="wear limit [µm] (300)")
+    w.add_argument("--set-size", type=int, default=6, help="holes per set (6)")
+    w.add_argument("--baseline", type=int, default=30, help="new-tool holes (30)")
+    w.add_argument("--out", type=Path, metavar="DIR", help="write figures and wear.csv here")
+    w.set_defaults(func=_cmd_wear)
+
+    a = sub.add_parser("anomalies", help="replay recordings through an anomaly detector",
+                       description="Teach a detector on the first --learn-s seconds of the "
+                       "recordings (good data), score the rest, list the alarms.")
+    a.add_argument("files", nargs="+", type=Path, metavar="FILE")
+    a.add_argument("--detector", choices=("envelope", "physics", "spectral", "tapping"),
+                   default="envelope")
+    a.add_argument("--learn-s", type=float, default=None,
+                   help="teach-in duration [s] (default: the first third)")
+    a.add_argument("--threshold", type=float, default=0.0, help="alarm above this score (0)")
+    a.add_argument("--out", type=Path, metavar="DIR", help="write the score figure here")
+    a.set_defaults(func=_cmd_anomalies)
+
+
+def _read(files: list[Path]) -> list[Any]:
+    from cnctwin.iotools import read_recording
+
+    for f in files:
+        if not f.exists():
+            raise ConfigError(f"file not found: {f}")
+    return [read_recording(f) for f in files]
+
+
+def _holes(files: list[Path], set_size: int = 6) -> tuple[list[Any], pd.DataFrame]:
+    from cnctwin.usecases.holes import hole_records
+
+    recs = _read(files)
+    holes = hole_records(recs, set_size=set_size)
+    if holes.empty:
+        raise ConfigError("no hole found (no plunge of the Z axis in the recordings)")
+    return recs, holes
+
+
+def _table(df: pd.DataFrame, title: str) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=title)
+    for c in df.columns:
+        t.add_column(str(c), justify="right")
+    for row in df.itertuples(index=False):
+        t.add_row(*[_fmt(v) for v in row])
+    Console(width=200).print(t)
+
+
+def _fmt(v: object) -> str:
+    if isinstance(v, float | np.floating):
+        if not math.isfinite(float(v)):
+            return "-"
+        return f"{float(v):.4g}"
+    if v is None or v is pd.NA:
+        return "-"
+    return str(v)
+
+
+def _cmd_holes(args: argparse.Namespace) -> int:
+    from cnctwin.usecases.figures import plot_deviation_paths, plot_hole_means
+    from cnctwin.usecases.quality import deviation_paths
+
+    recs, holes = _holes(args.files)
+    _table(holes[[c for c in _HOLE_SHOW if c in holes.columns]],
+           f"{len(holes)} holes ({holes.attrs.get('thrust_source', '')})")
+    for issue in holes.attrs.get("issues", []):
+        print(f"note: {issue}")
+    if args.out:
+        holes.to_csv(args.out, index=False)
+        print(f"wrote {args.out}")
+    if args.figures:
+        args.figures.mkdir(parents=True, exist_ok=True)
+        plot_hole_means(holes).savefig(args.figures / "hole_means.png", dpi=110)
+        paths = pd.concat([deviation_paths(r, holes) for r in recs], ignore_index=True)
+        if not paths.empty:
+            for view in ("3d", "xz", "yz", "xy"):
+                plot_deviation_paths(paths, view=view).savefig(
+                    args.figures / f"deviation_{view}.png", dpi=110)
+        print(f"wrote figures to {args.figures}")
+    return 0
+
+
+def _parse_measured(text: str) -> dict[int, float]:
+    out: dict[int, float] = {}
+    for item in filter(None, (s.strip() for s in text.split(","))):
+        h, sep, um = item.partition(":")
+        try:
+            if not sep:
+                raise ValueError
+            out[int(h)] = float(um)
+        except ValueError:
+            raise ConfigError(f"--measured {item!r}: expected HOLE:UM, e.g. 1000:150") from None
+    return out
+
+
+def _cmd_wear(args: argparse.Namespace) -> int:
+    from cnctwin.usecases.figures import plot_hole_means
+    from cnctwin.usecases.wear import (
+        WearEstimator,
+        forecast_remaining_life,
+        relative_increase,
+        set_pattern,
+    )
+
+    measured = _parse_measured(args.measured)
+    _, holes = _holes(args.files, set_size=args.set_size)
+    torque = holes["torque_mean_nm"].to_numpy(dtype=np.float64)
+    baseline = min(args.baseline, len(holes))
+    inc = relative_increase(torque, baseline=baseline, set_size=args.set_size)
+    out = holes[["hole", "set", "current_mean_a", "torque_mean_nm"]].copy()
+    out["relative_increase"] = inc
+    summary: list[tuple[str, str]] = [("holes", str(len(holes))),
+                                      ("torque increase at the last hole", f"{inc[-1]:.2%}")]
+    if len(holes) >= args.set_size:
+        pat = set_pattern(torque, set_size=args.set_size)
+        summary.append(("last vs first hole of a set", f"{pat.rise_last_vs_first:+.2%}"))
+    wear = None
+    if measured:
+        bad = [h for h in measured if h not in set(holes["hole"])]
+        if bad:
+            raise ConfigError(f"--measured holes {bad} are not in the record "
+                              f"(holes 0..{int(holes['hole'].max())})")
+        idx = holes.reset_index().set_index("hole").loc[list(measured), "index"].to_numpy()
+        est = WearEstimator().fit(inc[idx], list(measured.values()))
+        wear = est.predict(inc)
+        out["wear_um"] = wear
+        summary += [("wear per unit increase", f"{est.slope_um:.4g} ± {est.slope_std_um:.2g} µm"),
+                    ("estimated wear at the last hole", f"{wear[-1]:.1f} µm")]
+        try:
+            fc = forecast_remaining_life(holes["hole"], wear, limit_um=args.limit_um)
+            summary.append((f"holes to {args.limit_um:g} µm",
+                            f"{fc.remaining:.0f} (90 %: {fc.remaining_low:.0f}-"
+                            f"{fc.remaining_high:.0f})"))
+        except Exception as exc:  # not enough points for a trend
+            summary.append(("forecast", f"not possible: {exc}"))
+    else:
+        summary.append(("wear [µm]", "give --measured HOLE:UM,... to calibrate"))
+    _table(pd.DataFrame(summary, columns=["quantity", "value"]), "tool wear")
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
+        out.to_csv(args.out / "wear.csv", index=False)
+        plot_hole_means(holes, wear_um=wear).savefig(args.out / "wear_trend.png", dpi=110)
+        print(f"wrote {args.out / 'wear.csv'} and wear_trend.png")
+    return 0
+
+
+def _stream(recs: list[Any], holes: pd.DataFrame, detector: str) -> pd.DataFrame:
+    from cnctwin.analysis.segments import spindle_speed_rpm
+    from cnctwin.spindle import SpindleModel
+
+    model = SpindleModel.from_parameters("thesis_spinner_840dsl")
+    origin = pd.Timestamp(recs[0].hf["time"].iloc[0])
+    parts = []
+    for r in recs:
+        t = ((pd.DatetimeIndex(r.hf["time"]) - origin) / pd.Timedelta(seconds=1)).to_numpy()
+        cur = r.hf["CURRENT|SP1"].to_numpy(dtype=np.float64)
+        speed, _ = spindle_speed_rpm(r, "SP1")
+        d = pd.DataFrame({"time_s": t, "current_a": cur, "speed_rpm": speed,
+                          "predicted_current_a": model.predict_current_a(0.0, speed)})
+        if r.has("DES_POS|Z1") and r.has("ENC_POS|Z1"):
+            d["z_error_mm"] = (r.hf["DES_POS|Z1"] - r.hf["ENC_POS|Z1"]).to_numpy()
+        else:
+            d["z_error_mm"] = 0.0
+        prog = np.full(len(d), np.nan)
+        hole = np.full(len(d), -1)
+        cyc = r.cycles
+        for _, h in holes.iterrows():
+            lo = int(np.searchsorted(cyc, int(h["cut_start_cycle"])))
+            hi = int(np.searchsorted(cyc, int(h["cut_end_cycle"]), side="right"))
+            if hi > lo:
+                prog[lo:hi] = np.linspace(0.0, 1.0, hi - lo)
+                hole[lo:hi] = int(h["hole"])
+        d["progress"] = prog
+        d["hole"] = hole
+        parts.append(d)
+    data = pd.concat(parts, ignore_index=True)
+    if detector in ("envelope", "physics", "spectral"):
+        data = data[data["hole"] >= 0].reset_index(drop=True)
+    return data
+
+
+def _cmd_anomalies(args: argparse.Namespace) -> int:
+    from cnctwin.usecases.anomaly import (
+        EnvelopeDetector,
+        PhysicsResidualDetector,
+        SpectralDetector,
+        TappingDetector,
+        backtest,
+    )
+    from cnctwin.usecases.figures import plot_anomaly_scores
+
+    recs = _read(args.files)
+    if args.detector == "tapping":
+        from cnctwin.usecases.holes import hole_records
+
+        try:
+            holes = hole_records(recs)
+        except Exception:
+            holes = pd.DataFrame(columns=["hole", "cut_start_cycle", "cut_end_cycle"])
+    else:
+        _, holes = _holes(args.files)
+    data = _stream(recs, holes, args.detector)
+    if data.empty:
+        raise ConfigError("nothing to score: no cutting samples in the recordings")
+    det = {
+        "envelope": lambda: EnvelopeDetector(),
+        "physics": lambda: PhysicsResidualDetector(),
+        "spectral": lambda: SpectralDetector(fs_hz=recs[0].fs_hz),
+        "tapping": lambda: TappingDetector(),
+    }[args.detector]()
+    t = data["time_s"].to_numpy()
+    learn_s = args.learn_s if args.learn_s is not None else t[0] + (t[-1] - t[0]) / 3.0
+    res = backtest(det, data, time_s=t, learn_until_s=learn_s, threshold=args.threshold)
+    hole_at = np.interp(res.alarms_s, t, data["hole"].to_numpy()) if res.alarms_s else []
+    alarms = pd.DataFrame({"alarm_s": res.alarms_s,
+                           "hole": np.round(np.asarray(hole_at)).astype(int)})
+    _table(pd.DataFrame([("detector", repr(det)), ("teach-in until [s]", f"{learn_s:.1f}"),
+                         ("scored [s]", f"{res.monitored_s:.1f}"),
+                         ("alarms", str(len(res.alarms_s)))], columns=["quantity", "value"]),
+           "anomaly replay")
+    if len(alarms):
+        _table(alarms, "alarms")
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
+        d2 = det.clone()
+        learn = t < learn_s
+        d2.learn_many(data.loc[learn])
+        scores = d2.score_many(data.loc[~learn])
+        plot_anomaly_scores(t[~learn], scores, threshold=args.threshold,
+                            alarms_s=res.alarms_s, title=f"{args.detector} detector").savefig(
+            args.out / f"anomalies_{args.detector}.png", dpi=110)
+        alarms.to_csv(args.out / "alarms.csv", index=False)
+        print(f"wrote {args.out / 'alarms.csv'} and the score figure")
+    return 0

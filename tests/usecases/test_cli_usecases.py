@@ -1,0 +1,82 @@
+"""``cnctwin holes|wear|anomalies`` through the entry point on simulated recordings."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import pytest
+
+from cnctwin.cli import main
+from cnctwin.sim.scenarios import tool_wear_run
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
+    out = tmp_path_factory.mktemp("cliwear")
+    res = tool_wear_run(out, n_holes=12, seed=7, fmt="c4a")
+    return out, res.truth
+
+
+def _files(d: Path) -> list[str]:
+    # the wear run is one recording (Parquet chunk directory); older layouts: one file per set
+    files = sorted(d.glob("wear_set_*.json")) or sorted(d.glob("tool_wear_run*.json"))
+    return [str(p) for p in files]
+
+
+def test_holes(run_dir, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:  # type: ignore[no-untyped-def]
+    d, _ = run_dir
+    csv = tmp_path / "holes.csv"
+    figs = tmp_path / "figs"
+    assert main(["holes", *_files(d), "--out", str(csv), "--figures", str(figs)]) == 0
+    out = capsys.readouterr().out
+    assert "12 holes" in out
+    h = pd.read_csv(csv)
+    assert list(h["hole"]) == list(range(12))
+    assert list(h["set"]) == [0] * 6 + [1] * 6
+    assert sorted(p.name for p in figs.iterdir()) == [
+        "deviation_3d.png", "deviation_xy.png", "deviation_xz.png", "deviation_yz.png",
+        "hole_means.png"]
+
+
+def test_wear(run_dir, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:  # type: ignore[no-untyped-def]
+    d, truth = run_dir
+    w = {r["hole"]: r["wear_um"] for r in truth["holes"]}
+    measured = ",".join(f"{h}:{w[h]:.2f}" for h in (5, 11))
+    code = main(["wear", *_files(d), "--measured", measured, "--baseline", "6",
+                 "--out", str(tmp_path)])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "estimated wear at the last hole" in out
+    t = pd.read_csv(tmp_path / "wear.csv")
+    assert "wear_um" in t.columns and len(t) == 12
+    assert (tmp_path / "wear_trend.png").exists()
+    assert main(["wear", *_files(d)]) == 0
+    assert "--measured" in capsys.readouterr().out
+
+
+def test_wear_bad_measured(run_dir, capsys: pytest.CaptureFixture[str]) -> None:  # type: ignore[no-untyped-def]
+    d, _ = run_dir
+    assert main(["wear", *_files(d), "--measured", "5=40"]) == 2
+    assert "HOLE:UM" in capsys.readouterr().err
+    assert main(["wear", *_files(d), "--measured", "500:40"]) == 2
+    assert "not in the record" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("detector", ["envelope", "physics", "spectral"])
+def test_anomalies(run_dir, tmp_path: Path, detector: str,  # type: ignore[no-untyped-def]
+                   capsys: pytest.CaptureFixture[str]) -> None:
+    d, _ = run_dir
+    code = main(["anomalies", *_files(d), "--detector", detector, "--learn-s", "40",
+                 "--out", str(tmp_path)])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "anomaly replay" in out
+    assert (tmp_path / f"anomalies_{detector}.png").exists()
+    assert (tmp_path / "alarms.csv").exists()
+
+
+def test_missing_file(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["holes", "/nonexistent/x.json"]) == 2
+    assert "not found" in capsys.readouterr().err
