@@ -47,7 +47,7 @@ _UNIT_TO_PER_S: dict[str, float] = {
 
 def informative_segments(
     x: FloatArray, segs: list[slice], *, pad: int = 120, warm: int = 60,
-    max_samples: int = 6000,
+    max_samples: int = 3000,
 ) -> tuple[list[slice], NDArray[np.bool_]]:
     """Windows around the changes of the velocity of ``x`` (where filters reveal themselves).
 
@@ -400,14 +400,22 @@ def delay(x: FloatArray, cycles: float) -> FloatArray:
 
 
 def pt1(x: FloatArray, time_cycles: float) -> FloatArray:
-    """First-order lag with time constant ``time_cycles`` (exact for a step held per cycle).
+    """First-order lag, backward Euler: ``y[k] = y[k-1] + (x[k] - y[k-1]) / (T + 1)``.
 
-    ``y[k] = a y[k-1] + (1-a) x[k]``, ``a = exp(-1/T)``; starts in steady state at ``x[0]``.
+    The steady ramp lag is exactly ``T`` cycles (the NC's PT1 filters are of this kind, so ``T``
+    is the equivalent time); starts in steady state at ``x[0]``.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        Samples.
+    time_cycles : float
+        Time constant T [cycles].
     """
-    if time_cycles < 1e-6:
+    if time_cycles < 1e-9:
         return x.copy()
-    a = math.exp(-1.0 / time_cycles)
-    y, _ = sps.lfilter([1.0 - a], [1.0, -a], x, zi=[a * x[0]])
+    p = time_cycles / (time_cycles + 1.0)
+    y, _ = sps.lfilter([1.0 - p], [1.0, -p], x, zi=[p * x[0]])
     return np.asarray(y, dtype=np.float64)
 
 

@@ -150,9 +150,11 @@ class SetpointChainFit:
     jerk_damping : float
         PT2 damping [-] (PT2 only).
     delay_s : float
-        Pure delay after the jerk filter (dynamic response adaptation, dead-time balancing) [s].
-    pt1_s : float
-        First-order lag after the jerk filter (PT1 balancing / adaptation) [s].
+        Pure delay after the jerk filter (dynamic response adaptation, dead-time balancing;
+        the sum of the two delays of the model) [s].
+    pt1_s, pt1b_s : float
+        Two first-order lags after the jerk filter (PT1 dynamic response adaptation, PT1
+        balancing; ramp lag = time constant) [s], ``pt1_s >= pt1b_s``.
     rms : float
         Residual RMS of CTRL_POS [position unit].
     rms_by_model : dict
@@ -167,6 +169,7 @@ class SetpointChainFit:
     jerk_damping: float
     delay_s: float
     pt1_s: float
+    pt1b_s: float
     rms: float
     rms_by_model: dict[str, float]
     stderr: dict[str, float]
@@ -189,11 +192,16 @@ _N_JERK = {"none": 0, "moving_average": 1, "double_moving_average": 2, "pt2": 2}
 
 def apply_setpoint_chain(
     des: FloatArray, *, jerk_type: str, jerk_cycles: tuple[float, ...], delay_cycles: float,
-    pt1_cycles: float,
+    pt1_cycles: float, pt1b_cycles: float = 0.0, delay2_cycles: float = 0.0,
 ) -> FloatArray:
-    """Jerk filter -> delay -> PT1 on one contiguous setpoint run (parameters in cycles)."""
+    """Jerk filter -> delay -> delay -> PT1 -> PT1 on one contiguous setpoint run (cycles).
+
+    Two interpolated delays in series (dead-time adaptation and dead-time balancing, FFW modes
+    3/4) are not one delay of their sum: each linear interpolation smooths a little.
+    """
     y = _jerk(des, jerk_type, np.asarray(jerk_cycles, dtype=float))
-    return pt1(delay(y, max(delay_cycles, 0.0)), max(pt1_cycles, 0.0))
+    y = delay(delay(y, max(delay_cycles, 0.0)), max(delay2_cycles, 0.0))
+    return pt1(pt1(y, max(pt1_cycles, 0.0)), max(pt1b_cycles, 0.0))
 
 
 def fit_setpoint_chain(
@@ -224,8 +232,11 @@ def fit_setpoint_chain(
 
     Notes
     -----
-    Moving average: ``y(t) = 1/T int_{t-T}^t x``; double MA: two in series (MD32410,
-    MD32411); PT2: ``1/(T^2 s^2 + 2 D T s + 1)`` (MD32402 types 2, 4, 1; B2 function manual).
+    Moving average over T/cycle samples (fractional allowed); double MA: two in series
+    (MD32410, MD32411); PT2: ``1/(T^2 s^2 + 2 D T s + 1)`` (MD32402 types 2, 4, 1; B2
+    function manual). After the jerk filter: a delay and two backward-Euler PT1s (dynamic
+    response adaptation MD32910 and feedforward balancing MD32810, PT1 in FFW modes 0-2, dead
+    time in modes 3/4, K3 function manual).
     Standard errors from the SSE Hessian, inflated for AR(1) residual correlation.
     """
     full_mask = _segment_mask(des.size, segs, 5) & np.isfinite(des) & np.isfinite(ctrl)
@@ -247,7 +258,8 @@ def fit_setpoint_chain(
             if s.stop - s.start < 3:
                 continue
             out[s] = apply_setpoint_chain(des[s], jerk_type=jt, jerk_cycles=tuple(p[:nj]),
-                                          delay_cycles=p[nj], pt1_cycles=p[nj + 1])
+                                          delay_cycles=p[nj], pt1_cycles=p[nj + 1],
+                                          pt1b_cycles=p[nj + 2], delay2_cycles=p[nj + 3])
         return out
 
     def cost_of(jt: str) -> Callable[[FloatArray], float]:
@@ -259,35 +271,68 @@ def fit_setpoint_chain(
 
         return cost
 
+    def resid_of(jt: str) -> Callable[[FloatArray], FloatArray]:
+        def resid(p: FloatArray) -> FloatArray:
+            return np.asarray((ctrl - model_of(jt, p))[mask], dtype=np.float64)
+
+        return resid
+
     fits: dict[str, tuple[FloatArray, float]] = {}
+    jacs: dict[str, FloatArray] = {}
     for jt in models:
         cost = cost_of(jt)
         wins = [float(w) for w in range(1, 21)] + [24.0, 28.0, 32.0]
-        taus = [0.0, 1.0, 2.0, 3.0, 4.0]
-        t1s = [0.0, 1.0, 2.0, 4.0]
+        taus = [0.0, 1.0, 2.0, 4.0]
+        t1s = [0.0, 1.0, 2.5]
+        t2s = [0.0, 1.5]
         if jt == "none":
-            grid = [np.array([tau, t1]) for tau in [*taus, 6.0, 8.0]
-                    for t1 in [*t1s, 8.0, 12.0]]
+            grid = [np.array([tau, t1, t2]) for tau in [*taus, 6.0, 8.0]
+                    for t1 in [*t1s, 8.0, 12.0] for t2 in t2s]
         elif jt == "moving_average":
-            grid = [np.array([w, tau, t1]) for w in wins for tau in taus for t1 in t1s]
+            grid = [np.array([w, tau, t1, t2]) for w in wins for tau in taus for t1 in t1s
+                    for t2 in t2s]
         elif jt == "double_moving_average":
-            grid = [np.array([w, w2, tau, t1]) for w in wins[:16]
-                    for w2 in sorted({max(round(w / 2), 2.0), w}) for tau in taus for t1 in t1s]
+            grid = [np.array([w, w2, tau, t1, t2]) for w in wins[:12]
+                    for w2 in sorted({max(round(w / 2), 2.0), w}) for tau in taus[::2]
+                    for t1 in t1s for t2 in t2s]
         else:
-            grid = [np.array([t, dmp, tau, t1]) for t in np.arange(0.5, 12.5, 0.5)
-                    for dmp in (0.5, 0.7, 1.0) for tau in taus for t1 in t1s]
+            grid = [np.array([t, dmp, tau, t1, t2]) for t in np.arange(0.5, 12.5, 1.0)
+                    for dmp in (0.7, 1.0) for tau in taus[::2] for t1 in t1s for t2 in t2s]
+        grid = [np.append(g, 0.0) for g in grid]  # second delay starts at 0
         costs = np.array([cost(g) for g in grid])
+        resid_fn = resid_of(jt)
         best_fit: tuple[FloatArray, float] | None = None
-        for i in np.argsort(costs)[:3]:
-            res = optimize.minimize(cost, grid[int(i)], method="Nelder-Mead",
-                                    options={"xatol": 1e-4, "fatol": 0.0, "maxiter": 400,
-                                             "adaptive": True})
-            if best_fit is None or res.fun < best_fit[1]:
-                best_fit = (np.asarray(res.x, dtype=float), float(res.fun))
+        # starts: the best grid points with distinct first parameters (jerk windows), so a
+        # wrong window is not refined three times
+        starts: list[int] = []
+        seen: set[float] = set()
+        for i in np.argsort(costs):
+            key = float(grid[int(i)][0])
+            if key in seen:
+                continue
+            seen.add(key)
+            starts.append(int(i))
+            if len(starts) == 3:
+                break
+        for i in starts:
+            x0 = np.maximum(grid[int(i)], 1e-6)
+            lb = np.zeros(x0.size)
+            if jt == "pt2":
+                lb[1] = 0.06
+                x0[1] = max(x0[1], 0.07)
+            ls = optimize.least_squares(resid_fn, x0, bounds=(lb, np.full(x0.size, np.inf)),
+                                        method="trf", diff_step=1e-5, xtol=1e-12, ftol=1e-14,
+                                        gtol=1e-14, max_nfev=200)
+            c = float(2.0 * ls.cost)
+            if best_fit is None or c < best_fit[1]:
+                best_fit = (np.asarray(ls.x, dtype=float), c)
+                jacs[jt] = np.asarray(ls.jac, dtype=float)
         assert best_fit is not None
         res2 = optimize.minimize(cost, best_fit[0], method="Nelder-Mead",
-                                 options={"xatol": 1e-5, "fatol": 0.0, "maxiter": 200,
+                                 options={"xatol": 1e-6, "fatol": 0.0, "maxiter": 150,
                                           "adaptive": True})
+        if res2.fun > best_fit[1]:
+            res2.x, res2.fun = best_fit[0], best_fit[1]
         fits[jt] = (np.asarray(res2.x, dtype=float), float(res2.fun))
     n = int(mask.sum())
     rms_by = {jt: math.sqrt(f[1] / n) for jt, f in fits.items()}
@@ -298,13 +343,19 @@ def fit_setpoint_chain(
     nj = _N_JERK[chosen]
     cost = cost_of(chosen)
     resid = (ctrl - model_of(chosen, p))[mask]
-    steps = np.maximum(np.abs(p) * 1e-3, 1e-3)
-    se = _hessian_se(cost, p, n, _ess_inflation(resid), steps) if fits[chosen][1] > 0 else (
-        np.zeros(p.size))
+    # standard errors from the Jacobian at the solution: cov = s^2 (J'J)^-1, inflated for
+    # residual autocorrelation
+    jac = jacs.get(chosen)
+    if jac is None or jac.shape[1] != p.size:
+        se = np.full(p.size, np.nan)
+    else:
+        s2 = fits[chosen][1] / max(n - p.size, 1)
+        cov = np.linalg.pinv(jac.T @ jac) * s2 * _ess_inflation(resid)
+        se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     dt = cycle_time_s
     names = {"none": [], "moving_average": ["jerk_time_s"], "pt2": ["jerk_time_s", "jerk_damping"],
              "double_moving_average": ["jerk_time_s", "jerk_time2_s"]}[chosen]
-    names = [*names, "delay_s", "pt1_s"]
+    names = [*names, "delay_s", "pt1_s", "pt1b_s", "delay2_s"]
     stderr = {nm: float(se[i]) * (1.0 if nm == "jerk_damping" else dt)
               for i, nm in enumerate(names)}
     jt1 = float(p[0]) * dt if nj >= 1 else 0.0
@@ -314,8 +365,14 @@ def fit_setpoint_chain(
         jt1, jt2 = jt2, jt1
         se1, se2 = stderr["jerk_time_s"], stderr["jerk_time2_s"]
         stderr["jerk_time_s"], stderr["jerk_time2_s"] = se2, se1
-    return SetpointChainFit(chosen, jt1, jt2, dmp, max(float(p[nj]), 0.0) * dt,
-                            max(float(p[nj + 1]), 0.0) * dt, rms_by[chosen], rms_by, stderr)
+    t_a, t_b = max(float(p[nj + 1]), 0.0) * dt, max(float(p[nj + 2]), 0.0) * dt
+    if t_b > t_a:  # the two PT1s commute: larger first
+        t_a, t_b = t_b, t_a
+        stderr["pt1_s"], stderr["pt1b_s"] = stderr["pt1b_s"], stderr["pt1_s"]
+    d_tot = (max(float(p[nj]), 0.0) + max(float(p[nj + 3]), 0.0)) * dt
+    stderr["delay_s"] = math.hypot(stderr["delay_s"], stderr.pop("delay2_s"))
+    return SetpointChainFit(chosen, jt1, jt2, dmp, d_tot, t_a, t_b, rms_by[chosen], rms_by,
+                            stderr)
 
 
 # ---------------------------------------------------------------------------- speed loop
@@ -512,7 +569,9 @@ def fit_position_controller(
         mad = float(np.median(np.abs(r[m] - np.median(r[m])))) * 1.4826
         if mad == 0:
             break
-        new = m & (np.abs(r) <= 6 * mad + 1e-12)
+        # keep everything within 6 MAD or 1e-4 of the command RMS (a perfect fit has a tiny MAD)
+        floor = 1e-4 * float(np.sqrt(np.mean(cmd[m] ** 2)))
+        new = m & (np.abs(r) <= max(6 * mad, floor) + 1e-12)
         if new.sum() == m.sum() or new.sum() < 20:
             break
         m = new
@@ -816,10 +875,10 @@ def identify_axis(
         try:
             chain = fit_setpoint_chain(des, ctrl, segs, cycle_time_s=dt, models=jerk_models)
         except IdentificationError as exc:
-            for nm in ("jerk_time_s", "setpoint_delay_s", "setpoint_pt1_s"):
+            for nm in ("jerk_time_s", "setpoint_delay_s", "setpoint_pt1_s", "setpoint_pt1b_s"):
                 NI[nm] = str(exc)
     else:
-        for nm in ("jerk_time_s", "setpoint_delay_s", "setpoint_pt1_s"):
+        for nm in ("jerk_time_s", "setpoint_delay_s", "setpoint_pt1_s", "setpoint_pt1b_s"):
             NI[nm] = ("CTRL_POS is not recorded: the jerk filter, dynamic response adaptation "
                       "and balancing act between DES_POS and CTRL_POS and cannot be separated "
                       "from the loop lag without it")
@@ -838,6 +897,7 @@ def identify_axis(
                                          meth)
         P["setpoint_delay_s"] = Estimate(chain.delay_s, chain.stderr["delay_s"], "s", meth)
         P["setpoint_pt1_s"] = Estimate(chain.pt1_s, chain.stderr["pt1_s"], "s", meth)
+        P["setpoint_pt1b_s"] = Estimate(chain.pt1b_s, chain.stderr["pt1b_s"], "s", meth)
 
     # --- velocity units
     f_ffw = 1.0
@@ -910,6 +970,7 @@ def identify_axis(
     # --- Kv and weight
     g = sl.gain if sl is not None else 1.0
     se_g = sl.stderr["gain"] if sl is not None else 0.0
+    se_g = se_g if math.isfinite(se_g) else 0.0
     if has_cmd:
         cmd_s = sig["CMD_SPEED"] * f_cmd
         ffw_reg = sig["VEL_FFW"] * f_ffw if has_ffw else None
@@ -944,6 +1005,11 @@ def identify_axis(
                         f" j=1..{fir_cycles} (absorbs the unrecorded setpoint filter); Kv = g*a; "
                         f"block bootstrap SE")
             P["kv_1_s"] = Estimate(kv, se_kv, "1/s", meth)
+            if abs(g - 1.0) > 0.03:
+                P["kv_command_1_s"] = Estimate(
+                    pc.a, pc.se_a, "1/s",
+                    "Kv in the units of CMD_SPEED (the NC's MD32200 if CMD_SPEED is a load "
+                    "velocity): regression coefficient a before the speed-gain correction")
             P["kv_m_min_mm"] = Estimate(kv / KV_PER_S_PER_M_MIN_MM, se_kv / KV_PER_S_PER_M_MIN_MM,
                                         "(m/min)/mm", meth)
             if pc.n_excluded:

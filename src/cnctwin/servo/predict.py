@@ -76,8 +76,8 @@ class AxisLoopModel:
         Jerk-filter model (``cnctwin.servo.JERK_FILTER_TYPES``).
     jerk_time_s, jerk_time2_s, jerk_damping : float
         Jerk-filter parameters [s], [s], [-].
-    setpoint_delay_s, setpoint_pt1_s : float
-        Delay and PT1 after the jerk filter (dynamic response adaptation, balancing) [s].
+    setpoint_delay_s, setpoint_pt1_s, setpoint_pt1b_s : float
+        Delay and two PT1s after the jerk filter (dynamic response adaptation, balancing) [s].
     ffw_delay_s : float
         Delay of the feedforward behind d(jerk-filtered DES_POS)/dt [s].
     speed_delay_cycles, speed_time_cycles : float
@@ -94,6 +94,7 @@ class AxisLoopModel:
     jerk_damping: float = 1.0
     setpoint_delay_s: float = 0.0
     setpoint_pt1_s: float = 0.0
+    setpoint_pt1b_s: float = 0.0
     ffw_delay_s: float = 0.0
     speed_delay_cycles: float = 1.0
     speed_time_cycles: float = 0.0
@@ -120,7 +121,8 @@ class AxisLoopModel:
             kw.update(jerk_type=sp.jerk_type, jerk_time_s=sp.jerk_time_s,
                       jerk_time2_s=sp.jerk_time2_s,
                       jerk_damping=sp.jerk_damping if sp.jerk_damping == sp.jerk_damping else 1.0,
-                      setpoint_delay_s=sp.delay_s, setpoint_pt1_s=sp.pt1_s)
+                      setpoint_delay_s=sp.delay_s, setpoint_pt1_s=sp.pt1_s,
+                      setpoint_pt1b_s=sp.pt1b_s)
         elif "apparent_ffw_weight" in ident.params:
             # no CTRL_POS: assume w = 1 (MD32610 default) and put the lag into a pure delay
             wa = ident.params["apparent_ffw_weight"].value
@@ -160,14 +162,15 @@ class AxisLoopModel:
         Discrete loop per cycle ``k``: ``u[k] = Kv (ctrl[k] - enc[k]) + w vff[k]``;
         ``z = PT1(delay(u))``; ``enc[k+1] = enc[k] + dt (z[k] + z[k+1]) / 2``, with the same
         filter discretizations used in identification (linear interpolation for fractional
-        delays, ``z[k] = a z[k-1] + (1-a) x[k]``, ``a = exp(-1/T)``).
+        delays, ``z[k] = a z[k-1] + (1-a) x[k]``, ``a = T/(T+1)``).
         """
         des = np.asarray(des_pos_mm, dtype=np.float64)
         n = des.size
         dt = self.cycle_time_s
         ctrl = apply_setpoint_chain(
             des, jerk_type=self.jerk_type, jerk_cycles=tuple(self._jerk_params()),
-            delay_cycles=self.setpoint_delay_s / dt, pt1_cycles=self.setpoint_pt1_s / dt)
+            delay_cycles=self.setpoint_delay_s / dt, pt1_cycles=self.setpoint_pt1_s / dt,
+            pt1b_cycles=self.setpoint_pt1b_s / dt)
         jf = _jerk(des, self.jerk_type, self._jerk_params())
         v_jf = derivative(jf, [slice(0, n)], dt, kind="central")
         v_jf[0] = 0.0
@@ -175,7 +178,8 @@ class AxisLoopModel:
             v_jf[-1] = v_jf[-2]
         vff = self.ffw_weight * delay(v_jf, self.ffw_delay_s / dt)
         tau = max(self.speed_delay_cycles, 0.0)
-        a = math.exp(-1.0 / self.speed_time_cycles) if self.speed_time_cycles > 1e-6 else 0.0
+        t_sp = self.speed_time_cycles
+        a = t_sp / (t_sp + 1.0) if t_sp > 1e-9 else 0.0  # backward-Euler pole (as pt1())
         enc = np.empty(n)
         u = np.zeros(n)
         z = np.zeros(n)
