@@ -397,7 +397,7 @@ def print_validation(ctx: DemoContext) -> None:
               "thesis: err", "sim: I [A]", "sim: dyn [Nm]", "thesis method",
               "err", "improved", "err"):
         tab.add_column(c, justify="right" if c != "cut" else "left")
-    for k, row in th.iterrows():
+    for k, (_, row) in enumerate(th.iterrows()):
         lab = str(row["recording"])
         ref = THESIS_TABLE_4_1[
             (THESIS_TABLE_4_1["speed_rpm"] == float(lab.split()[-4]))
