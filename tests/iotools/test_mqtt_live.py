@@ -4,11 +4,12 @@ The broker is started by the fixture (``mosquitto -p PORT``, mosquitto 2.x liste
 only without a config file) and stopped by its pid. Databus payloads are hand-written
 (same as in ``test_databus.py``; documented structure, data-formats.md section 2); the Data
 Recorder message is the real Capture4Analysis file (3818 HF rows, first CYCLE 5558098,
-78 block events; counted by hand with python json).
+78 block events; counted by hand with python json), sent as JSON and as a zip archive.
 """
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import shutil
@@ -16,6 +17,7 @@ import socket
 import subprocess
 import threading
 import time
+import zipfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -115,7 +117,8 @@ def test_databus_metadata_then_data(broker: int) -> None:
         pub.disconnect()
 
 
-def test_data_recorder_stream(broker: int, c4a_file: Path) -> None:
+@pytest.mark.parametrize("zipped", [False, True])
+def test_data_recorder_stream(broker: int, c4a_file: Path, zipped: bool) -> None:
     pytest.importorskip("cnctwin.iotools.capture4analysis")
     topic = "MACHINE_A/tapping/M8-40"
     ready = threading.Event()
@@ -130,7 +133,13 @@ def test_data_recorder_stream(broker: int, c4a_file: Path) -> None:
     assert ready.wait(10), "Data Recorder subscription not acknowledged within 10 s"
     pub = _publisher(broker)
     try:
-        pub.publish(topic, c4a_file.read_bytes(), qos=1).wait_for_publish(timeout=10)
+        payload = c4a_file.read_bytes()
+        if zipped:  # the Data Recorder may send each message as a zip archive
+            buf = io.BytesIO()
+            with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+                zf.writestr("job.json", payload)
+            payload = buf.getvalue()
+        pub.publish(topic, payload, qos=1).wait_for_publish(timeout=10)
         th.join(timeout=30)
     finally:
         pub.loop_stop()

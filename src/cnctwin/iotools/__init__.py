@@ -1,7 +1,8 @@
 """Readers and writers, one module per source (pvlib.iotools style).
 
 ``read_recording(path)`` detects the format; format-specific readers are importable by name
-(``read_capture4analysis``, ...). Every reader returns a :class:`~cnctwin.recording.Recording`.
+(``read_capture4analysis``, ...); ``parse_capture4analysis(data)`` parses a document held in
+memory. Every reader returns a :class:`~cnctwin.recording.Recording`.
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ from __future__ import annotations
 from cnctwin.iotools._detect import read_recording
 from cnctwin.iotools.capture4analysis import (
     Capture4AnalysisWriter,
+    parse_capture4analysis,
     read_capture4analysis,
     write_capture4analysis,
 )
@@ -34,6 +36,7 @@ from cnctwin.iotools.umich import read_umich, read_umich_dataset, read_umich_lab
 __all__ = ["read_recording"]
 __all__ += [  # Capture4Analysis / Data Recorder, Parquet and CSV export
     "Capture4AnalysisWriter",
+    "parse_capture4analysis",
     "read_capture4analysis",
     "read_parquet",
     "write_capture4analysis",

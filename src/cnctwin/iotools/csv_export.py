@@ -81,7 +81,7 @@ def write_csv(
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
-    from cnctwin.iotools.capture4analysis import _axis_numbers
+    from cnctwin.iotools.capture4analysis_writer import _axis_numbers
 
     stem = csv_stem(path)
     stem.parent.mkdir(parents=True, exist_ok=True)

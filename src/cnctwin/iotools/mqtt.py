@@ -7,7 +7,7 @@
   metadata message (reconfiguration) replaces the id map and adds newly announced topics.
 * :func:`subscribe_data_recorder`: SINUMERIK Data Recorder MQTT streaming, where every message
   is one complete Capture4Analysis JSON document (or a zip of it); each message becomes one
-  recording through :func:`cnctwin.iotools.capture4analysis.read_capture4analysis`.
+  recording through :func:`cnctwin.iotools.capture4analysis.parse_capture4analysis`, in memory.
 
 The paho network loop runs in its own thread and only puts ``(topic, payload)`` into a bounded
 queue; decoding happens in the caller's thread. Messages lost because the queue was full are
@@ -17,9 +17,7 @@ counted in the next recording's ``meta.issues``. Every wait is bounded by a time
 from __future__ import annotations
 
 import contextlib
-import os
 import queue
-import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -379,23 +377,13 @@ def parse_data_recorder_message(payload: bytes, *, topic: str = "<mqtt>",
                                 salvage: bool = False) -> Recording:
     """One SINUMERIK Data Recorder MQTT message (Capture4Analysis JSON, or a zip) -> Recording.
 
-    ``cnctwin.iotools.capture4analysis`` reads files only, so the payload is written to a
-    temporary file and read with ``read_capture4analysis(..., follow_chain=False)``.
+    The payload is parsed in memory with
+    :func:`cnctwin.iotools.capture4analysis.parse_capture4analysis` (no temporary file); errors
+    and ``meta.issues`` name the topic, and ``meta.source_files`` is ``[topic]``.
     """
-    from cnctwin.iotools.capture4analysis import read_capture4analysis
+    from cnctwin.iotools.capture4analysis import parse_capture4analysis
 
-    suffix = ".zip" if payload[:4] == b"PK\x03\x04" else ".json"
-    fd, name = tempfile.mkstemp(prefix="cnctwin-dr-", suffix=suffix)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(payload)
-        rec = read_capture4analysis(name, salvage=salvage, follow_chain=False)
-    except FormatError as exc:
-        raise FormatError(exc.message, path=topic, position=exc.position,
-                          field=exc.field) from None
-    finally:
-        with contextlib.suppress(OSError):
-            os.unlink(name)
+    rec = parse_capture4analysis(payload, source=topic, salvage=salvage)
     rec.meta.source_files = [topic]
     return rec
 
