@@ -26,3 +26,16 @@ __all__ = [
     "relative_increase",
     "set_pattern",
 ]
+
+from cnctwin.usecases.holes import hole_record, hole_records
+from cnctwin.usecases.quality import deviation_paths, hole_quality
+from cnctwin.usecases.thermal import ToolThermalModel, merge_camera
+
+__all__ += [
+    "ToolThermalModel",
+    "deviation_paths",
+    "hole_quality",
+    "hole_record",
+    "hole_records",
+    "merge_camera",
+]
