@@ -7,7 +7,10 @@ Address), ``Payload[*].HFData`` rows -> ``_hfdata.csv``, ``Payload[*].HFBlockEve
 ``_hfblockevent.csv``. Facts of the real file checked by hand (python json): 3818 HF rows of 61
 values (CYCLE + 60 signals), first CYCLE 5558098, last 5565774, one counter jump of 3860 ticks
 from 5559591 to 5563451 (3859 missing cycles), 78 HFBlockEvents, first at HFProbeCounter
-5558103 with GCode "M17".
+5558103 with GCode "M17"; the HFBlockEvent at HFProbeCounter 5564831 has GCode "D0" followed
+by 15 blanks; at HFProbeCounter 5564709 the payload holds three HFCallEvents (Path
+"/_SEQUENCE", "/_WP_DIR/_P3", "/_TOOLCHANGE") and then the HFBlockEvent "D0"; 26 counters carry
+both kinds, each as calls followed by one block.
 """
 
 from __future__ import annotations
@@ -17,11 +20,12 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from cnctwin.exceptions import FormatError
-from cnctwin.iotools import read_flat_csv
-from cnctwin.recording import Recording
+from cnctwin.iotools import read_capture4analysis, read_flat_csv, write_csv
+from cnctwin.recording import CYCLE_COUNTER_MODULUS, EVENT_COLUMNS, Recording
 
 # KIT header.csv long names (data-formats.md 1.3); codes not listed keep the code as name
 LONG_NAMES = {
@@ -153,3 +157,65 @@ def test_no_cycle_column(tmp_path: Path) -> None:
     p.write_text("A,B\n1,2\n", encoding="utf-8")
     with pytest.raises(FormatError, match="no CYCLE"):
         read_flat_csv(p)
+
+
+# ---------------------------------------------------------------------------- cells and order
+def test_gcode_text_kept_verbatim(rec: Recording) -> None:
+    """The stdlib-written CSV holds the real G-code "D0" + 15 blanks; the reader keeps them."""
+    ev = rec.events.set_index("cycle")
+    assert ev.loc[5564831, "gcode"] == "D0" + " " * 15
+    assert ev.loc[5558103, "gcode"] == "M17"
+
+
+def test_number_cells_stripped_text_cells_verbatim(tmp_path: Path) -> None:
+    p = _tiny(tmp_path, ["10,1.0,2.0", "12,1.5,2.5"])
+    Path(str(p).replace("_hfdata", "_hfblockevent")).write_text(
+        "HFProbeCounter,Channel,GCode,IpoGC\n 12 , 1 , G1 X1 ,\n", encoding="utf-8")
+    ev = read_flat_csv(p).events
+    assert ev["cycle"].tolist() == [12] and ev["channel"].tolist() == [1]
+    assert ev["gcode"].tolist() == [" G1 X1 "]
+    assert ev["ipo_gcode"].tolist() == [None]
+
+
+@pytest.fixture(scope="module")
+def c4a_real(c4a_file: Path) -> Recording:
+    return read_capture4analysis(c4a_file)
+
+
+def test_event_order_matches_c4a_reader(c4a_real: Recording, tmp_path: Path) -> None:
+    """Block and call events at one cycle come out in the C4A reader's order (calls first)."""
+    files = write_csv(c4a_real, tmp_path / "T01")
+    assert {"hfblockevent", "hfcallevent"} <= set(files)
+    back = read_flat_csv(files["hfdata"])
+    both = back.events.groupby("cycle")["kind"].agg(lambda k: set(k) == {"block", "call"})
+    assert int(both.sum()) == 26
+    at = back.events[back.events["cycle"] == 5564709]
+    assert at["kind"].tolist() == ["call", "call", "call", "block"]
+    assert at["path"].tolist()[:3] == ["/_SEQUENCE", "/_WP_DIR/_P3", "/_TOOLCHANGE"]
+    assert at["gcode"].tolist()[3] == "D0"
+    # the whole frame, row order and extra columns (ipo_read_error, la_buf) included
+    pd.testing.assert_frame_equal(back.events, c4a_real.events)
+
+
+def test_event_counters_unwrapped_next_to_hf(tmp_path: Path) -> None:
+    """Events on both sides of a 2**31 wrap stay on the HF counter (written modulo 2**31)."""
+    start = CYCLE_COUNTER_MODULUS - 150
+    cycles = np.arange(start, start + 400)
+    src = Recording.from_arrays(cycles, {"LOAD|X1": np.zeros(cycles.size)},
+                                axis_map={1: "X1"})
+    src.events = pd.DataFrame({
+        "cycle": pd.Series([start + 5, start + 5, start + 300], dtype="int64"),
+        "kind": pd.Series(["call", "block", "block"], dtype="object"),
+        "channel": pd.array([1, 1, 1], dtype="Int64"),
+        "seek_offset": pd.array([4, 4, 9], dtype="Int64"),
+        "gcode": pd.Series([None, "G1 X1", "M30"], dtype="object"),
+        "ipo_gcode": pd.Series([None, "G1", "G0"], dtype="object"),
+        "selected_tool": pd.array([None, 3, 3], dtype="Int64"),
+        "active_tool": pd.array([None, 3, 3], dtype="Int64"),
+        "call_stack_level": pd.array([2, None, None], dtype="Int64"),
+        "path": pd.Series(["/_N_SUB", None, None], dtype="object"),
+    })[list(EVENT_COLUMNS)]
+    back = read_flat_csv(write_csv(src, tmp_path / "W")["hfdata"])
+    assert back.meta.wraps == 1
+    np.testing.assert_array_equal(back.cycles, cycles)
+    pd.testing.assert_frame_equal(back.events[list(EVENT_COLUMNS)], src.events)

@@ -14,6 +14,21 @@ each trial as three CSV files:
 An optional ``<TRIAL>_hfcallevent.csv`` (``HFProbeCounter,Channel,SeekOffset,CallStackLevel,
 Path``) becomes call events. The files carry no wall-clock time: unless a ``time`` column is
 present in ``hfdata`` (ISO 8601 UTC), times start at the Unix epoch (noted in ``meta.issues``).
+
+Cells and events, so that a trial reads like the Capture4Analysis recording it came from:
+
+* Number cells are stripped of blanks; text cells (``GCode``, ``IpoGC``, ``Path``) are kept
+  verbatim (the real G-code ``"D0"`` + 15 blanks keeps its blanks). An empty cell (or ``null``,
+  ``None``) is a missing value. ``ipoReadError`` and ``laBuf`` become ``ipo_read_error`` and
+  ``la_buf``; other event columns are kept as extra text columns (listed in ``meta.issues``).
+* Event order: stable by cycle, then the source order, as in
+  :func:`~cnctwin.iotools.capture4analysis.read_capture4analysis`. The source order within a
+  file is its row order; between the two files it is the Data Recorder's write order, in
+  which the ``HFCallEvent`` entries of a cycle precede the ``HFBlockEvent`` they lead to (in the
+  real recording 26 cycles carry both kinds, each as calls then one block). So at one cycle the
+  rows of ``_hfcallevent.csv`` come before those of ``_hfblockevent.csv``.
+* Event counters are unwrapped in file order and placed next to the HF counter (nearest
+  period of 2**31), so events after a wrap-around stay after it.
 """
 
 from __future__ import annotations
@@ -25,9 +40,17 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from numpy.typing import NDArray
 
 from cnctwin.exceptions import FormatError
-from cnctwin.recording import EVENT_COLUMNS, Recording, RecordingMeta, find_gaps, unwrap_cycles
+from cnctwin.recording import (
+    CYCLE_COUNTER_MODULUS,
+    EVENT_COLUMNS,
+    Recording,
+    RecordingMeta,
+    find_gaps,
+    unwrap_cycles,
+)
 from cnctwin.signals import DEFAULT_AXIS_MAP
 
 __all__ = ["FLAT_CSV_SUFFIXES", "flat_csv_paths", "read_flat_csv"]
@@ -39,13 +62,19 @@ FLAT_CSV_SUFFIXES: tuple[str, ...] = ("_hfdata.csv", "_header.csv", "_hfblockeve
 _BLOCK_COLS = {
     "HFProbeCounter": "cycle", "Channel": "channel", "SeekOffset": "seek_offset",
     "SelectedTool": "selected_tool", "ActiveTool": "active_tool", "GCode": "gcode",
-    "IpoGC": "ipo_gcode",
+    "IpoGC": "ipo_gcode", "ipoReadError": "ipo_read_error", "laBuf": "la_buf",
 }
 _CALL_COLS = {
     "HFProbeCounter": "cycle", "Channel": "channel", "SeekOffset": "seek_offset",
     "CallStackLevel": "call_stack_level", "Path": "path",
 }
-_INT_EVENT_COLS = ("channel", "seek_offset", "selected_tool", "active_tool", "call_stack_level")
+_INT_EVENT_COLS = ("channel", "seek_offset", "selected_tool", "active_tool", "call_stack_level",
+                   "la_buf")
+_EXTRA_EVENT_COLS = ("ipo_read_error", "la_buf")
+"""Block-event fields kept beside :data:`~cnctwin.recording.EVENT_COLUMNS` (as the
+Capture4Analysis reader does)."""
+_NULL_CELLS = ("", "null", "None")
+"""Cells read as a missing value (compared verbatim, so ``" "`` is text)."""
 
 
 def flat_csv_paths(path: str | PathLike[str]) -> dict[str, Path]:
@@ -154,23 +183,39 @@ def _read_header(path: Path, issues: list[str]) -> tuple[dict[int, str], dict[st
     return axis_map, name_to_addr, entries
 
 
+def _unwrap_near(raw: NDArray[np.int64], ref: int | None) -> NDArray[np.int64]:
+    """Unwrap counters in file order, then shift by whole periods to lie nearest ``ref``."""
+    cycles, _ = unwrap_cycles(raw)
+    if ref is None or cycles.size == 0:
+        return cycles
+    return cycles + CYCLE_COUNTER_MODULUS * round((ref - int(cycles[0])) / CYCLE_COUNTER_MODULUS)
+
+
 def _events(path: Path, kind: str, colmap: dict[str, str], *, salvage: bool,
-            issues: list[str]) -> tuple[pd.DataFrame, bool]:
+            issues: list[str], ref_cycle: int | None) -> tuple[pd.DataFrame, bool]:
+    """Events of one file in file order; counters unwrapped next to ``ref_cycle``.
+
+    Number cells are stripped; text cells (``GCode``, ``IpoGC``, ``Path``) are kept verbatim
+    (G-code may end in blanks: ``"D0"`` + 15 blanks in the real recording).
+    """
     header, rows, partial = _read_rows(path, salvage=salvage, issues=issues)
     if "HFProbeCounter" not in header:
         raise FormatError("event file needs an 'HFProbeCounter' column", path=str(path),
                           position="line 1", field="HFProbeCounter")
-    data: dict[str, list[Any]] = {c: [] for c in EVENT_COLUMNS}
     idx = {h: i for i, h in enumerate(header)}
+    unknown = [h for h in header if h not in colmap]
+    columns = (*EVENT_COLUMNS, *_EXTRA_EVENT_COLS, *unknown)
+    data: dict[str, list[Any]] = {c: [] for c in columns}
     for line, row in rows:
-        rec: dict[str, Any] = {c: None for c in EVENT_COLUMNS}
+        rec: dict[str, Any] = dict.fromkeys(columns)
         rec["kind"] = kind
         for src, dst in colmap.items():
             if src not in idx:
                 continue
-            cell = row[idx[src]].strip()
+            raw = row[idx[src]]
             if dst == "cycle" or dst in _INT_EVENT_COLS:
-                if cell in ("", "null", "None"):
+                cell = raw.strip()
+                if cell in _NULL_CELLS:
                     if dst == "cycle":
                         raise FormatError("empty HFProbeCounter", path=str(path),
                                           position=f"line {line}", field=src)
@@ -181,16 +226,33 @@ def _events(path: Path, kind: str, colmap: dict[str, str], *, salvage: bool,
                     raise FormatError(f"value {cell!r} is not an integer", path=str(path),
                                       position=f"line {line}", field=src) from None
             else:
-                rec[dst] = None if cell in ("", "null", "None") else cell
-        for c in EVENT_COLUMNS:
+                rec[dst] = None if raw in _NULL_CELLS else raw
+        for h in unknown:
+            raw = row[idx[h]]
+            rec[h] = None if raw in _NULL_CELLS else raw
+        for c in columns:
             data[c].append(rec[c])
-    df = pd.DataFrame(data)
-    df["cycle"] = df["cycle"].astype("int64")
-    for c in _INT_EVENT_COLS:
-        df[c] = pd.array(data[c], dtype="Int64")
-    for c in ("kind", "gcode", "ipo_gcode", "path"):
-        df[c] = df[c].astype("object")
-    return df, partial
+    if unknown:
+        issues.append(f"{path.name}: columns not in the event schema kept as extra (text) "
+                      f"columns: {', '.join(unknown)}")
+    frame: dict[str, Any] = {}
+    for c in columns:
+        if c == "cycle":
+            frame[c] = _unwrap_near(np.asarray(data[c], dtype=np.int64), ref_cycle)
+        elif c in _INT_EVENT_COLS:
+            frame[c] = pd.array(data[c], dtype="Int64")
+        else:
+            frame[c] = pd.Series(data[c], dtype="object")
+    return pd.DataFrame(frame), partial
+
+
+def _merge_events(frames: list[pd.DataFrame]) -> pd.DataFrame:
+    """Concatenate event frames in the given order, then sort stably by cycle."""
+    df = pd.concat(frames, ignore_index=True)
+    for c in df.columns:
+        if df[c].dtype == object:  # columns only one file has: None, not NaN, elsewhere
+            df[c] = df[c].astype(object).where(df[c].notna(), None)
+    return df.sort_values("cycle", kind="stable").reset_index(drop=True)
 
 
 def read_flat_csv(
@@ -300,24 +362,20 @@ def read_flat_csv(
     else:
         issues.append("no wall-clock time in the flat CSV: times start at the Unix epoch")
 
-    events = []
-    if files["hfblockevent"].exists():
-        ev, part = _events(files["hfblockevent"], "block", _BLOCK_COLS, salvage=salvage,
-                           issues=issues)
-        events.append(ev)
-        partial |= part
-        sources.append(str(files["hfblockevent"]))
-    if files["hfcallevent"].exists():
-        ev, part = _events(files["hfcallevent"], "call", _CALL_COLS, salvage=salvage,
-                           issues=issues)
-        events.append(ev)
-        partial |= part
-        sources.append(str(files["hfcallevent"]))
+    # at one cycle the Data Recorder writes the call events before the block event they lead
+    # to; the two files lost that interleaving, so calls go first (see the module docstring)
+    ref = int(hf.index[0]) if len(hf) else None
+    by_kind: dict[str, pd.DataFrame] = {}
+    for key, kind, colmap in (("hfblockevent", "block", _BLOCK_COLS),
+                              ("hfcallevent", "call", _CALL_COLS)):
+        if files[key].exists():
+            by_kind[kind], part = _events(files[key], kind, colmap, salvage=salvage,
+                                          issues=issues, ref_cycle=ref)
+            partial |= part
+            sources.append(str(files[key]))
     ev_all = None
-    if events:
-        ev_all = pd.concat(events, ignore_index=True).sort_values("cycle", kind="stable")
-        ev_all["cycle"], _ = unwrap_cycles(ev_all["cycle"].to_numpy())
-        ev_all = ev_all.reset_index(drop=True)
+    if by_kind:
+        ev_all = _merge_events([by_kind[k] for k in ("call", "block") if k in by_kind])
 
     meta = RecordingMeta(
         cycle_time_s=cycle_time_s,
