@@ -65,3 +65,15 @@ def test_forecast_recovers_known_crossing() -> None:
     fc = forecast_remaining_life(idx, wear, limit_um=300.0, window=600)
     assert fc.index_at_limit == pytest.approx(2000, rel=0.03)
     assert fc.remaining_low <= fc.remaining <= fc.remaining_high
+
+
+def test_forecast_interval_handles_draws_that_never_reach_the_limit() -> None:
+    # A nearly flat trend: many bootstrap curves never reach the limit; no warning, inf bound.
+    import warnings
+
+    idx = np.arange(200)
+    wear = 100 + 0.01 * idx + np.random.default_rng(0).normal(0, 2.0, idx.size)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fc = forecast_remaining_life(idx, wear, limit_um=300.0, degree=1)
+    assert fc.remaining_high == np.inf

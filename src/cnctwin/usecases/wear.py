@@ -317,9 +317,11 @@ def forecast_remaining_life(
     for _ in range(n_boot):
         yb = fitted + rng.choice(resid, size=resid.size, replace=True)
         boots.append(_crossing(np.polyfit(x, yb, degree), last, limit_um, horizon) - last)
-    b = np.array(boots)
-    lo, hi = (np.percentile(b, [5, 95]) if np.isfinite(b).any() else (np.inf, np.inf))
-    return LifeForecast(at, at - last, float(lo), float(hi), f"poly{degree}")
+    b = np.sort(np.array(boots))  # inf (never reaches the limit) sorts last
+    # order statistics, not np.percentile: draws that never reach the limit are +inf
+    lo = float(b[int(np.floor(0.05 * (b.size - 1)))])
+    hi = float(b[int(np.ceil(0.95 * (b.size - 1)))])
+    return LifeForecast(at, at - last, lo, hi, f"poly{degree}")
 
 
 def ridge_fit(
