@@ -66,8 +66,10 @@ __all__ = [
     "field_weakening_onset_rpm",
     "find_cuts",
     "fit_friction_stribeck",
+    "friction_energy",
     "ripple_free_means",
     "temperature_coefficient_from_warm_up",
+    "thermal_drift_from_warm_up",
 ]
 
 NDFEB_KT_TEMP_COEFF_PER_K = -0.00105
@@ -348,6 +350,69 @@ def temperature_coefficient_from_warm_up(
     return float(slope / (slope * t_ref + icpt)), float(p["speed_rpm"])
 
 
+def friction_energy(rec: Recording, *, spindle: str = "SP1") -> NDArray[np.float64]:
+    """Cumulative ``|I| |n|`` since the start of the recording [A rpm s].
+
+    Proportional to the friction energy turned into heat in the bearings and rotor at
+    constant speed (``P = Kt I omega``); the scale (``Kt 2 pi / 60``) cancels in
+    :func:`thermal_drift_from_warm_up`.
+    """
+    cur = np.abs(rec.signal(f"CURRENT|{spindle}").to_numpy(dtype=np.float64))
+    speed, _ = spindle_speed_rpm(rec, spindle)
+    p = np.nan_to_num(cur) * np.abs(np.nan_to_num(speed))
+    return np.asarray(np.cumsum(p) / rec.fs_hz, dtype=np.float64)
+
+
+def thermal_drift_from_warm_up(
+    rec: Recording, *, spindle: str = "SP1", block_s: float = 5.0, skip_s: float = 10.0
+) -> float:
+    """Relative air-current change per unit of dissipated friction energy, from a warm-up.
+
+    Parameters
+    ----------
+    rec : Recording
+        Warm-up run from a cold start at constant speed (thesis §4.2).
+    spindle : str
+        Spindle axis.
+    block_s : float, default 5
+        Averaging block [s].
+    skip_s : float, default 10
+        Time skipped after the run-up [s].
+
+    Returns
+    -------
+    float
+        ``gamma`` in ``I = I_cold (1 + gamma E)`` [1/(A rpm s)], ``E`` from
+        :func:`friction_energy`.
+
+    Notes
+    -----
+    In the first minutes of a run the bearings and magnets keep most of the friction heat
+    (their time constant to the stator is several minutes), so their temperature rise, and
+    with it the drop of the friction torque (grease viscosity) and of Kt (magnets), grows with
+    the dissipated energy. The winding temperature the drive reports (r0035) hardly moves in
+    that time, so it cannot correct the air-cut sweep, which heats the rotor by a kelvin or
+    two while it climbs through the linear region and tilts the friction line (slope ~1 %
+    low). The energy is measured in both runs, so the warm-up transfers to the sweep.
+    """
+    e = friction_energy(rec, spindle=spindle)
+    pl = speed_plateaus(rec, spindle=spindle, min_duration_s=4 * block_s)
+    if pl.empty:
+        raise IdentificationError("no constant-speed stretch in the warm-up run")
+    p = pl.iloc[int(np.argmax(pl["n_cycles"].to_numpy()))]
+    lo = int(np.searchsorted(rec.cycles, int(p["start_cycle"]))) + round(skip_s * rec.fs_hz)
+    hi = int(np.searchsorted(rec.cycles, int(p["end_cycle"]), side="right"))
+    i = np.abs(rec.signal(f"CURRENT|{spindle}").to_numpy(dtype=np.float64))[lo:hi]
+    blk = max(1, round(block_s * rec.fs_hz))
+    nb = i.size // blk
+    if nb < 4:
+        raise IdentificationError("the warm-up is too short for the thermal drift (< 4 blocks)")
+    ib = np.nanmean(i[: nb * blk].reshape(nb, blk), axis=1)
+    eb = np.nanmean(e[lo:lo + nb * blk].reshape(nb, blk), axis=1)
+    slope, icpt = np.polyfit(eb, ib, 1)
+    return float(slope / icpt)
+
+
 # ====================================================================== alignment
 def align_dynamometer(
     rec: Recording,
@@ -559,6 +624,10 @@ class TwinChainResult:
     warm_up_coeff_per_k : float or None
         Relative air-cut current change per kelvin of motor temperature from the warm-up
         run [1/K].
+    thermal_drift_per_energy : float or None
+        Relative air-current change per dissipated friction energy from the warm-up,
+        used to refer the air-cut plateaus to the cold start
+        (:func:`thermal_drift_from_warm_up`) [1/(A rpm s)].
     validation : pandas.DataFrame
         One row per cut of the recordings passed to :meth:`TwinChain.run_model_from_measured`:
         ``recording`` (index), the :class:`CutEstimate` fields, ``error_nm`` and ``error_pct``
@@ -575,6 +644,7 @@ class TwinChainResult:
     spindle_model: SpindleModel
     calibration: CutEstimate
     warm_up_coeff_per_k: float | None = None
+    thermal_drift_per_energy: float | None = None
     validation: pd.DataFrame = field(default_factory=pd.DataFrame)
     cutting_torque: list[pd.Series] = field(default_factory=list)
 
@@ -727,6 +797,12 @@ class TwinChain:
            identified Kt, B, tau_f are referred to the air-cut temperature. The warm-up run
            gives the lumped air-current coefficient (thesis §4.2), used where no local
            baseline exists (continuous cutting).
+        6. **Sweep self-heating** (with ``temperature_compensation`` and a warm-up run). The
+           up-sweep heats bearings and magnets by 1-2 K while it climbs through the linear
+           region; the friction falls and the line tilts (B ~1 % low) while r0035 (winding)
+           barely moves. The warm-up gives the current drop per dissipated friction energy
+           (:func:`thermal_drift_from_warm_up`); each plateau mean is referred back to the
+           cold start with the energy dissipated before it.
         5. **Acceleration term** (``acceleration_term=True``). J is identified from the
            air-cut run-ups (least squares on Eq. 3.1 with the identified friction) and
            ``J dOmega/dt`` is removed from windows where the speed changes.
@@ -805,6 +881,13 @@ class TwinChain:
         if o.ripple_free and poles is not None:
             means = ripple_free_means(stats["speed_rpm"].to_numpy(), segs, poles=poles,
                                       fs_hz=air_cut.fs_hz)
+        gamma = None
+        if o.temperature_compensation and warm_up is not None:
+            gamma = thermal_drift_from_warm_up(warm_up, spindle=sp)
+            e = friction_energy(air_cut, spindle=sp)
+            mid = np.searchsorted(air_cut.cycles,
+                                  ((stats["start_cycle"] + stats["end_cycle"]) // 2).to_numpy())
+            means = means / (1.0 + gamma * e[np.clip(mid, 0, e.size - 1)])
         friction = ffn(stats["speed_rpm"].abs().to_numpy(), means, fit_lo, hi)
         t_ref = self._air_cut_temperature(stats, lo, hi)
         # Kt from the calibration cut (Eq. 4.3)
@@ -834,6 +917,7 @@ class TwinChain:
             spindle_model=self._model(kt_ref, friction, j, t_ref),
             calibration=cal,
             warm_up_coeff_per_k=coeff,
+            thermal_drift_per_energy=gamma,
         )
         return self
 
