@@ -1,8 +1,10 @@
-"""Recording subcommands: ``info``, ``convert`` (and ``ingest``, ``query`` from the store work).
+"""Recording subcommands: ``info`` (describe a recording) and ``convert`` (to Parquet, flattened
+CSV or Capture4Analysis). The store subcommands ``ingest`` and ``query`` live in
+:mod:`cnctwin.cli.store`.
 
 One ``_add_<verb>(sub)`` function registers each subcommand and one ``_cmd_<verb>(args)`` runs
 it; :func:`register` calls the ``_add_*`` functions listed in :data:`_SUBCOMMANDS`. To add a
-subcommand, write the two functions and append the adder to :data:`_SUBCOMMANDS`.
+recording subcommand, write the two functions and append the adder to :data:`_SUBCOMMANDS`.
 """
 
 from __future__ import annotations
@@ -12,7 +14,6 @@ from collections.abc import Callable
 from pathlib import Path
 
 __all__ = ["register"]
-
 
 
 # ---------------------------------------------------------------------- info
@@ -170,7 +171,7 @@ _SUBCOMMANDS: list[Callable[[argparse._SubParsersAction[argparse.ArgumentParser]
     _add_info,
     _add_convert,
 ]
-"""Adders of the subcommands of this module, in help order (append ``_add_ingest`` ...)."""
+"""Adders of the subcommands of this module, in help order."""
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
