@@ -242,18 +242,25 @@ def axis_data(rec: Recording, axis: str) -> AxisData:
         sigs[code] = rec.hf[col].to_numpy(dtype=np.float64)
         units[code] = rec.meta.units.get(col, "")
     if "ENC_POS" not in sigs:
-        for alt in ("ENC1_POS", "ENC2_POS"):
-            if alt in sigs:
-                sigs["ENC_POS"] = sigs[alt]
-                units["ENC_POS"] = units[alt]
-                break
+        # no active-encoder position: take the measuring system the setpoint refers to (the
+        # one closer to DES_POS), e.g. measPos2 for a trace of the 2nd-encoder setpoint
+        alts = [c for c in ("ENC1_POS", "ENC2_POS") if c in sigs]
+        if alts:
+            if "DES_POS" in sigs and len(alts) > 1:
+                alts.sort(key=lambda c: float(np.nanmean((sigs["DES_POS"] - sigs[c]) ** 2)))
+            sigs["ENC_POS"] = sigs[alts[0]]
+            units["ENC_POS"] = units[alts[0]]
+            units["ENC_SOURCE"] = alts[0]
+    kind = axis_kind(axis)
+    if kind == "linear" and units.get("DES_POS") == "deg":
+        kind = "rotary"  # the reader knew better than the name (servo trace 'AX7')
     return AxisData(
         axis=axis,
         cycle_time_s=rec.meta.cycle_time_s,
         segments=segments(rec.cycles),
         signals=sigs,
         units=units,
-        kind=axis_kind(axis),
+        kind=kind,
     )
 
 

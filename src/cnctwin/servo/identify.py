@@ -279,6 +279,11 @@ def fit_setpoint_chain(
 
     fits: dict[str, tuple[FloatArray, float]] = {}
     jacs: dict[str, FloatArray] = {}
+    nj_of = _N_JERK
+    lag = (des - ctrl)[mask]
+    lag_rms = float(np.sqrt(np.mean(lag * lag)))
+    early_stop = 3e-6
+    q_floor = (quantum(des) + quantum(ctrl)) / math.sqrt(12.0)
     for jt in models:
         cost = cost_of(jt)
         wins = [float(w) for w in range(1, 21)] + [24.0, 28.0, 32.0]
@@ -312,21 +317,50 @@ def fit_setpoint_chain(
                 continue
             seen.add(key)
             starts.append(int(i))
-            if len(starts) == 3:
+            if len(starts) == (4 if jt in ("moving_average", "double_moving_average") else 2):
                 break
+        inits = []
         for i in starts:
-            x0 = np.maximum(grid[int(i)], 1e-6)
+            g0 = grid[int(i)].copy()
+            inits.append(g0)
+            if jt != "none":
+                # same total delay split into two halves-cycle interpolations: two fractional
+                # delays in series are a 3-tap kernel no single delay reaches
+                g1 = g0.copy()
+                g1[nj_of[jt]] = max(g0[nj_of[jt]] - 0.5, 0.0)
+                g1[-1] = 0.5
+                inits.append(g1)
+        moving_window = jt in ("moving_average", "double_moving_average")
+
+        def local_fit(
+            x_init: FloatArray, freeze_window: bool, jt: str = jt,
+            resid_fn: Callable[[FloatArray], FloatArray] = resid_fn,
+        ) -> tuple[FloatArray, float, FloatArray]:
+            x0 = np.maximum(x_init, 1e-6)
             lb = np.zeros(x0.size)
+            ub = np.full(x0.size, np.inf)
             if jt == "pt2":
                 lb[1] = 0.06
                 x0[1] = max(x0[1], 0.07)
-            ls = optimize.least_squares(resid_fn, x0, bounds=(lb, np.full(x0.size, np.inf)),
-                                        method="trf", diff_step=1e-5, xtol=1e-12, ftol=1e-14,
-                                        gtol=1e-14, max_nfev=200)
-            c = float(2.0 * ls.cost)
+            if freeze_window:
+                # MA windows are whole cycles on the NC; the window kink at integers stalls a
+                # gradient method, so the window is held first and freed afterwards
+                lb[0], ub[0] = x0[0], x0[0] + 1e-9
+            ls = optimize.least_squares(resid_fn, x0, bounds=(lb, ub), method="trf",
+                                        diff_step=1e-5, xtol=1e-12, ftol=1e-14, gtol=1e-14,
+                                        max_nfev=200)
+            return np.asarray(ls.x, dtype=float), float(2.0 * ls.cost), np.asarray(ls.jac)
+
+        for x_init in inits:
+            xs, c, jac = local_fit(x_init, moving_window)
             if best_fit is None or c < best_fit[1]:
-                best_fit = (np.asarray(ls.x, dtype=float), c)
-                jacs[jt] = np.asarray(ls.jac, dtype=float)
+                best_fit = (xs, c)
+                jacs[jt] = jac
+        if moving_window and best_fit is not None:
+            xs, c, jac = local_fit(best_fit[0], False)
+            if c < best_fit[1]:
+                best_fit = (xs, c)
+                jacs[jt] = jac
         assert best_fit is not None
         res2 = optimize.minimize(cost, best_fit[0], method="Nelder-Mead",
                                  options={"xatol": 1e-6, "fatol": 0.0, "maxiter": 150,
@@ -334,19 +368,43 @@ def fit_setpoint_chain(
         if res2.fun > best_fit[1]:
             res2.x, res2.fun = best_fit[0], best_fit[1]
         fits[jt] = (np.asarray(res2.x, dtype=float), float(res2.fun))
+        # a model that explains the setpoint lag to 3e-6 of its size (or to the quantization of
+        # the signals) is kept; more complex
+        # models are not tried (they could only be chosen if clearly better)
+        if math.sqrt(fits[jt][1] / max(int(mask.sum()), 1)) < max(early_stop * lag_rms,
+                                                                   2.0 * q_floor):
+            break
     n = int(mask.sum())
     rms_by = {jt: math.sqrt(f[1] / n) for jt, f in fits.items()}
     best = min(rms_by.values())
     floor = max(best * (1.0 + rel_tol), 1e-9)
-    chosen = next(jt for jt in models if rms_by[jt] <= floor)
+    chosen = next(jt for jt in models if jt in rms_by and rms_by[jt] <= floor)
     p = fits[chosen][0]
+    if chosen == "double_moving_average" and min(p[0], p[1]) <= 1.0 + 1e-6:
+        # a window of <= 1 cycle is no filter: this is a single moving average
+        if "moving_average" in fits and rms_by["moving_average"] <= rms_by[chosen] * (
+                1.0 + rel_tol):
+            chosen = "moving_average"
+            p = fits[chosen][0]
+        else:
+            chosen = "moving_average"
+            p = np.delete(p, 1 if p[1] <= p[0] else 0)
+            fits[chosen] = (p, fits["double_moving_average"][1])
+            rms_by[chosen] = rms_by["double_moving_average"]
     nj = _N_JERK[chosen]
     cost = cost_of(chosen)
     resid = (ctrl - model_of(chosen, p))[mask]
     # standard errors from the Jacobian at the solution: cov = s^2 (J'J)^-1, inflated for
     # residual autocorrelation
-    jac = jacs.get(chosen)
-    if jac is None or jac.shape[1] != p.size:
+    rf = resid_of(chosen)
+    jac = np.empty((int(mask.sum()), p.size))
+    for i in range(p.size):
+        h = max(abs(p[i]) * 1e-6, 1e-7)
+        e = np.zeros(p.size)
+        e[i] = h
+        lo = np.maximum(p - e, 0.0)
+        jac[:, i] = (rf(p + e) - rf(lo)) / (p[i] + h - lo[i])
+    if not np.isfinite(jac).all():
         se = np.full(p.size, np.nan)
     else:
         s2 = fits[chosen][1] / max(n - p.size, 1)
@@ -846,7 +904,7 @@ def identify_axis(
                 f"ENC_POS (it has: {', '.join(sorted(d.signals)) or 'nothing for this axis'})")
     dt = d.cycle_time_s
     sig = d.signals
-    pos_u = "mm" if d.kind == "linear" else "deg"
+    pos_u = d.units.get("DES_POS") or ("mm" if d.kind == "linear" else "deg")
     ident = AxisIdentification(axis=axis, cycle_time_s=dt, position_unit=pos_u)
     P = ident.params
     NI = ident.not_identified
@@ -968,6 +1026,7 @@ def identify_axis(
                                     "lag of VEL_FFW behind d(jerk-filtered DES_POS)/dt")
 
     # --- Kv and weight
+    cmd_is_setpoint = False
     g = sl.gain if sl is not None else 1.0
     se_g = sl.stderr["gain"] if sl is not None else 0.0
     se_g = se_g if math.isfinite(se_g) else 0.0
@@ -977,26 +1036,51 @@ def identify_axis(
         if ffw_reg is not None and not np.any(np.abs(np.nan_to_num(ffw_reg)) > 0):
             ffw_reg = None
         use_diff = diff if diff is not None else des - enc
-        extra = None
-        if diff is None:
-            # CTRL_POS unknown: DES - CTRL is a linear filter of DES; absorb it with setpoint
-            # differences DES[k] - DES[k-j], j = 1..fir_cycles (VEL_FFW is such a combination
-            # too, so it is left out; Kv stays identified, the weight does not)
-            extra = _setpoint_differences(des, segs, fir_cycles)
-            ffw_reg_fit = None
-        else:
-            ffw_reg_fit = ffw_reg
+        fir_used = False
+        pc: PositionControllerFit | None = None
         try:
-            pc = fit_position_controller(cmd_s, use_diff, ffw_reg_fit, block_cycles=block_cycles,
-                                         n_bootstrap=n_bootstrap, seed=seed, extra=extra)
+            if diff is None:
+                # first order: DES - CTRL ~ T v is absorbed by the feedforward regressor
+                v_reg = ffw_reg if ffw_reg is not None else v_des
+                pc = fit_position_controller(cmd_s, use_diff, v_reg, block_cycles=block_cycles,
+                                             n_bootstrap=n_bootstrap, seed=seed)
+                if pc.a > 3.0 * max(pc.se_a, 0.0) and pc.a > 0.0:
+                    # DES - CTRL is a linear filter of DES: absorb it exactly with setpoint
+                    # differences DES[k] - DES[k-j], j = 1..fir_cycles (VEL_FFW is such a
+                    # combination too and is left out). Kept only if well conditioned.
+                    pf = fit_position_controller(
+                        cmd_s, use_diff, None, block_cycles=block_cycles,
+                        n_bootstrap=n_bootstrap, seed=seed,
+                        extra=_setpoint_differences(des, segs, fir_cycles))
+                    if pf.a > 0.0 and pf.se_a < 0.02 * pf.a:
+                        pc, fir_used = pf, True
+                    else:
+                        ident.notes.append(
+                            f"Kv|{axis}: the setpoint-difference regression is ill conditioned "
+                            f"(a = {pf.a:.4g} +- {pf.se_a:.2g}); the first-order regression on "
+                            f"the following error and the feedforward is used, Kv is "
+                            f"approximate (the setpoint lag is absorbed only as T*v).")
+            else:
+                pc = fit_position_controller(cmd_s, use_diff, ffw_reg, block_cycles=block_cycles,
+                                             n_bootstrap=n_bootstrap, seed=seed)
         except IdentificationError as exc:
             NI["kv_1_s"] = str(exc)
+            pc = None
+        if pc is not None and not (pc.a > 3.0 * max(pc.se_a, 0.0) and pc.a > 0.0):
+            NI["kv_1_s"] = (
+                f"CMD_SPEED|{axis} does not follow a P law on the controller difference "
+                f"(coefficient {pc.a:.3g} +- {pc.se_a:.2g} 1/s): it is a setpoint velocity "
+                f"(e.g. the servo trace's velocity setpoint at the controller input), a "
+                f"speed-controlled spindle, or its units are inconsistent")
+            NI["ffw_weight"] = NI["kv_1_s"]
+            cmd_is_setpoint = True
             pc = None
         if pc is not None:
             ident.controller = pc
             kv = g * pc.a
             se_kv = abs(kv) * math.hypot(pc.se_a / pc.a if pc.a else 0.0, se_g / g if g else 0.0)
-            if diff is not None:
+            if diff is not None or not fir_used:
+                diff_name = diff_name or "DES_POS-ENC_POS"
                 meth = (f"regression CMD_SPEED = a*({diff_name})"
                         f"{' + c*VEL_FFW' if ffw_reg is not None else ''}; Kv = g*a, "
                         f"g = speed gain; block bootstrap SE")
@@ -1016,19 +1100,18 @@ def identify_axis(
                 ident.notes.append(
                     f"{pc.n_excluded} of {pc.n_used + pc.n_excluded} samples left out of the Kv "
                     f"regression as outliers (> 6 MAD: speed-controlled spindle, saturation).")
-            if ffw_reg is not None:
+            if diff is None:
+                NI["ffw_weight"] = (
+                    "CTRL_POS/CTRL_DIFF2 not recorded: the regression on the following error "
+                    "gives w - Kv*T_setpoint, the weight and the setpoint lag cannot be "
+                    "separated")
+            elif ffw_reg is not None:
                 w = g * pc.c * k_ffw
                 se_w = abs(w) * math.hypot(pc.se_c / pc.c if pc.c else 0.0,
                                            se_g / g if g else 0.0)
-                if diff is not None:
-                    P["ffw_weight"] = Estimate(w, se_w, "-",
-                                               "g*c*k from the CMD_SPEED regression (k = "
-                                               "VEL_FFW/setpoint velocity)")
-                else:
-                    NI["ffw_weight"] = (
-                        "CTRL_POS/CTRL_DIFF2 not recorded: the regression on the following error "
-                        "gives w - Kv*T_setpoint, the weight and the setpoint lag cannot be "
-                        "separated")
+                P["ffw_weight"] = Estimate(w, se_w, "-",
+                                           "g*c*k from the CMD_SPEED regression (k = "
+                                           "VEL_FFW/setpoint velocity)")
             elif diff is not None and ctrl is not None:
                 # no VEL_FFW recorded: use the setpoint velocity as FFW regressor
                 v_ctrl = derivative(ctrl, segs, dt, kind="central")
@@ -1066,18 +1149,30 @@ def identify_axis(
         NI.setdefault("ffw_weight", "CMD_SPEED is not recorded")
     if "kv_1_s" in NI:
         NI.setdefault("kv_m_min_mm", NI["kv_1_s"])
+    if cmd_is_setpoint and sl is not None:
+        # CMD -> actual speed is then the whole position loop, not the speed loop
+        for nm in ("speed_gain", "speed_loop_time_s", "speed_loop_delay_s",
+                   "speed_loop_equiv_time_s"):
+            P.pop(nm, None)
+        NI["speed_loop_equiv_time_s"] = ("CMD_SPEED is a setpoint velocity here; its response "
+                                         "is the whole position loop, not the speed loop")
+        ident.speed_loop = None
 
     # --- steady-state lag: following error per velocity on steady runs (always identifiable)
     v_steady = np.where(np.abs(v_act_c - v_des) <= 0.01 * np.abs(v_des), v_act_c, np.nan)
     runs_ss = constant_velocity_runs(v_steady, segs, rel_tol=0.01)
     if len(runs_ss) >= 1:
         fe_all = des - enc
+        fe_src = "DES_POS - ENC_POS"
+        if d.has("FOLLOWING_ERROR"):
+            fe_all = sig["FOLLOWING_ERROR"]  # recorded per servo cycle: better than held ENC
+            fe_src = "recorded FOLLOWING_ERROR"
         lag_i = np.array([np.nanmean(fe_all[r]) / np.nanmean(v_act_c[r]) for r in runs_ss])
         lag = float(np.median(lag_i))
         se_lag = (float(np.std(lag_i, ddof=1) / math.sqrt(lag_i.size)) if lag_i.size > 1
                   else float("nan"))
         P["lag_time_s"] = Estimate(
-            lag, se_lag, "s", f"steady following error / velocity on {lag_i.size} runs "
+            lag, se_lag, "s", f"steady {fe_src} / velocity on {lag_i.size} runs "
             f"(= (1-w)/Kv + setpoint lag; 1/Kv with FFW off)")
         if "kv_1_s" in P and "ffw_weight" not in P and has_ffw:
             kv_v = P["kv_1_s"].value
@@ -1138,6 +1233,9 @@ def identify_axis(
             NI["reversal_error"] = "no velocity reversal in the recording"
     else:
         NI["reversal_error"] = "CONT_DEV is not recorded"
+    if "ENC_SOURCE" in d.units:
+        ident.notes.append(f"no ENC_POS|{axis}: {d.units['ENC_SOURCE']}|{axis} (the measuring "
+                           f"system closer to DES_POS) stands in.")
     q = quantum(enc)
     if q > 0:
         ident.notes.append(f"ENC_POS|{axis} is quantized in steps of {q:.3g} {pos_u}.")

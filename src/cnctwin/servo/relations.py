@@ -258,7 +258,7 @@ def check_relations(rec: Recording, axis: str, *, atol: float = 0.0) -> Relation
     """
     d = axis_data(rec, axis)
     dt = d.cycle_time_s
-    pos_unit = "mm" if d.kind == "linear" else "deg"
+    pos_unit = d.units.get("DES_POS") or ("mm" if d.kind == "linear" else "deg")
     out: dict[str, Relation] = {}
     sig = d.signals
     have_enc = d.has("ENC_POS")
@@ -283,7 +283,7 @@ def check_relations(rec: Recording, axis: str, *, atol: float = 0.0) -> Relation
         tol = max(atol, quantum(rec_fe) + quantum(sig["DES_POS"]) + quantum(sig["ENC_POS"]))
         out["following_error"] = _relation(
             "following_error", eq, rec_fe - fe, rec_fe, tol, pos_unit,
-            {"best_lag_cycles": lag},
+            {"best_lag_cycles": lag, "encoder": d.units.get("ENC_SOURCE", "ENC_POS")},
         )
 
     # 2. controller difference

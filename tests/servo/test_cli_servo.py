@@ -1,0 +1,29 @@
+"""``cnctwin servo`` through the entry point (cnctwin.cli.main)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from cnctwin.cli import main
+
+from ..conftest import C4A_FILE
+
+
+def test_cli_servo_on_real_c4a(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["servo", str(C4A_FILE), "--axis", "Y1", "--axis", "X1", "--out",
+                 str(tmp_path), "--bootstrap", "20"])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "kv_m_min_mm" in out
+    assert "not identified" in out and "CTRL_POS" in out
+    assert "behaves as mm/s" in out
+    assert (tmp_path / "tool_path_Y1_X1.png").stat().st_size > 10_000
+    assert (tmp_path / "errors_Y1.png").exists()
+
+
+def test_cli_servo_unknown_axis(capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["servo", str(C4A_FILE), "--axis", "Q9"])
+    assert code == 2
+    assert "Q9" in capsys.readouterr().err
