@@ -627,8 +627,8 @@ def fit_position_controller(
         mad = float(np.median(np.abs(r[m] - np.median(r[m])))) * 1.4826
         if mad == 0:
             break
-        # keep everything within 6 MAD or 1e-4 of the command RMS (a perfect fit has a tiny MAD)
-        floor = 1e-4 * float(np.sqrt(np.mean(cmd[m] ** 2)))
+        # keep everything within 6 MAD or 1e-3 of the command RMS (a perfect fit has a tiny MAD)
+        floor = 1e-3 * float(np.sqrt(np.mean(cmd[m] ** 2)))
         new = m & (np.abs(r) <= max(6 * mad, floor) + 1e-12)
         if new.sum() == m.sum() or new.sum() < 20:
             break
@@ -1065,6 +1065,26 @@ def identify_axis(
                                              n_bootstrap=n_bootstrap, seed=seed)
         except IdentificationError as exc:
             NI["kv_1_s"] = str(exc)
+            pc = None
+        if pc is not None:
+            cm = np.isfinite(cmd_s) & np.isfinite(use_diff)
+            contribution = abs(pc.a) * float(np.std(use_diff[cm])) / max(
+                float(np.std(cmd_s[cm])), 1e-300)
+            if contribution < 1e-3:
+                NI["kv_1_s"] = (
+                    f"CMD_SPEED|{axis} carries no position-controller correction (the following "
+                    f"error explains {contribution:.1e} of its spread): it is a setpoint velocity "
+                    f"(e.g. the servo trace's velocity setpoint at the controller input)")
+                NI["ffw_weight"] = NI["kv_1_s"]
+                cmd_is_setpoint = True
+                pc = None
+        if pc is not None and pc.n_excluded > pc.n_used:
+            NI["kv_1_s"] = (
+                f"the P law CMD_SPEED = Kv*e + c*FFW holds on only {pc.n_used} of "
+                f"{pc.n_used + pc.n_excluded} samples of {axis} (spindle in speed control, "
+                f"modulo positions or inconsistent units); Kv is not reported")
+            NI["ffw_weight"] = NI["kv_1_s"]
+            cmd_is_setpoint = True
             pc = None
         if pc is not None and not (pc.a > 3.0 * max(pc.se_a, 0.0) and pc.a > 0.0):
             NI["kv_1_s"] = (
