@@ -28,7 +28,7 @@ def trace() -> Recording:
 def test_c4a_vel_ffw_is_per_second_not_per_minute(c4a: Recording, axis: str) -> None:
     # data-formats.md §1.3 (Siemens): VEL_FFW in mm/s (deg/s); the catalog declares mm/min
     # (rpm). The file says per second: VEL_FFW / (d(DES_POS)/dt in unit/s) = 1.000.
-    d = axis_data(c4a: Recording, axis)
+    d = axis_data(c4a, axis)
     v = derivative(d.signals["DES_POS"], d.segments, d.cycle_time_s, kind="backward")
     vu = detect_velocity_unit(d.signals["VEL_FFW"], v, declared=d.units["VEL_FFW"], kind=d.kind)
     assert vu.ratio == pytest.approx(1.0, abs=2e-3)
@@ -37,7 +37,7 @@ def test_c4a_vel_ffw_is_per_second_not_per_minute(c4a: Recording, axis: str) -> 
 
 
 def test_c4a_relations_and_contour_model(c4a: Recording) -> None:
-    rep = check_relations(c4a: Recording, "X1")
+    rep = check_relations(c4a, "X1")
     assert not rep["ctrl_diff2"].checkable and "CTRL_POS|X1" in rep["ctrl_diff2"].reason
     cd = rep["contour_deviation"]
     # CONT_DEV = ENC_model - ENC with the NC model ~ 7.7 ms delay + 0.56 ms PT1 of DES_POS;
@@ -50,7 +50,7 @@ def test_c4a_relations_and_contour_model(c4a: Recording) -> None:
 
 @pytest.mark.parametrize("axis", ["X1", "Y1"])
 def test_c4a_kv_identified_without_ctrl_pos(c4a: Recording, axis: str) -> None:
-    ident = identify_axis(c4a: Recording, axis, n_bootstrap=40)
+    ident = identify_axis(c4a, axis, n_bootstrap=40)
     # CMD_SPEED is 1.175 x the actual speed at steady velocity on every moving feed axis
     assert ident.value("speed_gain") == pytest.approx(0.851, abs=0.003)
     # Kv in CMD_SPEED units: 33.3 1/s = 2.00 (m/min)/mm, a typical MD32200 value
@@ -67,7 +67,7 @@ def test_c4a_kv_identified_without_ctrl_pos(c4a: Recording, axis: str) -> None:
 def test_c4a_spindle_like_axes_not_identified(c4a: Recording, axis: str) -> None:
     # Z1 and B1 turn continuously (4200 and 10098 units/s) although named like feed axes;
     # the P law does not hold there, so Kv is refused with a reason, not invented
-    ident = identify_axis(c4a: Recording, axis, n_bootstrap=20)
+    ident = identify_axis(c4a, axis, n_bootstrap=20)
     assert "kv_1_s" in ident.not_identified
     assert "kv_1_s" not in ident.params
 
