@@ -786,11 +786,12 @@ class AxisIdentification:
         Axis name.
     params : dict
         Parameter name -> :class:`Estimate`. Names: ``kv_1_s``, ``kv_m_min_mm``,
-        ``ffw_weight``, ``apparent_ffw_weight``, ``jerk_time_s``, ``jerk_time2_s``,
-        ``jerk_damping``, ``setpoint_delay_s``, ``setpoint_pt1_s``, ``ffw_delay_s``,
-        ``speed_loop_time_s``, ``speed_loop_delay_s``, ``speed_loop_equiv_time_s``,
-        ``speed_gain``, ``coulomb_<signal>``, ``viscous_<signal>``, ``offset_<signal>``,
-        ``reversal_error``.
+        ``kv_command_1_s`` (Kv in CMD_SPEED units when the speed gain is not 1),
+        ``ffw_weight``, ``apparent_ffw_weight``, ``lag_time_s`` (steady following error per
+        velocity), ``jerk_time_s``, ``jerk_time2_s``, ``jerk_damping``, ``setpoint_delay_s``,
+        ``setpoint_pt1_s``, ``setpoint_pt1b_s``, ``ffw_delay_s``, ``speed_loop_time_s``,
+        ``speed_loop_delay_s``, ``speed_loop_equiv_time_s``, ``speed_gain``,
+        ``coulomb_<signal>``, ``viscous_<signal>``, ``offset_<signal>``, ``reversal_error``.
     ffw_mode : str
         ``"none"``, ``"speed"``, ``"torque"`` or ``"unknown"``.
     jerk_type : str or None
