@@ -14,6 +14,7 @@ they run unchanged on real Capture4Analysis files and servo traces.
 
 from __future__ import annotations
 
+from cnctwin.servo.geometry import CircleResult, ContourErrorResult, circle_test, contour_error
 from cnctwin.servo.identify import (
     JERK_FILTER_TYPES,
     KV_PER_S_PER_M_MIN_MM,
@@ -21,15 +22,31 @@ from cnctwin.servo.identify import (
     Estimate,
     identify_axis,
 )
+from cnctwin.servo.predict import (
+    AxisLoopModel,
+    DriftAlarm,
+    DriftMonitor,
+    Prediction,
+    prediction_residual,
+)
 from cnctwin.servo.relations import Relation, RelationReport, check_relations
 
 __all__ = [
     "JERK_FILTER_TYPES",
     "KV_PER_S_PER_M_MIN_MM",
     "AxisIdentification",
+    "AxisLoopModel",
+    "CircleResult",
+    "ContourErrorResult",
+    "DriftAlarm",
+    "DriftMonitor",
     "Estimate",
+    "Prediction",
     "Relation",
     "RelationReport",
     "check_relations",
+    "circle_test",
+    "contour_error",
     "identify_axis",
+    "prediction_residual",
 ]
