@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -282,7 +283,7 @@ def fit_setpoint_chain(
     nj_of = _N_JERK
     lag = (des - ctrl)[mask]
     lag_rms = float(np.sqrt(np.mean(lag * lag)))
-    early_stop = 3e-6
+    early_stop = 1e-7
     q_floor = (quantum(des) + quantum(ctrl)) / math.sqrt(12.0)
     for jt in models:
         cost = cost_of(jt)
@@ -317,7 +318,7 @@ def fit_setpoint_chain(
                 continue
             seen.add(key)
             starts.append(int(i))
-            if len(starts) == (4 if jt in ("moving_average", "double_moving_average") else 2):
+            if len(starts) == (6 if jt in ("moving_average", "double_moving_average") else 2):
                 break
         inits = []
         for i in starts:
@@ -346,9 +347,12 @@ def fit_setpoint_chain(
                 # MA windows are whole cycles on the NC; the window kink at integers stalls a
                 # gradient method, so the window is held first and freed afterwards
                 lb[0], ub[0] = x0[0], x0[0] + 1e-9
-            ls = optimize.least_squares(resid_fn, x0, bounds=(lb, ub), method="trf",
-                                        diff_step=1e-5, xtol=1e-12, ftol=1e-14, gtol=1e-14,
-                                        max_nfev=200)
+            with warnings.catch_warnings():
+                # scipy casts inf/inf step bounds of the unbounded parameters (harmless)
+                warnings.simplefilter("ignore", RuntimeWarning)
+                ls = optimize.least_squares(resid_fn, x0, bounds=(lb, ub), method="trf",
+                                            diff_step=1e-5, xtol=1e-12, ftol=1e-14,
+                                            gtol=1e-14, max_nfev=200)
             return np.asarray(ls.x, dtype=float), float(2.0 * ls.cost), np.asarray(ls.jac)
 
         for x_init in inits:
@@ -368,7 +372,7 @@ def fit_setpoint_chain(
         if res2.fun > best_fit[1]:
             res2.x, res2.fun = best_fit[0], best_fit[1]
         fits[jt] = (np.asarray(res2.x, dtype=float), float(res2.fun))
-        # a model that explains the setpoint lag to 3e-6 of its size (or to the quantization of
+        # a model that explains the setpoint lag to 1e-7 of its size (or to the quantization of
         # the signals) is kept; more complex
         # models are not tried (they could only be chosen if clearly better)
         if math.sqrt(fits[jt][1] / max(int(mask.sum()), 1)) < max(early_stop * lag_rms,
