@@ -11,16 +11,44 @@ import matplotlib
 
 matplotlib.use("Agg")
 
+import numpy as np
 from matplotlib.figure import Figure
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
-from cnctwin.exceptions import IdentificationError
+from cnctwin.exceptions import ConfigError, IdentificationError
 from cnctwin.recording import Recording
+from cnctwin.servo.geometry import signed_distance_to_polyline
 
 __all__ = ["plot_error_signals", "plot_tool_path"]
 
 
+def _magnified(path: NDArray[np.float64], pts: NDArray[np.float64], magnify: float,
+               deviation: str) -> NDArray[np.float64]:
+    """Points drawn with their deviation from ``path`` magnified."""
+    if deviation == "total":
+        return path + magnify * (pts - path)
+    # normal deviation: nearest vertex of the path plus the magnified signed normal distance
+    good = np.isfinite(path).all(axis=1)
+    p = path[good]
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(p, axis=0), axis=1) > 1e-12])
+    p = p[keep]
+    out = np.full(pts.shape, np.nan)
+    if len(p) < 2:
+        return out
+    dist = signed_distance_to_polyline(pts, p)
+    tang = np.gradient(p, axis=0)
+    tang /= np.maximum(np.linalg.norm(tang, axis=1), 1e-300)[:, None]
+    normal = np.column_stack([-tang[:, 1], tang[:, 0]])  # left of travel
+    ok = np.isfinite(pts).all(axis=1)
+    _, idx = cKDTree(p).query(pts[ok])
+    out[ok] = p[idx] + magnify * dist[ok][:, None] * normal[idx]
+    return out
+
+
 def plot_tool_path(
-    rec: Recording, axes: tuple[str, str] = ("X1", "Y1"), *, magnify: float = 50.0
+    rec: Recording, axes: tuple[str, str] = ("X1", "Y1"), *, magnify: float = 50.0,
+    deviation: str = "normal",
 ) -> Figure:
     """Tool path in the plane of two axes (thesis Fig. 3.2a / 3.3a).
 
@@ -32,6 +60,10 @@ def plot_tool_path(
         Horizontal and vertical axis.
     magnify : float, default 50
         Deviations from DES_POS are drawn ``magnify`` times enlarged [-].
+    deviation : {'normal', 'total'}, default 'normal'
+        ``'normal'``: the signed distance from the DES_POS path (the contour error) is
+        magnified, so the lag along the path does not smear corners; ``'total'``: the whole
+        vector ``position - DES_POS`` of the same cycle is magnified.
 
     Returns
     -------
@@ -46,16 +78,22 @@ def plot_tool_path(
     ax = fig.add_subplot(1, 1, 1)
     dx = rec.signal("DES_POS", ax_x).to_numpy(float)
     dy = rec.signal("DES_POS", ax_y).to_numpy(float)
+    if deviation not in ("normal", "total"):
+        raise ConfigError(f"deviation must be 'normal' or 'total', not {deviation!r}")
     ax.plot(dx, dy, color="k", lw=1.0, label="desired position (DES_POS)")
+    path = np.column_stack([dx, dy])
+    what = "normal deviation" if deviation == "normal" else "deviation"
     if rec.has("CTRL_POS", ax_x) and rec.has("CTRL_POS", ax_y):
-        cx = rec.signal("CTRL_POS", ax_x).to_numpy(float)
-        cy = rec.signal("CTRL_POS", ax_y).to_numpy(float)
-        ax.plot(dx + magnify * (cx - dx), dy + magnify * (cy - dy), color="tab:orange", lw=1.0,
-                label=f"controller input position (CTRL_POS), deviation x{magnify:g}")
-    ex = rec.signal("ENC_POS", ax_x).to_numpy(float)
-    ey = rec.signal("ENC_POS", ax_y).to_numpy(float)
-    ax.plot(dx + magnify * (ex - dx), dy + magnify * (ey - dy), color="tab:blue", lw=1.0,
-            label=f"encoder position (ENC_POS), deviation x{magnify:g}")
+        c = np.column_stack([rec.signal("CTRL_POS", ax_x).to_numpy(float),
+                             rec.signal("CTRL_POS", ax_y).to_numpy(float)])
+        m = _magnified(path, c, magnify, deviation)
+        ax.plot(m[:, 0], m[:, 1], color="tab:orange", lw=1.0,
+                label=f"controller input position (CTRL_POS), {what} x{magnify:g}")
+    e = np.column_stack([rec.signal("ENC_POS", ax_x).to_numpy(float),
+                         rec.signal("ENC_POS", ax_y).to_numpy(float)])
+    m = _magnified(path, e, magnify, deviation)
+    ax.plot(m[:, 0], m[:, 1], color="tab:blue", lw=1.0,
+            label=f"encoder position (ENC_POS), {what} x{magnify:g}")
     unit = rec.meta.units.get(f"DES_POS|{ax_x}", "mm")
     ax.set_xlabel(f"{ax_x} [{unit}]")
     ax.set_ylabel(f"{ax_y} [{unit}]")

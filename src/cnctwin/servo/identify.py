@@ -1174,6 +1174,8 @@ def identify_axis(
         NI.setdefault("ffw_weight", "CMD_SPEED is not recorded")
     if "kv_1_s" in NI:
         NI.setdefault("kv_m_min_mm", NI["kv_1_s"])
+    if cmd_is_setpoint:
+        ident.notes[:] = [n for n in ident.notes if not n.startswith(f"Kv|{axis}: the setpoint")]
     if cmd_is_setpoint and sl is not None:
         # CMD -> actual speed is then the whole position loop, not the speed loop
         for nm in ("speed_gain", "speed_loop_time_s", "speed_loop_delay_s",
