@@ -38,6 +38,7 @@ def test_demo_quick_writes_report(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
         "Air cut, linear region and friction",
         "Motor temperature and current (Fig. 4.4)",
         "Real recording: Capture4Analysis example",
+        "Position loop: identification from a milling recording",
         "Hook section",
     ):
         assert title in text, title

@@ -575,7 +575,14 @@ SPINDLE_SECTIONS: list[SectionBuilder] = [
 ]
 """The spindle (issue #4) sections, in report order."""
 
-DEMO_SECTIONS: list[SectionBuilder] = []
+def section_position_loop(ctx: DemoContext) -> None:
+    """Position-loop section (issue #5); imported lazily to keep ``cnctwin --help`` fast."""
+    from cnctwin.servo.report import position_loop_section
+
+    position_loop_section(ctx)
+
+
+DEMO_SECTIONS: list[SectionBuilder] = [section_position_loop]
 """Extension hook: builders ``(DemoContext) -> None`` appended by other topics (position loop,
 issue #5; use cases, issue #6). They run after :data:`SPINDLE_SECTIONS`."""
 
