@@ -144,8 +144,10 @@ _HF: tuple[SignalSpec, ...] = (
     SignalSpec(
         "VEL_FFW", "hf", "Velocity feedforward added to the position-controller output.",
         "mm/min", "rpm", "Velocity feedforward", ("VelocityFeedForward", "VelocityFeedforward"),
-        note="Siemens documents mm/s (deg/s); the real C4A file shows 400.0 on Y1 during a "
-        "400 mm/min move, i.e. mm/min. cnctwin uses mm/min (linear) and rpm (rotary).",
+        note="Siemens documents mm/s (deg/s), and the real C4A file agrees: VEL_FFW equals "
+        "d(DES_POS)/dt in mm/s (deg/s) with ratio 1.000 on X1, Y1, C1, SP1 "
+        "(docs/real-data-servo.md). The catalog unit and the simulator still say mm/min (rpm); "
+        "aligning both on per-second units is open. cnctwin.servo reads the unit from the data.",
     ),
     SignalSpec(
         "TORQUE_FFW", "hf", "Torque (force) feedforward value sent from the NC to the drive.",
