@@ -797,6 +797,23 @@ def _sink_files(sink: Any, path: Path | None) -> list[Path]:
     return files
 
 
+def _collect(res: ScenarioResult, sim: Any, sink: Any, path: Path | None,
+             daq: _DynamometerDAQ, tp: _TruthParquet | None) -> None:
+    """Keep a finished simulation in ``res``: the in-memory recording with its first
+    dynamometer session attached and its per-cycle truth, or the files written."""
+    if sim.recording is not None:
+        rec = sim.recording
+        if daq.channels:
+            rec.external["dynamometer"] = daq.channels[0]
+        res.recordings.append(rec)
+        res.per_cycle.append(sim.truth["per_cycle"])
+    if path is not None:
+        res.recording_paths.append(path)
+        res.paths += _sink_files(sink, path) + daq.paths
+        if tp is not None and tp.close() is not None:
+            res.paths.append(tp.path)
+
+
 def _duration_s(program: Program, machine: Machine) -> float:
     """Machine time of a program (the interpolator plans it; no sampling)."""
     from cnctwin.sim.simulation import iter_chunks
@@ -1139,18 +1156,7 @@ def drilling_validation(
             "recording": path.name if path is not None else None,
             "dynamometer": daq.sessions,
         })
-        if sim.recording is not None:
-            rec = sim.recording
-            if daq.channels:
-                rec.external["dynamometer"] = daq.channels[0]
-            res.recordings.append(rec)
-            res.per_cycle.append(sim.truth["per_cycle"])
-        if path is not None:
-            res.recording_paths.append(path)
-            res.paths += _sink_files(sink, path)
-            res.paths += daq.paths
-            if tp is not None and tp.close() is not None:
-                res.paths.append(tp.path)
+        _collect(res, sim, sink, path, daq, tp)
     _write_truth(o, res.truth, res.paths)
     return res
 
@@ -1333,17 +1339,7 @@ def loose_tap(
     res.truth["holes"] = hook.hole_rows()
     res.truth["fault_onsets_s"] = hook.onsets
     res.truth["dynamometer_sessions"] = daq.sessions
-    if sim.recording is not None:
-        rec = sim.recording
-        if daq.channels:
-            rec.external["dynamometer"] = daq.channels[0]
-        res.recordings.append(rec)
-        res.per_cycle.append(sim.truth["per_cycle"])
-    if path is not None:
-        res.recording_paths.append(path)
-        res.paths += _sink_files(sink, path) + daq.paths
-        if tp is not None and tp.close() is not None:
-            res.paths.append(tp.path)
+    _collect(res, sim, sink, path, daq, tp)
     _write_truth(o, res.truth, res.paths)
     return res
 
@@ -1438,17 +1434,7 @@ def milling_square_circle(
     daq.close()
     res.truth["fault_onsets_s"] = hook.onsets
     res.truth["dynamometer_sessions"] = daq.sessions
-    if sim.recording is not None:
-        rec = sim.recording
-        if daq.channels:
-            rec.external["dynamometer"] = daq.channels[0]
-        res.recordings.append(rec)
-        res.per_cycle.append(sim.truth["per_cycle"])
-    if path is not None:
-        res.recording_paths.append(path)
-        res.paths += _sink_files(sink, path) + daq.paths
-        if tp is not None and tp.close() is not None:
-            res.paths.append(tp.path)
+    _collect(res, sim, sink, path, daq, tp)
     _write_truth(o, res.truth, res.paths)
     return res
 
