@@ -46,6 +46,8 @@ __all__ = [
     "Recording",
     "RecordingMeta",
     "cycles_to_time",
+    "empty_events",
+    "empty_lf",
     "find_gaps",
     "unwrap_cycles",
 ]
@@ -302,7 +304,8 @@ def cycles_to_time(
     return pd.DatetimeIndex(pd.to_datetime(ns, unit="ns", utc=True), name="time")
 
 
-def _empty_events() -> pd.DataFrame:
+def empty_events() -> pd.DataFrame:
+    """An events table with no rows and the column types of :data:`EVENT_COLUMNS`."""
     return pd.DataFrame(
         {
             "cycle": pd.Series(dtype="int64"),
@@ -319,7 +322,8 @@ def _empty_events() -> pd.DataFrame:
     )
 
 
-def _empty_lf() -> pd.DataFrame:
+def empty_lf() -> pd.DataFrame:
+    """An LF table with no rows and the column types of :data:`LF_COLUMNS`."""
     return pd.DataFrame(
         {
             "cycle": pd.Series(dtype="int64"),
@@ -386,8 +390,8 @@ class Recording:
                 ),
             )
         self.hf = hf
-        self.lf = lf if lf is not None else _empty_lf()
-        self.events = events if events is not None else _empty_events()
+        self.lf = lf if lf is not None else empty_lf()
+        self.events = events if events is not None else empty_events()
         self.external: dict[str, ExternalChannel] = dict(external or {})
         for col in self.columns:
             self.meta.units.setdefault(col, unit(col))
@@ -435,8 +439,8 @@ class Recording:
             data[name] = arr
         anchors: list[tuple[int, pd.Timestamp]] = []
         if start_time is not None and c.size:
-            anchors = [(int(c[0]), pd.Timestamp(start_time).tz_localize("UTC")
-                        if pd.Timestamp(start_time).tzinfo is None else pd.Timestamp(start_time))]
+            t0 = pd.Timestamp(start_time)
+            anchors = [(int(c[0]), t0.tz_localize("UTC") if t0.tzinfo is None else t0)]
         meta = RecordingMeta(
             machine=machine,
             cycle_time_s=cycle_time_s,

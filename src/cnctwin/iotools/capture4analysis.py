@@ -66,6 +66,7 @@ from cnctwin.recording import (
     Recording,
     RecordingMeta,
     cycles_to_time,
+    empty_lf,
     find_gaps,
 )
 from cnctwin.signals import DEFAULT_AXIS_MAP, parse_column
@@ -795,13 +796,7 @@ def _lf_frame(
     issues: list[str], attrs: dict[str, Any], gaps: list[CounterGap],
 ) -> pd.DataFrame:
     if not lf:
-        return pd.DataFrame({
-            "cycle": pd.Series(dtype="int64"),
-            "time": pd.Series(dtype="datetime64[ns, UTC]"),
-            "signal": pd.Series(dtype="object"),
-            "value": pd.Series(dtype="float64"),
-            "text": pd.Series(dtype="object"),
-        })
+        return empty_lf()
     order = sorted(range(len(lf)), key=lambda i: lf[i]["__cycle"])
     lf = [lf[i] for i in order]
     cycles = np.array([e["__cycle"] for e in lf], dtype=np.int64)

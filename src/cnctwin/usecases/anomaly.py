@@ -28,7 +28,6 @@ References
 
 from __future__ import annotations
 
-import copy
 import math
 from collections import deque
 from collections.abc import Mapping, Sequence
@@ -478,7 +477,7 @@ def backtest(
     t = np.asarray(time_s, dtype=np.float64)
     if t.size != len(data):
         raise ConfigError(f"time_s has {t.size} values, data {len(data)} rows")
-    det = copy.deepcopy(detector.clone())
+    det = detector.clone()
     learn = t < learn_until_s
     det.learn_many(data.loc[learn])
     scores = det.score_many(data.loc[~learn])
