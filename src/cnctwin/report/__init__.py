@@ -86,7 +86,7 @@ class Section:
             float_format=lambda v: float_format.format(v),
         )
         if caption:
-            body = body.replace("<table", "<table", 1).replace(
+            body = body.replace(
                 "</table>", f"<caption>{html.escape(caption)}</caption></table>", 1
             )
         self.blocks.append(body)
