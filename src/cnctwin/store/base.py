@@ -34,6 +34,7 @@ from cnctwin.recording import (
     EVENT_COLUMNS,
     LF_COLUMNS,
     CounterGap,
+    ExternalChannel,
     Recording,
     RecordingMeta,
 )
@@ -45,6 +46,8 @@ __all__ = [
     "TimeRun",
     "catalog_row",
     "default_recording_id",
+    "external_channel",
+    "external_meta",
     "meta_from_json",
     "meta_to_json",
     "normalize_events",
@@ -227,6 +230,27 @@ def catalog_row(rec: Recording, recording_id: str) -> dict[str, Any]:
     }
 
 
+def external_meta(ch: ExternalChannel) -> dict[str, Any]:
+    """The catalog description of an external channel (everything but its data).
+
+    ``index`` is the name of the data's index column (``"time_s"`` if unnamed).
+    """
+    return {
+        "index": ch.data.index.name or "time_s", "units": ch.units, "fs_hz": ch.fs_hz,
+        "offset_s": ch.offset_s, "drift_ppm": ch.drift_ppm, "aligned": ch.aligned,
+        "source": ch.source,
+    }
+
+
+def external_channel(name: str, data: pd.DataFrame, desc: dict[str, Any]) -> ExternalChannel:
+    """Inverse of :func:`external_meta`: the channel from its stored table and description."""
+    return ExternalChannel(
+        name=name, data=data.set_index(desc["index"]), units=dict(desc["units"]),
+        fs_hz=desc["fs_hz"], offset_s=float(desc["offset_s"]),
+        drift_ppm=float(desc["drift_ppm"]), aligned=bool(desc["aligned"]), source=desc["source"],
+    )
+
+
 # ---------------------------------------------------------------------------- HF time runs
 @dataclass(frozen=True)
 class TimeRun:
@@ -285,6 +309,15 @@ def block_bounds(runs: Iterable[TimeRun], *, block_cycles: int) -> list[tuple[in
 
 
 # ---------------------------------------------------------------------------- LF and events
+def _text_or_none(src: pd.Series) -> pd.Series:
+    """Values as ``str``, missing ones (None, NaN, NA) as ``None``; object dtype."""
+    return pd.Series(
+        [None if (v is None or (isinstance(v, float) and np.isnan(v)) or v is pd.NA)
+         else str(v) for v in src.astype(object)],
+        dtype=object,
+    )
+
+
 def normalize_events(events: pd.DataFrame) -> pd.DataFrame:
     """Events with exactly :data:`EVENT_COLUMNS` in the canonical dtypes.
 
@@ -300,12 +333,7 @@ def normalize_events(events: pd.DataFrame) -> pd.DataFrame:
         elif col in _EVENT_INT_COLUMNS:
             out[col] = pd.to_numeric(src, errors="raise").astype("Int64")
         else:
-            vals = src.astype(object)
-            out[col] = pd.Series(
-                [None if (v is None or (isinstance(v, float) and np.isnan(v)) or v is pd.NA)
-                 else str(v) for v in vals],
-                dtype=object,
-            )
+            out[col] = _text_or_none(src)
     return out
 
 
@@ -323,12 +351,7 @@ def normalize_lf(lf: pd.DataFrame) -> pd.DataFrame:
         elif col == "value":
             out[col] = pd.to_numeric(src, errors="coerce").astype("float64")
         else:
-            vals = src.astype(object)
-            out[col] = pd.Series(
-                [None if (v is None or (isinstance(v, float) and np.isnan(v)) or v is pd.NA)
-                 else str(v) for v in vals],
-                dtype=object,
-            )
+            out[col] = _text_or_none(src)
     return out
 
 
@@ -417,7 +440,6 @@ class Store(abc.ABC):
             Only recordings overlapping ``[start, end]`` (UTC; naive times are taken as UTC).
         """
 
-    @abc.abstractmethod
     def query_signals(
         self,
         signals: Sequence[str],
@@ -451,6 +473,68 @@ class Store(abc.ABC):
         ------
         SignalNotFoundError
             If a requested signal is in none of the selected recordings.
+        StoreError
+            If ``recording_id`` is given and not in the store.
+
+        Notes
+        -----
+        The argument handling (UTC times, the recording check, expanding codes to columns
+        with :func:`resolve_columns`) and the shape of the result are shared by every
+        backend; a backend supplies the catalog (:meth:`_catalog_columns`), the existence
+        check (:meth:`_require`) and the HF reads (:meth:`_signal_frames`).
+        """
+        t0, t1 = to_utc(start), to_utc(end)
+        cat = self._catalog_columns(machine=machine, start=t0, end=t1)
+        if recording_id is not None:
+            if recording_id not in set(cat["recording_id"]):
+                self._require(recording_id)  # raises if unknown
+            cat = cat[cat["recording_id"] == recording_id]
+        cols_by_rec = {
+            r: json.loads(c) for r, c in zip(cat["recording_id"], cat["columns"], strict=True)
+        }
+        available = [c for cols in cols_by_rec.values() for c in cols]
+        where = f"recording {recording_id!r}" if recording_id else "the selected recordings"
+        wanted = (
+            resolve_columns(signals, available, where=where) if cols_by_rec else list(signals)
+        )
+        frames = self._signal_frames(cols_by_rec, wanted, t0, t1) if cols_by_rec else []
+        if frames:
+            out = pd.concat(frames, ignore_index=True)
+        else:
+            out = pd.DataFrame(
+                {"recording_id": pd.Series(dtype=object), "cycle": pd.Series(dtype="int64"),
+                 "time": pd.Series(dtype="datetime64[ns, UTC]")}
+            )
+        for c in wanted:
+            if c not in out.columns:
+                out[c] = np.nan
+        out = out[["recording_id", "cycle", "time", *wanted]]
+        out["recording_id"] = out["recording_id"].astype(object)
+        return index_result(out, single=recording_id is not None)
+
+    @abc.abstractmethod
+    def _catalog_columns(
+        self, *, machine: str | None, start: pd.Timestamp | None, end: pd.Timestamp | None
+    ) -> pd.DataFrame:
+        """Catalog rows (``recording_id``, ``columns`` as JSON text) of the selection."""
+
+    @abc.abstractmethod
+    def _require(self, recording_id: str) -> None:
+        """Raise :class:`~cnctwin.exceptions.StoreError` if ``recording_id`` is not stored."""
+
+    @abc.abstractmethod
+    def _signal_frames(
+        self,
+        cols_by_rec: dict[str, list[str]],
+        wanted: Sequence[str],
+        start: pd.Timestamp | None,
+        end: pd.Timestamp | None,
+    ) -> list[pd.DataFrame]:
+        """HF rows of ``wanted`` in ``[start, end]``, one frame per recording (or file).
+
+        Each frame has ``recording_id``, ``cycle``, ``time`` (UTC) and the wanted signals
+        the recording has (``cols_by_rec``: recording id -> its columns); missing signals
+        are filled with NaN by :meth:`query_signals`.
         """
 
     @abc.abstractmethod

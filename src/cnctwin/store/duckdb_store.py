@@ -46,11 +46,11 @@ from cnctwin.store.base import (
     catalog_row,
     check_recording_id,
     default_recording_id,
-    index_result,
+    external_channel,
+    external_meta,
     meta_from_json,
     normalize_events,
     normalize_lf,
-    resolve_columns,
     to_utc,
 )
 
@@ -275,11 +275,7 @@ class DuckDBStore(Store):
                  "end_time": None, "first_cycle": None, "last_cycle": None,
                  "n_rows": len(data)}
             )
-            external[name] = {
-                "path": rel, "index": index_name, "units": ch.units, "fs_hz": ch.fs_hz,
-                "offset_s": ch.offset_s, "drift_ppm": ch.drift_ppm, "aligned": ch.aligned,
-                "source": ch.source,
-            }
+            external[name] = {"path": rel, **external_meta(ch)}
         row = catalog_row(rec, rid)
         row["external"] = json.dumps(external)
         row["ingested_at"] = pd.Timestamp.now(tz="UTC")
@@ -376,68 +372,48 @@ class DuckDBStore(Store):
             )
         return str(row[0]), str(row[1])
 
-    def query_signals(
-        self,
-        signals: Sequence[str],
-        *,
-        machine: str | None = None,
-        start: pd.Timestamp | str | None = None,
-        end: pd.Timestamp | str | None = None,
-        recording_id: str | None = None,
+    def _catalog_columns(
+        self, *, machine: str | None, start: pd.Timestamp | None, end: pd.Timestamp | None
     ) -> pd.DataFrame:
-        t0, t1 = to_utc(start), to_utc(end)
-        cat = self._recordings(("recording_id", "columns"), machine, t0, t1)
-        if recording_id is not None:
-            if recording_id not in set(cat["recording_id"]):
-                self._catalog_entry(recording_id)  # raises if unknown
-            cat = cat[cat["recording_id"] == recording_id]
-        cols_by_rec = {r: json.loads(c) for r, c in zip(cat["recording_id"], cat["columns"],
-                                                         strict=True)}
-        available = [c for cols in cols_by_rec.values() for c in cols]
-        where = f"recording {recording_id!r}" if recording_id else "the selected recordings"
-        wanted = resolve_columns(signals, available, where=where) if cols_by_rec else list(
-            signals
-        )
-        frames: list[pd.DataFrame] = []
-        if cols_by_rec:
-            ids = list(cols_by_rec)
-            sel = _run(
+        return self._recordings(("recording_id", "columns"), machine, start, end)
+
+    def _require(self, recording_id: str) -> None:
+        self._catalog_entry(recording_id)
+
+    def _signal_frames(
+        self,
+        cols_by_rec: dict[str, list[str]],
+        wanted: Sequence[str],
+        start: pd.Timestamp | None,
+        end: pd.Timestamp | None,
+    ) -> list[pd.DataFrame]:
+        ids = list(cols_by_rec)
+        sel = _run(
             self.con,
-                "SELECT recording_id, path FROM files WHERE kind = 'hf' AND recording_id IN "
-                f"({', '.join('?' for _ in ids)})"
-                + (" AND end_time >= ?" if t0 is not None else "")
-                + (" AND start_time <= ?" if t1 is not None else "")
-                + " ORDER BY recording_id, first_cycle",
-                [*ids, *([t0] if t0 is not None else []), *([t1] if t1 is not None else [])],
+            "SELECT recording_id, path FROM files WHERE kind = 'hf' AND recording_id IN "
+            f"({', '.join('?' for _ in ids)})"
+            + (" AND end_time >= ?" if start is not None else "")
+            + (" AND start_time <= ?" if end is not None else "")
+            + " ORDER BY recording_id, first_cycle",
+            [*ids, *([start] if start is not None else []), *([end] if end is not None else [])],
+        )
+        filters: list[tuple[str, str, Any]] = []
+        if start is not None:
+            filters.append(("time", ">=", start))
+        if end is not None:
+            filters.append(("time", "<=", end))
+        frames: list[pd.DataFrame] = []
+        for rid, rel in sel:
+            present = [c for c in wanted if c in cols_by_rec[rid]]
+            table = pq.read_table(
+                self._abs(rel),
+                columns=["cycle", "time", *present],
+                filters=filters or None,
             )
-            filters: list[tuple[str, str, Any]] = []
-            if t0 is not None:
-                filters.append(("time", ">=", t0))
-            if t1 is not None:
-                filters.append(("time", "<=", t1))
-            for rid, rel in sel:
-                present = [c for c in wanted if c in cols_by_rec[rid]]
-                table = pq.read_table(
-                    self._abs(rel),
-                    columns=["cycle", "time", *present],
-                    filters=filters or None,
-                )
-                frame = table.to_pandas()
-                frame.insert(0, "recording_id", rid)
-                frames.append(frame)
-        if frames:
-            out = pd.concat(frames, ignore_index=True)
-        else:
-            out = pd.DataFrame(
-                {"recording_id": pd.Series(dtype=object), "cycle": pd.Series(dtype="int64"),
-                 "time": pd.Series(dtype="datetime64[ns, UTC]")}
-            )
-        for c in wanted:
-            if c not in out.columns:
-                out[c] = np.nan
-        out = out[["recording_id", "cycle", "time", *wanted]]
-        out["recording_id"] = out["recording_id"].astype(object)
-        return index_result(out, single=recording_id is not None)
+            frame = table.to_pandas()
+            frame.insert(0, "recording_id", rid)
+            frames.append(frame)
+        return frames
 
     def load(self, recording_id: str) -> Recording:
         meta_text, external_text = self._catalog_entry(recording_id)
@@ -475,12 +451,8 @@ class DuckDBStore(Store):
         events = normalize_events(pq.read_table(self._abs(by_kind["events"][0])).to_pandas())
         external: dict[str, ExternalChannel] = {}
         for name, d in json.loads(external_text).items():
-            data = pq.read_table(self._abs(d["path"])).to_pandas().set_index(d["index"])
-            external[name] = ExternalChannel(
-                name=name, data=data, units=dict(d["units"]), fs_hz=d["fs_hz"],
-                offset_s=float(d["offset_s"]), drift_ppm=float(d["drift_ppm"]),
-                aligned=bool(d["aligned"]), source=d["source"],
-            )
+            data = pq.read_table(self._abs(d["path"])).to_pandas()
+            external[name] = external_channel(name, data, d)
         return Recording(hf, lf=lf, events=events, external=external, meta=meta)
 
     def sql(self, query: str) -> pd.DataFrame:

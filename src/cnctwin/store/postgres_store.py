@@ -59,11 +59,11 @@ from cnctwin.store.base import (
     catalog_row,
     check_recording_id,
     default_recording_id,
-    index_result,
+    external_channel,
+    external_meta,
     meta_from_json,
     normalize_events,
     normalize_lf,
-    resolve_columns,
     time_runs,
     to_utc,
 )
@@ -371,13 +371,7 @@ class PostgresStore(Store):
         step_ns = round(rec.meta.cycle_time_s * 1e9)
         cycles = rec.cycles
         t_ns = rec.hf["time"].to_numpy(dtype="datetime64[ns]").view(np.int64)
-        external = {}
-        for name, ch in rec.external.items():
-            external[name] = {
-                "index": ch.data.index.name or "time_s", "units": ch.units, "fs_hz": ch.fs_hz,
-                "offset_s": ch.offset_s, "drift_ppm": ch.drift_ppm, "aligned": ch.aligned,
-                "source": ch.source,
-            }
+        external = {name: external_meta(ch) for name, ch in rec.external.items()}
         conn = self.conn
         with conn.transaction():
             conn.execute("SELECT pg_advisory_xact_lock(hashtext(%s))", [rid])
@@ -586,34 +580,24 @@ class PostgresStore(Store):
             out[key] = (cyc, tns, vals)
         return out
 
-    def query_signals(
-        self,
-        signals: Sequence[str],
-        *,
-        machine: str | None = None,
-        start: pd.Timestamp | str | None = None,
-        end: pd.Timestamp | str | None = None,
-        recording_id: str | None = None,
+    def _catalog_columns(
+        self, *, machine: str | None, start: pd.Timestamp | None, end: pd.Timestamp | None
     ) -> pd.DataFrame:
-        t0, t1 = to_utc(start), to_utc(end)
-        cat = self.recordings(machine=machine, start=t0, end=t1)
-        if recording_id is not None:
-            if recording_id not in set(cat["recording_id"]):
-                self._meta_row(recording_id)  # raises if unknown
-            cat = cat[cat["recording_id"] == recording_id]
-        cols_by_rec = {
-            r: json.loads(c) for r, c in zip(cat["recording_id"], cat["columns"], strict=True)
-        }
-        available = [c for cols in cols_by_rec.values() for c in cols]
-        where = f"recording {recording_id!r}" if recording_id else "the selected recordings"
-        wanted = (
-            resolve_columns(signals, available, where=where) if cols_by_rec else list(signals)
-        )
-        start_ns = int(t0.value) if t0 is not None else None
-        end_ns = int(t1.value) if t1 is not None else None
-        data = (
-            self._read_blocks(list(cols_by_rec), wanted, start_ns, end_ns) if cols_by_rec else {}
-        )
+        return self.recordings(machine=machine, start=start, end=end)
+
+    def _require(self, recording_id: str) -> None:
+        self._meta_row(recording_id)
+
+    def _signal_frames(
+        self,
+        cols_by_rec: dict[str, list[str]],
+        wanted: Sequence[str],
+        start: pd.Timestamp | None,
+        end: pd.Timestamp | None,
+    ) -> list[pd.DataFrame]:
+        start_ns = int(start.value) if start is not None else None
+        end_ns = int(end.value) if end is not None else None
+        data = self._read_blocks(list(cols_by_rec), wanted, start_ns, end_ns)
         frames = []
         for rid in cols_by_rec:
             per = {sig: v for (r, sig), v in data.items() if r == rid}
@@ -635,21 +619,11 @@ class PostgresStore(Store):
                 mask &= tns <= end_ns
             frame = frame[mask]
             frame.insert(0, "recording_id", rid)
-            frames.append(frame)
-        if frames:
-            out = pd.concat(frames, ignore_index=True)
-        else:
-            out = pd.DataFrame(
-                {"recording_id": pd.Series(dtype=object), "cycle": pd.Series(dtype="int64"),
-                 "time_ns": pd.Series(dtype="int64")}
+            frame.insert(
+                2, "time", pd.to_datetime(frame.pop("time_ns").to_numpy(), unit="ns", utc=True)
             )
-        out.insert(2, "time", pd.to_datetime(out.pop("time_ns").to_numpy(), unit="ns", utc=True))
-        for c in wanted:
-            if c not in out.columns:
-                out[c] = np.nan
-        out = out[["recording_id", "cycle", "time", *wanted]]
-        out["recording_id"] = out["recording_id"].astype(object)
-        return index_result(out, single=recording_id is not None)
+            frames.append(frame)
+        return frames
 
     def load(self, recording_id: str) -> Recording:
         meta_text, external_text, columns_text = self._meta_row(recording_id)
@@ -715,12 +689,8 @@ class PostgresStore(Store):
             [recording_id],
         ).fetchall():
             d = ext_meta[name]
-            frame = pq.read_table(io.BytesIO(bytes(blob))).to_pandas().set_index(d["index"])
-            external[name] = ExternalChannel(
-                name=name, data=frame, units=dict(d["units"]), fs_hz=d["fs_hz"],
-                offset_s=float(d["offset_s"]), drift_ppm=float(d["drift_ppm"]),
-                aligned=bool(d["aligned"]), source=d["source"],
-            )
+            frame = pq.read_table(io.BytesIO(bytes(blob))).to_pandas()
+            external[name] = external_channel(name, frame, d)
         external = {k: external[k] for k in ext_meta if k in external}
         return Recording(hf, lf=lf, events=events, external=external, meta=meta)
 
