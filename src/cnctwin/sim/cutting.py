@@ -38,7 +38,9 @@ __all__ = [
     "fit_kienzle",
     "get_material",
     "kienzle_kc",
+    "lip_height_difference_um",
     "milling_load",
+    "rotating_force_n",
     "tapping_load",
     "wear_factor",
 ]
@@ -211,11 +213,30 @@ class DrillingModel:
     lip_ripple : float
         Relative amplitude of the lip-pass (flutes x rotation) ripple. 0.02
     walk_force_ratio_new, walk_force_ratio_worn : float
-        Static lateral force / thrust for a new tool and at ``walk_wear_ref_um`` (lip
-        asymmetry grows with wear -> hole position error, thesis §5.3). 0.01, 0.06
-    rotating_force_ratio : float
-        Lateral force rotating with the spindle / thrust (run-out), grows with wear like the
-        walk. 0.02
+        Static lateral force / thrust for a new tool and at ``walk_wear_ref_um`` once the
+        point is engaged (lip asymmetry grows with wear -> straightness error, thesis §5.3).
+        0.01, 0.06
+    lip_height_difference_um : float
+        Axial lip-height difference delta of the new (reground) drill [um]; with two lips
+        the chip thicknesses are f/2 + delta and f/2 - delta (derivation in Notes of
+        :func:`rotating_force_n`). [E] 8 (precision carbide drills: a few um to ~20 um)
+    wear_asymmetry : float
+        Fraction of the flank wear VB by which one lip wears more than the other [-];
+        the edge recedes by VB tan(alpha) along the feed, so delta grows by
+        ``wear_asymmetry`` VB tan(alpha). [E] 0.2
+    clearance_angle_deg : float
+        Lip clearance angle alpha [deg]. [E] 8 (typical carbide twist drill 6-12)
+    lip_thrust_share : float
+        Share of the thrust produced by the two lips (the rest by the chisel edge) [-].
+        [S] the chisel edge gives roughly half of the drilling thrust (Shaw & Oxford 1957;
+        Stephenson & Agapiou, Metal Cutting Theory and Practice, ch. 8); 0.5
+    entry_force_ratio : float
+        Peak lateral force / full-engagement thrust while the chisel edge skids on the
+        surface before the point is centred (0 < z < point length), new tool [-]; it grows
+        like the walk with wear (x (1 + ``entry_wear_gain`` VB/``walk_wear_ref_um``)) and
+        acts in a random direction per hole. [E] 0.03
+    entry_wear_gain : float
+        Growth of the entry force with wear (chisel-edge wear) [-]. [E] 1.0
     walk_wear_ref_um : float
         Wear at which ``walk_force_ratio_worn`` applies [um]. 277
     tool_temp_torque_coeff_per_k : float
@@ -232,7 +253,12 @@ class DrillingModel:
     lip_ripple: float = 0.02
     walk_force_ratio_new: float = 0.01
     walk_force_ratio_worn: float = 0.06
-    rotating_force_ratio: float = 0.02
+    lip_height_difference_um: float = 8.0
+    wear_asymmetry: float = 0.2
+    clearance_angle_deg: float = 8.0
+    lip_thrust_share: float = 0.5
+    entry_force_ratio: float = 0.03
+    entry_wear_gain: float = 1.0
     walk_wear_ref_um: float = 277.0
     tool_temp_torque_coeff_per_k: float = 1e-4
 
@@ -293,6 +319,69 @@ def drill_thrust_n(
     return np.asarray(ff * wf * np.asarray(hardness_factor, dtype=np.float64))
 
 
+def lip_height_difference_um(
+    wear_um: ArrayLike, *, model: DrillingModel | None = None
+) -> NDArray[np.float64]:
+    """Effective axial lip-height difference delta of a drill with flank wear VB [um].
+
+    Notes
+    -----
+    delta = delta_0 + q VB tan(alpha): the lip that wears more by q VB (``wear_asymmetry``)
+    loses VB tan(alpha) of height along the feed (alpha = clearance angle).
+    """
+    mdl = model if model is not None else DrillingModel()
+    w = np.maximum(np.asarray(wear_um, dtype=np.float64), 0.0)
+    return np.asarray(mdl.lip_height_difference_um + mdl.wear_asymmetry * w
+                      * math.tan(math.radians(mdl.clearance_angle_deg)), dtype=np.float64)
+
+
+def rotating_force_n(
+    thrust_n: ArrayLike,
+    feed_mm_per_rev: ArrayLike,
+    wear_um: ArrayLike = 0.0,
+    *,
+    drill: Drill | None = None,
+    model: DrillingModel | None = None,
+) -> NDArray[np.float64]:
+    """Amplitude of the lateral force rotating with the spindle (unequal lips) [N].
+
+    Parameters
+    ----------
+    thrust_n : array-like
+        Drilling thrust [N].
+    feed_mm_per_rev : array-like
+        Feed per revolution f [mm/rev].
+    wear_um : array-like, default 0
+        Flank wear VB [um] (:func:`lip_height_difference_um`).
+    drill : Drill, optional
+        Point angle (kappa = point angle / 2).
+    model : DrillingModel, optional
+        Lip-height difference, wear asymmetry, lip share of the thrust.
+
+    Notes
+    -----
+    Two lips, lip 1 ahead by delta: chip thicknesses h1 = f/2 + delta, h2 = f/2 - delta
+    (h1 - h2 = 2 delta, clipped at f: one lip cuts alone). The force normal to a lip in the
+    axial plane has the axial part N sin(kappa) and the radial part N cos(kappa); the axial
+    parts add up to the lip thrust s F_z (s = ``lip_thrust_share``), the radial parts cancel
+    but for the chip-thickness difference:
+
+        F_rot = s F_z cot(kappa) (h1 - h2) / (h1 + h2) = s F_z cot(kappa) min(2 delta / f, 1)
+
+    It is fixed to the tool, so in the machine frame it turns at the spindle frequency.
+    Example: F_z = 1000 N, f = 0.167 mm, kappa = 70 deg, delta = 8 um: F_rot = 17 N; at
+    VB = 277 um (delta 15.8 um, thrust x1.57): 54 N.
+    """
+    d = drill if drill is not None else Drill()
+    mdl = model if model is not None else DrillingModel()
+    fz = np.abs(np.asarray(thrust_n, dtype=np.float64))
+    f = np.maximum(np.asarray(feed_mm_per_rev, dtype=np.float64), 1e-6)
+    delta_mm = lip_height_difference_um(wear_um, model=mdl) / 1000.0
+    ratio = np.minimum(2.0 * delta_mm / f, 1.0)
+    return np.asarray(mdl.lip_thrust_share * fz * ratio / math.tan(d.kappa_rad),
+                      dtype=np.float64)
+
+
 @dataclass(frozen=True)
 class CuttingLoad:
     """Process load per sample (signs: module docstring).
@@ -342,6 +431,7 @@ def drilling_load(
     spindle_angle_rad: ArrayLike | None = None,
     tool_temperature_c: ArrayLike | None = None,
     walk_direction_rad: float = 0.0,
+    entry_direction_rad: ArrayLike = 0.0,
     model: DrillingModel | None = None,
     rng: np.random.Generator | None = None,
     dt_s: float = 0.002,
@@ -373,6 +463,8 @@ def drilling_load(
         Tool-tip temperature (see :class:`DrillingModel`) [degC].
     walk_direction_rad : float, default 0
         Direction of the static lateral (walk) force in the XY plane [rad].
+    entry_direction_rad : array-like, default 0
+        Direction of the chisel-edge entry force per sample (one value per hole) [rad].
     model : DrillingModel, optional
         Secondary effects.
     rng : numpy.random.Generator, optional
@@ -390,6 +482,12 @@ def drilling_load(
     torque scales with (r/R)^2 (moment of a uniform lip load), thrust with r/R. Break-out (through
     holes) removes the inner part the same way. Mean torque and thrust at full engagement come
     from :func:`drill_torque_nm` / :func:`drill_thrust_n`.
+
+    Lateral forces on the tool (machine X/Y): (1) the force rotating with the spindle from the
+    lip-height difference, :func:`rotating_force_n` (1x spindle frequency, 40 Hz at 2400 rpm);
+    (2) the chisel-edge entry force F_e = ratio (1 + g VB/VB_ref) F_full 4 u (1 - u),
+    u = z / L_point, in ``entry_direction_rad`` (skidding until the point is centred);
+    (3) the static walk ratio(VB) x thrust in ``walk_direction_rad`` once the point is in.
     """
     d = drill if drill is not None else Drill()
     m = get_material(material)
@@ -443,11 +541,21 @@ def drilling_load(
     walk = mdl.walk_force_ratio_new + (mdl.walk_force_ratio_worn - mdl.walk_force_ratio_new) * (
         wear_rel
     )
-    lat = walk * thrust
+    # static walk once the point is engaged (the hole guides the drill from then on)
+    lat = walk * thrust * (r_out >= 1.0)
     fx = lat * math.cos(walk_direction_rad)
     fy = lat * math.sin(walk_direction_rad)
+    # chisel-edge skid at entry: bump over the point length, random direction per hole
+    cone = d.cone_length_mm
+    zc = np.clip(z / cone, 0.0, 1.0)
+    bump = np.where(cutting & (z > 0.0) & (z < cone), 4.0 * zc * (1.0 - zc), 0.0)
+    ent = (mdl.entry_force_ratio * (1.0 + mdl.entry_wear_gain * wear_rel) * f_full * bump
+           * (1.0 - r_in))
+    edir = np.broadcast_to(np.asarray(entry_direction_rad, dtype=np.float64), (nsz,))
+    fx = fx + ent * np.cos(edir)
+    fy = fy + ent * np.sin(edir)
     if ang is not None:
-        rot = mdl.rotating_force_ratio * (1.0 + 2.0 * wear_rel) * thrust
+        rot = rotating_force_n(thrust, f, wear, drill=d, model=mdl)
         fx = fx + rot * np.cos(ang)
         fy = fy + rot * np.sin(ang)
     return CuttingLoad(

@@ -63,7 +63,9 @@ from cnctwin.sim.cutting import (
     drill_thrust_n,
     drill_torque_nm,
     drilling_load,
+    lip_height_difference_um,
     milling_load,
+    rotating_force_n,
     tapping_load,
 )
 from cnctwin.sim.faults import Fault, LooseTool, apply_faults, fault_to_dict, hardness_factor
@@ -589,6 +591,18 @@ class DrillingProcess(_Process):
         self.walk_direction_rad = walk_direction_rad
         self.temperature_c = cfg.tool_thermal.ambient_temperature_c
         self._acc: dict[int, list[float]] = {}
+        # chisel-edge skid direction per hole (uniform): own stream, drawn once per new hole
+        self._dir_rng = np.random.default_rng(int(self.rng.integers(2**32)))
+        self._entry_dir: dict[int, float] = {}
+
+    def _entry_directions(self, hole: NDArray[np.int64]) -> NDArray[np.float64]:
+        for h in np.unique(hole[hole >= 0]):
+            if int(h) not in self._entry_dir:
+                self._entry_dir[int(h)] = float(self._dir_rng.uniform(-math.pi, math.pi))
+        out = np.zeros(hole.size)
+        for h in np.unique(hole[hole >= 0]):
+            out[hole == h] = self._entry_dir[int(h)]
+        return out
 
     def __call__(self, ci: CuttingInput) -> CuttingOutput:
         cfg = self.cfg
@@ -612,7 +626,8 @@ class DrillingProcess(_Process):
                                 initial_c=self.temperature_c)
         self.temperature_c = float(temp[-1])
         load = drilling_load(depth, n, feed, rng=self.rng, tool_temperature_c=temp,
-                             walk_direction_rad=self.walk_direction_rad, **kw)
+                             walk_direction_rad=self.walk_direction_rad,
+                             entry_direction_rad=self._entry_directions(hole), **kw)
         prog = np.clip(depth / self.hole_depth_mm, 0.0, 1.0)
         load = self._faults(load, ci, hole, n, prog)
         self._holes_update(ci, hole, depth, feed, load, temp, wear, hard)
@@ -657,6 +672,44 @@ class DrillingProcess(_Process):
                                                            self.speed_rpm, **common))
             row["model_thrust_n"] = float(drill_thrust_n(self.feed_mm_per_rev,
                                                          self.speed_rpm, **common))
+            row.update(self._quality_truth(int(h), row["model_thrust_n"], w))
+
+    def _quality_truth(self, hole: int, thrust_n: float, wear_um: float) -> dict[str, float]:
+        """Hidden hole-quality truth of one hole (forces and tool-tip geometry).
+
+        Tool-tip values from the lateral forces and the drill's tip stiffness k
+        (:attr:`~cnctwin.sim.tool.Drill.tip_stiffness_n_per_um`): the hole is started where the
+        chisel-edge skid force pushes the free tip, e = F_entry,peak / k (position error);
+        once the margins guide the drill the static walk shifts the axis by
+        F_walk / (g k) (straightness, g = ``guided_stiffness_gain``) and the rotating force
+        makes the tip orbit with F_rot / (g k) plus the radial run-out (hole oversize is twice
+        the orbit radius). The sub-micrometre slide deviation (which the X/Y encoders see) is
+        not included. Forces at full engagement with the programmed feed.
+        """
+        d, mdl = self.cfg.drill, self.cfg.drilling
+        wear_rel = min(max(wear_um / mdl.walk_wear_ref_um, 0.0), 2.0)
+        f_rot = float(rotating_force_n(thrust_n, self.feed_mm_per_rev, wear_um, drill=d,
+                                       model=mdl))
+        f_ent = mdl.entry_force_ratio * (1.0 + mdl.entry_wear_gain * wear_rel) * thrust_n
+        f_walk = (mdl.walk_force_ratio_new + (mdl.walk_force_ratio_worn
+                                              - mdl.walk_force_ratio_new) * wear_rel) * thrust_n
+        k = d.tip_stiffness_n_per_um
+        ang = self._entry_dir.get(hole, 0.0)
+        e_um = f_ent / k
+        orbit = d.radial_runout_um + f_rot / (d.guided_stiffness_gain * k)
+        return {
+            "entry_direction_rad": ang,
+            "entry_force_peak_n": f_ent,
+            "rotating_force_n": f_rot,
+            "walk_force_n": f_walk,
+            "lip_height_difference_um": float(lip_height_difference_um(wear_um, model=mdl)),
+            "tip_position_error_x_um": e_um * math.cos(ang),
+            "tip_position_error_y_um": e_um * math.sin(ang),
+            "tip_position_error_um": e_um,
+            "tip_straightness_um": f_walk / (d.guided_stiffness_gain * k),
+            "tip_orbit_radius_um": orbit,
+            "hole_oversize_um": 2.0 * orbit,
+        }
 
 
 class TappingProcess(_Process):

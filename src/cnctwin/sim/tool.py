@@ -45,6 +45,22 @@ class Drill:
         Cutting-edge radius r [mm] (Subramanian & Cook torque term). [S] ~0.01
     tool_number : int
         T number in the NC program. [E] 1
+    youngs_modulus_gpa : float
+        Young's modulus of the drill [GPa]. [S] cemented carbide WC-Co 550-650 (e.g.
+        Sandvik/ISO hardmetal data); 600
+    overhang_mm : float
+        Free length from the holder to the tip [mm]. [E] 50 (5xD drill for 20 mm holes)
+    effective_diameter_ratio : float
+        Diameter of the solid rod with the bending stiffness of the fluted body / D [-].
+        [E] 0.8 (I_fluted ~ 0.4 I_solid)
+    spindle_stiffness_n_per_um : float
+        Static radial stiffness of spindle + holder at the gauge line [N/um]. [E] 30
+        (motor spindles of machining centres: ~20-50 N/um)
+    radial_runout_um : float
+        Radial run-out of the tip (TIR / 2) [um]; the hole is 2 x this oversize. [E] 3
+    guided_stiffness_gain : float
+        Stiffening of the tip once the margins are in the hole (the hole wall guides the
+        drill) relative to the free cantilever [-]. [E] 10
     """
 
     diameter_mm: float = 8.5
@@ -52,6 +68,26 @@ class Drill:
     flutes: int = 2
     edge_radius_mm: float = 0.01
     tool_number: int = 1
+    youngs_modulus_gpa: float = 600.0
+    overhang_mm: float = 50.0
+    effective_diameter_ratio: float = 0.8
+    spindle_stiffness_n_per_um: float = 30.0
+    radial_runout_um: float = 3.0
+    guided_stiffness_gain: float = 10.0
+
+    @property
+    def tip_stiffness_n_per_um(self) -> float:
+        """Lateral stiffness at the free tip: drill cantilever in series with the spindle [N/um].
+
+        Notes
+        -----
+        k_drill = 3 E I / L^3 with I = pi (c D)^4 / 64; 1/k = 1/k_drill + 1/k_spindle.
+        Defaults: I = 105 mm^4, k_drill = 3 x 600e3 x 105 / 50^3 = 1512 N/mm = 1.51 N/um,
+        with 30 N/um in series: 1.44 N/um.
+        """
+        i_mm4 = math.pi * (self.effective_diameter_ratio * self.diameter_mm) ** 4 / 64.0
+        k_drill = 3.0 * self.youngs_modulus_gpa * 1e3 * i_mm4 / self.overhang_mm**3 / 1000.0
+        return 1.0 / (1.0 / k_drill + 1.0 / self.spindle_stiffness_n_per_um)
 
     @property
     def kappa_rad(self) -> float:
