@@ -195,38 +195,10 @@ def _cmd_wear(args: argparse.Namespace) -> int:
 
 
 def _stream(recs: list[Any], holes: pd.DataFrame, detector: str) -> pd.DataFrame:
-    from cnctwin.analysis.segments import spindle_speed_rpm
-    from cnctwin.spindle import SpindleModel
+    from cnctwin.usecases.anomaly import signal_stream
 
-    model = SpindleModel.from_parameters("thesis_spinner_840dsl")
-    origin = pd.Timestamp(recs[0].hf["time"].iloc[0])
-    parts = []
-    for r in recs:
-        t = ((pd.DatetimeIndex(r.hf["time"]) - origin) / pd.Timedelta(seconds=1)).to_numpy()
-        cur = r.hf["CURRENT|SP1"].to_numpy(dtype=np.float64)
-        speed, _ = spindle_speed_rpm(r, "SP1")
-        d = pd.DataFrame({"time_s": t, "current_a": cur, "speed_rpm": speed,
-                          "predicted_current_a": model.predict_current_a(0.0, speed)})
-        if r.has("DES_POS|Z1") and r.has("ENC_POS|Z1"):
-            d["z_error_mm"] = (r.hf["DES_POS|Z1"] - r.hf["ENC_POS|Z1"]).to_numpy()
-        else:
-            d["z_error_mm"] = 0.0
-        prog = np.full(len(d), np.nan)
-        hole = np.full(len(d), -1)
-        cyc = r.cycles
-        for _, h in holes.iterrows():
-            lo = int(np.searchsorted(cyc, int(h["cut_start_cycle"])))
-            hi = int(np.searchsorted(cyc, int(h["cut_end_cycle"]), side="right"))
-            if hi > lo:
-                prog[lo:hi] = np.linspace(0.0, 1.0, hi - lo)
-                hole[lo:hi] = int(h["hole"])
-        d["progress"] = prog
-        d["hole"] = hole
-        parts.append(d)
-    data = pd.concat(parts, ignore_index=True)
-    if detector in ("envelope", "physics", "spectral"):
-        data = data[data["hole"] >= 0].reset_index(drop=True)
-    return data
+    return signal_stream(recs, holes,
+                         cutting_only=detector in ("envelope", "physics", "spectral"))
 
 
 def _cmd_anomalies(args: argparse.Namespace) -> int:

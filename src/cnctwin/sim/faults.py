@@ -26,6 +26,7 @@ __all__ = [
     "apply_faults",
     "fault_to_dict",
     "hardness_factor",
+    "loose_tool_signature",
 ]
 
 
@@ -34,8 +35,22 @@ class LooseTool:
     """Tool loosening in the collet (thesis §5.4, Fig. 5.10: loose tap on extraction).
 
     From ``start_hole`` (or ``start_s``) on, while the spindle turns backwards
-    (``on_extraction_only``) and the tool is engaged, torque and axial force fluctuate: the
-    tool slips and re-grips in the collet.
+    (``on_extraction_only``) and the tool is engaged, the tool sticks and slips in the collet:
+    the collet clamps for one direction of rotation only (thesis §5.4: "dynamometer collet is not
+    providing changing on rotation"), so on reversal the reverse torque winds the holder up until
+    the clamping friction gives, the tap slips back, and the cycle repeats (stick-slip).
+
+    Signature (see :func:`loose_tool_signature`):
+
+    * torque: a sawtooth at the slip frequency, rising during the stick phase and dropping at
+      each slip, with a slip-to-slip amplitude spread and sample jitter -> dynamometer torque and,
+      through the spindle position loop, the spindle current;
+    * axial force: at each slip the tap lags in rotation while the Z axis keeps retracting at the
+      pitch; the thread held in the workpiece pulls the tap (and the Z axis) back into the hole
+      with a force pulse that decays as the tension-compression float of the holder takes it up
+      -> fluctuation of the Z encoder position (following error).
+
+    Both scale with the engaged fraction of the thread.
 
     Attributes
     ----------
@@ -44,11 +59,16 @@ class LooseTool:
     start_s : float or None
         Or: time from which the tool is loose [s].
     torque_amplitude_nm : float
-        Amplitude of the torque fluctuation [Nm]. [E] 1.0
+        Half range of the stick-slip torque sawtooth [Nm]. [E] 1.0 (of the order of the
+        reverse torque of an M8 tap in steel, ~0.85 Nm)
     axial_force_amplitude_n : float
-        Amplitude of the axial (Z) force fluctuation [N] -> Z ENC_POS fluctuation. [E] 300
+        Peak of the axial pull per slip [N] -> Z ENC_POS fluctuation. [E] 300
     freq_hz : float
-        Main slip-stick frequency [Hz]. [E] 37
+        Mean slip frequency [Hz]. [E] 37
+    amplitude_spread : float
+        Relative spread of the slip amplitude from slip to slip (uniform +-) [-]. [E] 0.4
+    axial_decay_s : float
+        Decay time of the axial pull after a slip [s]. [E] 0.006
     on_extraction_only : bool
         Only while the spindle turns backwards (speed < 0). Default True.
     """
@@ -58,7 +78,53 @@ class LooseTool:
     torque_amplitude_nm: float = 1.0
     axial_force_amplitude_n: float = 300.0
     freq_hz: float = 37.0
+    amplitude_spread: float = 0.4
+    axial_decay_s: float = 0.006
     on_extraction_only: bool = True
+
+
+def loose_tool_signature(
+    fault: LooseTool, time_s: ArrayLike, *, jitter: ArrayLike | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Stick-slip torque and axial-force fluctuation of a loose tool (per unit engagement).
+
+    Parameters
+    ----------
+    fault : LooseTool
+        Amplitudes, slip frequency, spread and decay.
+    time_s : array-like
+        Recording time per sample [s].
+    jitter : array-like, optional
+        Standard-normal noise per sample (slip randomness within a slip) [-].
+
+    Returns
+    -------
+    torque_nm : numpy.ndarray
+        Torque fluctuation [Nm], sign as a load opposing reverse rotation adds to (negative).
+    axial_n : numpy.ndarray
+        Axial force [N], negative = pulls the tool down into the hole.
+
+    Notes
+    -----
+    Slip k occupies ``k <= f t < k + 1``; ``u = f t - k`` is the phase within it. Torque
+    ``-A_T a_k (2u - 1)`` (wind-up, then release at the slip), axial force
+    ``-A_F a_k exp(-u / (f tau))`` (pull after the slip, decaying with ``tau``). The slip
+    amplitude ``a_k = 1 + s (2 r_k - 1)`` uses a hash ``r_k`` of the slip number, so the
+    signature does not depend on how the simulation is cut into chunks.
+    """
+    t = np.asarray(time_s, dtype=np.float64)
+    ft = fault.freq_hz * t
+    k = np.floor(ft)
+    u = ft - k
+    r = np.sin(k * 12.9898 + 78.233) * 43758.5453
+    r -= np.floor(r)
+    a = 1.0 + fault.amplitude_spread * (2.0 * r - 1.0)
+    if jitter is not None:
+        a = a * (1.0 + 0.15 * np.asarray(jitter, dtype=np.float64))
+    torque = -fault.torque_amplitude_nm * a * (2.0 * u - 1.0)
+    decay = max(fault.freq_hz * fault.axial_decay_s, 1e-6)
+    axial = -fault.axial_force_amplitude_n * a * np.exp(-u / decay)
+    return torque, axial
 
 
 @dataclass(frozen=True)
@@ -186,11 +252,11 @@ def apply_faults(
             if f.on_extraction_only:
                 active &= spd < 0.0
             if active.any():
-                jitter = rng.standard_normal(n) if rng is not None else np.zeros(n)
-                phase = 2.0 * math.pi * f.freq_hz * t
-                slip = np.sin(phase) + 0.5 * np.sin(2.7 * phase + 1.0) + 0.5 * jitter
-                torque = np.where(active, torque + f.torque_amplitude_nm * slip, torque)
-                thrust = np.where(active, thrust + f.axial_force_amplitude_n * slip, thrust)
+                jitter = rng.standard_normal(n) if rng is not None else None
+                dt, da = loose_tool_signature(f, t, jitter=jitter)
+                w = np.clip(load.engagement, 0.0, 1.0)
+                torque = np.where(active, torque + w * dt, torque)
+                thrust = np.where(active, thrust + w * da, thrust)
         elif isinstance(f, ToolBreakage):
             in_hole = hole_a == f.hole
             after = (hole_a > f.hole) | (in_hole & (prog >= f.depth_fraction))

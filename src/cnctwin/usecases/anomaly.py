@@ -32,13 +32,16 @@ import math
 from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from cnctwin.exceptions import ConfigError
+
+if TYPE_CHECKING:
+    from cnctwin.recording import Recording
 
 __all__ = [
     "DETECTORS",
@@ -49,6 +52,7 @@ __all__ = [
     "SpectralDetector",
     "TappingDetector",
     "backtest",
+    "signal_stream",
 ]
 
 
@@ -349,7 +353,9 @@ class TappingDetector(Detector):
     torque, the spindle current and the Z encoder position fluctuate. The detector tracks the
     rolling standard deviation of the sample-to-sample change of ``current_a`` and of
     ``z_error_mm`` (following error of Z) while ``speed_rpm`` has the reverse sign, and scores
-    their ratio to the learned level.
+    their ratio to the level learned on good extractions *at the same time since the reversal*
+    (bins of ``bin_samples``), so the reversal and stop transients of a healthy tap are not
+    alarms.
 
     Parameters
     ----------
@@ -359,59 +365,115 @@ class TappingDetector(Detector):
         Sign of the spindle speed during extraction (M3 tapping reverses to M4: -1).
     threshold_ratio : float, default 3
         Ratio to the learned fluctuation that counts as normal.
+    bin_samples : int, default 5
+        Width of the reference bins over the time since the reversal [samples].
+    n_bins : int, default 800
+        Reference bins (800 x 5 samples = 8 s at 500 Hz); later windows use the last bin.
+    tolerance_bins : int, default 2
+        The reference of bin ``b`` is the largest learned level in ``b - tol .. b + tol``, which
+        tolerates a jitter of the transients of ``tol x bin_samples`` samples.
+    min_current_a : float, default 0.01
+        Floor of the learned current fluctuation [A] (quantization of CURRENT).
+    min_z_mm : float, default 2e-5
+        Floor of the learned Z fluctuation [mm] (encoder resolution order).
+
+    Notes
+    -----
+    Score = ``max(s_I / ref_I(b), s_z / ref_z(b)) - threshold_ratio`` with ``s`` the rolling
+    standard deviation of first differences and ``ref(b)`` the largest learned mean of ``s``
+    within ``tolerance_bins`` of bin ``b`` = (samples since the reversal - window) //
+    ``bin_samples``, floored by the ``min_*`` values. Bins never learned fall back to the
+    nearest earlier learned bin.
     """
 
     inputs = ("current_a", "z_error_mm", "speed_rpm")
 
     def __init__(
-        self, *, window: int = 50, direction: int = -1, threshold_ratio: float = 3.0
+        self,
+        *,
+        window: int = 50,
+        direction: int = -1,
+        threshold_ratio: float = 3.0,
+        bin_samples: int = 5,
+        n_bins: int = 800,
+        tolerance_bins: int = 2,
+        min_current_a: float = 0.01,
+        min_z_mm: float = 2e-5,
     ) -> None:
         if direction not in (-1, 1):
             raise ConfigError(f"direction must be -1 or +1, not {direction}")
+        if window < 2 or n_bins < 1 or bin_samples < 1 or tolerance_bins < 0:
+            raise ConfigError(
+                "window must be >= 2, n_bins and bin_samples >= 1, tolerance_bins >= 0; got "
+                f"{window}, {n_bins}, {bin_samples}, {tolerance_bins}"
+            )
         self.window = window
         self.direction = direction
         self.threshold_ratio = threshold_ratio
+        self.bin_samples = bin_samples
+        self.n_bins = n_bins
+        self.tolerance_bins = tolerance_bins
+        self.min_current_a = min_current_a
+        self.min_z_mm = min_z_mm
         self._prev: tuple[float, float] | None = None
+        self._since = 0
         self._dc: deque[float] = deque(maxlen=window)
         self._dz: deque[float] = deque(maxlen=window)
-        self._ref_c = _Welford()
-        self._ref_z = _Welford()
+        self._ref_c = [_Welford() for _ in range(n_bins)]
+        self._ref_z = [_Welford() for _ in range(n_bins)]
 
     def _params(self) -> dict[str, Any]:
         return {"window": self.window, "direction": self.direction,
-                "threshold_ratio": self.threshold_ratio}
+                "threshold_ratio": self.threshold_ratio, "bin_samples": self.bin_samples,
+                "n_bins": self.n_bins, "tolerance_bins": self.tolerance_bins,
+                "min_current_a": self.min_current_a, "min_z_mm": self.min_z_mm}
 
-    def _update(self, x: Mapping[str, float]) -> tuple[float, float] | None:
+    def _update(self, x: Mapping[str, float]) -> tuple[int, float, float] | None:
         c, z, n = float(x["current_a"]), float(x["z_error_mm"]), float(x["speed_rpm"])
         reverse = n * self.direction > 1.0
         prev, self._prev = self._prev, (c, z)
         if not reverse or prev is None:
             self._dc.clear()
             self._dz.clear()
+            self._since = 0
             return None
+        self._since += 1
         self._dc.append(c - prev[0])
         self._dz.append(z - prev[1])
         if len(self._dc) < self.window:
             return None
-        return float(np.std(self._dc)), float(np.std(self._dz))
+        b = min((self._since - self.window) // self.bin_samples, self.n_bins - 1)
+        return b, float(np.std(self._dc)), float(np.std(self._dz))
+
+    def _ref(self, refs: list[_Welford], b: int, floor: float) -> float:
+        lo, hi = max(b - self.tolerance_bins, 0), min(b + self.tolerance_bins, self.n_bins - 1)
+        near = [r.mean for r in refs[lo:hi + 1] if r.n]
+        if near:
+            return max(max(near), floor)
+        for k in range(lo - 1, -1, -1):  # never learned: the nearest earlier learned bin
+            if refs[k].n:
+                return max(refs[k].mean, floor)
+        return float("nan")
 
     def learn_one(self, x: Mapping[str, float]) -> None:
         f = self._update(x)
         if f is not None:
-            self._ref_c.update(f[0])
-            self._ref_z.update(f[1])
+            self._ref_c[f[0]].update(f[1])
+            self._ref_z[f[0]].update(f[2])
 
     def score_one(self, x: Mapping[str, float]) -> float:
         f = self._update(x)
-        if f is None or self._ref_c.n == 0:
+        if f is None:
             return 0.0
-        rc = f[0] / max(self._ref_c.mean, 1e-12)
-        rz = f[1] / max(self._ref_z.mean, 1e-12)
-        return max(rc, rz) - self.threshold_ratio
+        rc = self._ref(self._ref_c, f[0], self.min_current_a)
+        rz = self._ref(self._ref_z, f[0], self.min_z_mm)
+        if not math.isfinite(rc):
+            return 0.0
+        return max(f[1] / rc, f[2] / rz) - self.threshold_ratio
 
     @classmethod
     def _unit_test_params(cls) -> dict[str, Any]:
-        return {"window": 10}
+        return {"window": 10, "n_bins": 50}
 
 
 @dataclass(frozen=True)
@@ -427,11 +489,15 @@ class BacktestResult:
     misses : int
         Faults with no alarm within ``max_delay_s``.
     false_alarms : int
-        Alarms not within ``max_delay_s`` after any fault onset.
+        Alarms not within ``max_delay_s`` after any fault onset (with ``persistent`` faults:
+        alarms before the first onset).
     false_alarms_per_hour : float
-        ``false_alarms`` per hour of monitored (non-learning) time [1/h].
+        ``false_alarms`` per hour of fault-free monitored time (``healthy_s``) [1/h].
     monitored_s : float
         Scored duration [s].
+    healthy_s : float
+        Scored duration in which an alarm counts as false [s]: ``monitored_s``, or with
+        ``persistent`` faults the scored time before the first onset.
     """
 
     alarms_s: list[float]
@@ -440,6 +506,7 @@ class BacktestResult:
     false_alarms: int
     false_alarms_per_hour: float
     monitored_s: float
+    healthy_s: float = float("nan")
 
 
 def backtest(
@@ -452,6 +519,7 @@ def backtest(
     threshold: float = 0.0,
     max_delay_s: float = 2.0,
     refractory_s: float = 1.0,
+    persistent: bool = False,
 ) -> BacktestResult:
     """Replay a stream: learn on the first part, score the rest, compare alarms with faults.
 
@@ -473,6 +541,10 @@ def backtest(
         An alarm within this time after an onset counts as a detection [s].
     refractory_s : float, default 1
         After an alarm, further crossings within this time are not new alarms [s].
+    persistent : bool, default False
+        The fault stays once it has started (a loose tool stays loose, a broken drill stays
+        broken): alarms after the first onset are never false, and the false-alarm rate is per
+        hour of scored time before it.
     """
     t = np.asarray(time_s, dtype=np.float64)
     if t.size != len(data):
@@ -496,12 +568,80 @@ def backtest(
         hits = [i for i, a in enumerate(alarms) if o <= a <= o + max_delay_s]
         delays.append(alarms[hits[0]] - o if hits else float("nan"))
         matched.update(hits)
-    false = len(alarms) - len(matched)
     monitored = float(ts[-1] - ts[0]) if ts.size > 1 else 0.0
+    healthy = monitored
+    if persistent and onsets:
+        matched.update(i for i, a in enumerate(alarms) if a >= onsets[0])
+        healthy = float(np.clip(onsets[0] - ts[0], 0.0, monitored)) if ts.size else 0.0
+    false = len(alarms) - len(matched)
     return BacktestResult(
         alarms, delays, int(np.isnan(delays).sum()) if delays else 0, false,
-        false / (monitored / 3600.0) if monitored > 0 else float("nan"), monitored,
+        false / (healthy / 3600.0) if healthy > 0 else float("nan"), monitored, healthy,
     )
+
+
+def signal_stream(
+    recordings: Sequence[Recording],
+    holes: pd.DataFrame | None = None,
+    *,
+    cutting_only: bool = False,
+) -> pd.DataFrame:
+    """Detector inputs, one row per HF sample, from recordings in time order.
+
+    Parameters
+    ----------
+    recordings : sequence of Recording
+        Recordings with ``CURRENT|SP1`` (and ``DES_POS|Z1``/``ENC_POS|Z1`` for the Z error).
+    holes : pandas.DataFrame, optional
+        Hole record (:func:`cnctwin.usecases.holes.hole_records`): gives ``progress`` (0..1 over
+        each cut) and ``hole``; without it both are NaN / -1.
+    cutting_only : bool, default False
+        Keep only the samples inside a cut (envelope, physics and spectral detectors).
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``time_s`` (from the first sample of the first recording) [s], ``current_a`` [A],
+        ``speed_rpm`` (actual spindle speed) [rpm], ``predicted_current_a`` (spindle twin with
+        the thesis parameters at zero cutting torque) [A], ``z_error_mm`` (DES_POS - ENC_POS of
+        Z1, 0 if absent) [mm], ``progress`` [-], ``hole`` [-].
+    """
+    from cnctwin.analysis.segments import spindle_speed_rpm
+    from cnctwin.spindle import SpindleModel
+
+    if not recordings:
+        raise ConfigError("signal_stream needs at least one recording")
+    model = SpindleModel.from_parameters("thesis_spinner_840dsl")
+    origin = pd.Timestamp(recordings[0].hf["time"].iloc[0])
+    parts = []
+    for r in recordings:
+        t = ((pd.DatetimeIndex(r.hf["time"]) - origin) / pd.Timedelta(seconds=1)).to_numpy()
+        cur = r.hf["CURRENT|SP1"].to_numpy(dtype=np.float64)
+        speed, _ = spindle_speed_rpm(r, "SP1")
+        d = pd.DataFrame({"time_s": t, "current_a": cur, "speed_rpm": speed,
+                          "predicted_current_a": model.predict_current_a(0.0, speed)})
+        if r.has("DES_POS|Z1") and r.has("ENC_POS|Z1"):
+            d["z_error_mm"] = (r.hf["DES_POS|Z1"] - r.hf["ENC_POS|Z1"]).to_numpy()
+        else:
+            d["z_error_mm"] = 0.0
+        prog = np.full(len(d), np.nan)
+        hole = np.full(len(d), -1)
+        cyc = r.cycles
+        if holes is not None:
+            hv = holes[["hole", "cut_start_cycle", "cut_end_cycle"]].to_numpy(dtype=np.int64)
+            for h_no, c0, c1 in hv:
+                lo = int(np.searchsorted(cyc, c0))
+                hi = int(np.searchsorted(cyc, c1, side="right"))
+                if hi > lo:
+                    prog[lo:hi] = np.linspace(0.0, 1.0, hi - lo)
+                    hole[lo:hi] = int(h_no)
+        d["progress"] = prog
+        d["hole"] = hole
+        parts.append(d)
+    data = pd.concat(parts, ignore_index=True)
+    if cutting_only:
+        data = data[data["hole"] >= 0].reset_index(drop=True)
+    return data
 
 
 DETECTORS: tuple[type[Detector], ...] = (
