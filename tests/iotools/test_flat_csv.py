@@ -24,7 +24,12 @@ import pandas as pd
 import pytest
 
 from cnctwin.exceptions import FormatError
-from cnctwin.iotools import read_capture4analysis, read_flat_csv, write_csv
+from cnctwin.iotools import (
+    parse_capture4analysis,
+    read_capture4analysis,
+    read_flat_csv,
+    write_csv,
+)
 from cnctwin.recording import CYCLE_COUNTER_MODULUS, EVENT_COLUMNS, Recording
 
 # KIT header.csv long names (data-formats.md 1.3); codes not listed keep the code as name
@@ -219,3 +224,37 @@ def test_event_counters_unwrapped_next_to_hf(tmp_path: Path) -> None:
     assert back.meta.wraps == 1
     np.testing.assert_array_equal(back.cycles, cycles)
     pd.testing.assert_frame_equal(back.events[list(EVENT_COLUMNS)], src.events)
+
+
+DUP_ROWS = [[10, 1.0, 2.0], [11, 1.5, 2.5], [11, 9.0, 9.0], [12, 2.0, 3.0], [10, 7.0, 7.0]]
+"""Rows at file lines 2..6: cycle 11 repeats at line 4, cycle 10 at line 6 (out of order)."""
+
+
+def test_duplicate_cycle_keeps_first_and_names_lines(tmp_path: Path) -> None:
+    rec = read_flat_csv(_tiny(tmp_path, [",".join(map(str, r)) for r in DUP_ROWS]))
+    assert rec.cycles.tolist() == [10, 11, 12]
+    # the first row of each cycle in file order: line 2 for 10, line 3 for 11
+    np.testing.assert_array_equal(rec.signal("LOAD|SP1").to_numpy(), [1.0, 1.5, 2.0])
+    np.testing.assert_array_equal(rec.signal("CURRENT|X1").to_numpy(), [2.0, 2.5, 3.0])
+    dup = [i for i in rec.meta.issues if "duplicate CYCLE" in i]
+    assert len(dup) == 1
+    assert "2 duplicate CYCLE row(s) (DIFFERENT values)" in dup[0]
+    assert "cycle 10: line 6 (kept line 2)" in dup[0]
+    assert "cycle 11: line 4 (kept line 3)" in dup[0]
+    assert any("not in cycle order" in i for i in rec.meta.issues)
+
+
+def test_duplicate_cycle_same_rule_as_c4a(tmp_path: Path) -> None:
+    """The flat CSV and the Capture4Analysis reader keep the same row of a repeated cycle."""
+    doc = {
+        "Header": {"CycleTimeMs": 2, "SignalListHFData": [
+            {"Address": "CYCLE"}, {"Address": "LOAD|6", "Axis": "SP1"},
+            {"Address": "CURRENT|1", "Axis": "X1"},
+        ]},
+        "Payload": [{"HFData": DUP_ROWS}],
+    }
+    c4a = parse_capture4analysis(json.dumps(doc).encode())
+    flat = read_flat_csv(_tiny(tmp_path, [",".join(map(str, r)) for r in DUP_ROWS]))
+    assert any("kept the first arrival" in i for i in c4a.meta.issues)
+    np.testing.assert_array_equal(flat.cycles, c4a.cycles)
+    pd.testing.assert_frame_equal(flat.hf[flat.columns], c4a.hf[flat.columns])

@@ -246,6 +246,40 @@ def _events(path: Path, kind: str, colmap: dict[str, str], *, salvage: bool,
     return pd.DataFrame(frame), partial
 
 
+def _sorted_unique(hf: pd.DataFrame, lines: NDArray[np.int64], name: str, issues: list[str]
+                   ) -> pd.DataFrame:
+    """Sort rows by cycle (stable) and keep the first row of a repeated cycle.
+
+    The first row in file order wins, as in
+    :func:`~cnctwin.iotools.capture4analysis.read_capture4analysis` (first arrival); the
+    dropped rows are named by line in ``issues``.
+    """
+    if not hf.index.is_monotonic_increasing:
+        issues.append(f"{name}: rows not in cycle order; sorted")
+        order = np.argsort(hf.index.to_numpy(), kind="stable")
+        hf = hf.iloc[order]
+        lines = lines[order]
+    if not hf.index.has_duplicates:
+        return hf
+    cyc = hf.index.to_numpy()
+    dropped = np.flatnonzero(hf.index.duplicated(keep="first"))
+    first_of = np.searchsorted(cyc, cyc[dropped], side="left")  # rows are sorted by cycle
+    vals = hf.to_numpy(dtype=np.float64)
+    same = bool(np.array_equal(vals[dropped], vals[first_of], equal_nan=True))
+    shown = "; ".join(
+        f"cycle {int(cyc[d])}: line {int(lines[d])} (kept line {int(lines[f])})"
+        for d, f in zip(dropped[:10], first_of[:10], strict=True)
+    ) + (" ..." if dropped.size > 10 else "")
+    issues.append(
+        f"{name}: {dropped.size} duplicate CYCLE row(s) "
+        f"({'identical' if same else 'DIFFERENT'} values) dropped, kept the first of each "
+        f"cycle: {shown}"
+    )
+    keep = np.ones(len(hf), dtype=bool)
+    keep[dropped] = False
+    return hf[keep]
+
+
 def _merge_events(frames: list[pd.DataFrame]) -> pd.DataFrame:
     """Concatenate event frames in the given order, then sort stably by cycle."""
     df = pd.concat(frames, ignore_index=True)
@@ -286,6 +320,12 @@ def read_flat_csv(
     FormatError
         Missing ``_hfdata.csv`` or ``CYCLE`` column, rows of the wrong length (file and line),
         non-numeric values (file, line and column).
+
+    Notes
+    -----
+    Rows are sorted by cycle; of rows repeating a cycle the first in the file is kept and the
+    others are listed by line in ``meta.issues`` (the rule of
+    :func:`~cnctwin.iotools.capture4analysis.read_capture4analysis`).
     """
     files = flat_csv_paths(path)
     hfpath = files["hfdata"]
@@ -344,13 +384,8 @@ def read_flat_csv(
         code, _, num = a.partition("|")
         names.append(f"{code}|{axis_map[int(num)]}" if num.isdigit() else a)
     hf = pd.DataFrame(values[:, 1:], columns=names, index=pd.Index(cycles, name="cycle"))
-    if not hf.index.is_monotonic_increasing:
-        issues.append(f"{hfpath.name}: rows not in cycle order; sorted")
-        hf = hf.sort_index(kind="stable")
-    if hf.index.has_duplicates:
-        n_dup = int(hf.index.duplicated().sum())
-        issues.append(f"{hfpath.name}: {n_dup} duplicate CYCLE rows; kept the last")
-        hf = hf[~hf.index.duplicated(keep="last")]
+    hf = _sorted_unique(hf, np.array([ln for ln, _ in rows], dtype=np.int64), hfpath.name,
+                        issues)
 
     anchors: list[tuple[int, pd.Timestamp]] = []
     if time_i is not None:
