@@ -400,7 +400,7 @@ def _servo_kernel(
             xf1 = xf
             # ---- position controller (NC): encoder latched at t_k
             xq_prev = xq
-            xq = round(x * inv_res) * res
+            xq = np.rint(x * inv_res) * res  # rint: no float->int->float round trip
             enc = xq
             diff2 = ctrl - enc
             vset0 = kv * diff2 + vel  # load units/s
@@ -411,7 +411,7 @@ def _servo_kernel(
             for j in range(inner_steps):
                 if j > 0:
                     xq_prev = xq
-                    xq = round(x * inv_res) * res
+                    xq = np.rint(x * inv_res) * res
                 w_meas = (xq - xq_prev) * inv_hg
                 if dsc:
                     dd = ctrl + dctrl * (j / inner_steps) - xq

@@ -545,6 +545,51 @@ def _friction_nm(w: float, t_rotor: float, pv: NDArray[np.float64]) -> float:  #
     return sgn * (tau_c + pv[11] * math.exp(-aw / pv[12]) + b * w_eff)
 
 
+_TAYLOR_STEP_RAD_S = 0.02
+"""Largest speed change [rad/s] over which :func:`_kernel` extrapolates the friction torque
+from its last exact evaluation (quadratic Taylor model); beyond it the friction is evaluated
+exactly again. Error bound max|g3| d^3 / 6 < 3e-12 Nm for the default motor, g3 the third
+derivative (see :func:`_friction_taylor`)."""
+
+
+@njit(cache=True)
+def _friction_taylor(
+    w: float, t_rotor: float, pv: NDArray[np.float64]
+) -> tuple[float, float, float]:  # pragma: no cover
+    """Friction torque at ``w`` [Nm] and its first two derivatives in w (away from w = 0).
+
+    Valid where the sign term is exactly +-1 (``|w| >= 20 eps``, see :func:`_friction_nm`);
+    the value is computed with the same operations as :func:`_friction_nm` (same bits).
+    With g(|w|) = tau_c + tau_s exp(-|w|/w_s) + B w_eff(|w|) and f = sgn(w) g(|w|)::
+
+        g1 = -tau_s/w_s exp(-|w|/w_s) + B (1 - (1 - r) sigmoid(x))
+        g2 =  tau_s/w_s^2 exp(-|w|/w_s) - B (1 - r) sigmoid(x) (1 - sigmoid(x)) / W
+
+    with x = (|w| - w_k) / W; df/dw = g1, d2f/dw2 = sgn g2. The third derivative is bounded
+    by tau_s / w_s^3 + 0.0962 B (1 - r) / W^2 (2.1e-6 Nm s^3/rad^3 for the default motor).
+    """
+    dt_k = t_rotor - pv[8]
+    b = pv[6] * max(0.05, 1.0 + pv[9] * dt_k)
+    tau_c = pv[7] * max(0.05, 1.0 + pv[10] * dt_k)
+    aw = abs(w)
+    x = (aw - pv[13]) / pv[14]
+    if x > 0.0:
+        ex = math.exp(-x)
+        softplus = x + math.log1p(ex)
+        sig = 1.0 / (1.0 + ex)
+    else:
+        ex = math.exp(x)
+        softplus = math.log1p(ex)
+        sig = ex / (1.0 + ex)
+    w_eff = aw - (1.0 - pv[43]) * pv[14] * softplus
+    sgn = 1.0 if w > 0.0 else -1.0
+    st = pv[11] * math.exp(-aw / pv[12])
+    g0 = tau_c + st + b * w_eff
+    g1 = -st / pv[12] + b * (1.0 - (1.0 - pv[43]) * sig)
+    g2 = st / (pv[12] * pv[12]) - b * (1.0 - pv[43]) * sig * (1.0 - sig) / pv[14]
+    return sgn * g0, g1, sgn * g2
+
+
 @njit(cache=True)
 def _kernel(  # pragma: no cover - compiled
     speed_cmd_rpm: NDArray[np.float64],
@@ -587,7 +632,17 @@ def _kernel(  # pragma: no cover - compiled
     fr = 0.0
     u = 0.0
     psi_act = psi0
+    dt_over_j = dt / j
+    # friction: exact evaluation at an anchor speed w0, quadratic Taylor model while
+    # |w - w0| <= _TAYLOR_STEP_RAD_S and w stays where sgn(w) is exactly +-1; the anchor is
+    # renewed every cycle (the rotor temperature moves the coefficients)
+    w_taylor_min = 25.0 * pv[15] + _TAYLOR_STEP_RAD_S
     for k in range(n):
+        anchored = False
+        w0 = 0.0
+        f0 = 0.0
+        f1 = 0.0
+        f2h = 0.0
         m = mode[k]
         ff_w = 0.0
         if m == 1:
@@ -644,8 +699,19 @@ def _kernel(  # pragma: no cover - compiled
                 sat = 1.0 / (1.0 + pv[5] * x * x) if x > 0.0 else 1.0
             psi_act = psi_t * sat
             te = 1.5 * p * (psi_act + (ld - lq) * i_d) * i_q
-            fr = _friction_nm(w, tr, pv)
-            w += dt * (te - fr - tau_load) / j
+            dw = w - w0
+            if anchored and abs(dw) <= _TAYLOR_STEP_RAD_S:
+                fr = f0 + dw * (f1 + f2h * dw)
+            elif abs(w) >= w_taylor_min:
+                f0, f1, f2 = _friction_taylor(w, tr, pv)
+                f2h = 0.5 * f2
+                w0 = w
+                anchored = True
+                fr = f0
+            else:
+                fr = _friction_nm(w, tr, pv)
+                anchored = False
+            w += dt_over_j * (te - fr - tau_load)
             th += dt * w
         # voltage demand (truth)
         we = p * w
