@@ -174,6 +174,72 @@ def test_footer_error_messages_reported(tmp_path: Path) -> None:
     assert any("buffer overflow" in i for i in rec.meta.issues)
 
 
+@pytest.mark.parametrize("footer", [["a", "b"], "done"])
+def test_footer_not_an_object(tmp_path: Path, footer: Any) -> None:
+    """A Footer that is not an object used to escape as AttributeError ('list'.get)."""
+    p = _write(tmp_path, _doc([[100, 1.0, 2.0]], Footer=footer))
+    with pytest.raises(FormatError, match="Footer is a") as info:
+        read_capture4analysis(p)
+    assert info.value.path == str(p) and info.value.position == "Footer"
+    rec = read_capture4analysis(p, salvage=True)
+    assert rec.meta.partial and rec.n_cycles == 1
+    assert any("Footer is a" in i for i in rec.meta.issues)
+
+
+@pytest.mark.parametrize(("payload", "kind"), [({"HFData": [[100, 1.0, 2.0]]}, "an object"),
+                                               (None, "null")])
+def test_payload_not_an_array(tmp_path: Path, payload: Any, kind: str) -> None:
+    """A Payload that is not an array used to give an empty recording without any issue."""
+    p = _write(tmp_path, _doc([], Payload=payload))
+    with pytest.raises(FormatError, match=f"Payload is {kind}, not an array") as info:
+        read_capture4analysis(p)
+    assert info.value.position == "Payload"
+    rec = read_capture4analysis(p, salvage=True)
+    assert rec.meta.partial and rec.n_cycles == 0
+    assert any(f"Payload is {kind}" in i for i in rec.meta.issues)
+
+
+def test_event_integer_field_not_an_integer(tmp_path: Path) -> None:
+    """A non-integer Channel used to become <NA> silently."""
+    doc = _doc([[100, 1.0, 2.0]])
+    doc["Payload"].append({"HFBlockEvent": {"HFProbeCounter": 100, "Channel": "one",
+                                            "GCode": "G1 X1"}})
+    p = _write(tmp_path, doc)
+    with pytest.raises(FormatError, match=r"HFBlockEvent\.Channel 'one' is not an integer") as info:
+        read_capture4analysis(p)
+    assert info.value.position == "Payload[1].HFBlockEvent" and info.value.field == "Channel"
+    rec = read_capture4analysis(p, salvage=True)
+    assert rec.meta.partial
+    # the event is kept with its G-code; only the bad field is missing
+    assert rec.events["gcode"].tolist() == ["G1 X1"]
+    assert rec.events["channel"].isna().all()
+    assert any("Channel 'one' is not an integer; kept as missing" in i for i in rec.meta.issues)
+
+
+def test_one_bad_time_anchor_keeps_the_others(tmp_path: Path) -> None:
+    """One unparsable HFTimestamp used to discard every anchor (times from the epoch)."""
+    doc = _doc([[100, 1.0, 2.0], [101, 1.0, 2.0], [102, 1.0, 2.0]])
+    doc["Payload"].append({"HFTimestamp": {"HFProbeCounter": 102, "Time": "yesterday"}})
+    rec = read_capture4analysis(_write(tmp_path, doc))
+    # Initial (cycle 100 at 2024-01-01T00:00:00Z) still times the rows: 2 ms per cycle
+    assert str(rec.hf["time"].iloc[2]) == "2024-01-01 00:00:00.004000+00:00"
+    assert [c for c, _ in rec.meta.time_anchors] == [100]
+    assert any("1 of 2 time anchors" in i and "'yesterday' at cycle 102" in i
+               for i in rec.meta.issues)
+
+
+def test_unusable_initial_and_job_description_reported(tmp_path: Path) -> None:
+    """A non-object Initial and a non-list JobDescription used to vanish without an issue."""
+    doc = _doc([[100, 1.0, 2.0]])
+    doc["Header"]["Initial"] = ["2024-01-01"]
+    doc["Header"]["JobDescription"] = "drill 4 holes"
+    rec = read_capture4analysis(_write(tmp_path, doc))
+    assert any("Header.Initial" in i and "not used as a time anchor" in i
+               for i in rec.meta.issues)
+    assert rec.meta.attrs["job_description"] == {"item0": "drill 4 holes"}
+    assert any("JobDescription is not a list" in i for i in rec.meta.issues)
+
+
 # ---------------------------------------------------------------------------- zip
 def test_broken_zip(c4a_file: Path, tmp_path: Path) -> None:
     good = tmp_path / "good.zip"

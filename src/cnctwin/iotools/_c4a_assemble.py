@@ -159,21 +159,25 @@ def _time_anchors(parts: list[FilePart], cycle_time_s: float, issues: list[str],
     raw_anchors: list[tuple[int, str]] = []
     first = parts[0]
     initial = first.header.get("Initial")
-    if isinstance(initial, dict) and "HFProbeCounter" in initial and "Time" in initial:
-        c0 = opt_int(initial["HFProbeCounter"])
-        if c0 is not pd.NA:
-            ref = int(first.cycles[0]) if first.cycles.size else int(c0)
-            raw_anchors.append((nearest_unwrap(int(c0), ref), str(initial["Time"])))
+    c0: Any = opt_int(initial.get("HFProbeCounter")) if isinstance(initial, dict) else pd.NA
+    if c0 is not pd.NA and isinstance(initial, dict) and "Time" in initial:
+        ref = int(first.cycles[0]) if first.cycles.size else int(c0)
+        raw_anchors.append((nearest_unwrap(int(c0), ref), str(initial["Time"])))
+    elif initial is not None:
+        issues.append(f"Header.Initial {initial!r} has no integer HFProbeCounter and Time; "
+                      "not used as a time anchor")
     for p in parts:
         raw_anchors.extend(p.anchors)
     anchors: list[tuple[int, pd.Timestamp]] = []
     if raw_anchors:
         try:
             times = parse_times([t for _, t in raw_anchors])
-        except (ValueError, TypeError) as exc:
-            issues.append(f"time anchors could not be parsed ({exc}); times start at the epoch")
+        except (ValueError, TypeError):
+            anchors = _parse_anchors_one_by_one(raw_anchors, issues)
         else:
             anchors = [(c, t) for (c, _), t in zip(raw_anchors, times, strict=True)]
+        if not anchors:
+            issues.append("no time anchor could be parsed; times start at the Unix epoch")
     else:
         issues.append("no Initial/HFTimestamp time anchors; times start at the Unix epoch")
     if len(anchors) > 1:
@@ -196,6 +200,22 @@ def _time_anchors(parts: list[FilePart], cycle_time_s: float, issues: list[str],
                 "jumped)"
             )
     return anchors
+
+
+def _parse_anchors_one_by_one(raw: list[tuple[int, str]], issues: list[str]
+                              ) -> list[tuple[int, pd.Timestamp]]:
+    """Parse anchors singly, keep the good ones and name the bad ones in ``issues``."""
+    good: list[tuple[int, pd.Timestamp]] = []
+    bad: list[str] = []
+    for c, t in raw:
+        try:
+            good.append((c, parse_times([t])[0]))
+        except (ValueError, TypeError):
+            bad.append(f"{t!r} at cycle {c}")
+    shown = ", ".join(bad[:5]) + (" ..." if len(bad) > 5 else "")
+    issues.append(f"{len(bad)} of {len(raw)} time anchors are not ISO 8601 times and were not "
+                  f"used: {shown}")
+    return good
 
 
 def _hf_block(parts: list[FilePart], issues: list[str]

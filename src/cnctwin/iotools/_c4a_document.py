@@ -32,6 +32,10 @@ from cnctwin.iotools._jsonscan import (
 
 __all__ = ["FilePart", "read_document"]
 
+_INT_EVENT_FIELDS = ("Channel", "SeekOffset", "SelectedTool", "ActiveTool", "CallStackLevel",
+                     "laBuf")
+"""Event fields the events table holds as integers (``Int64``)."""
+
 
 @dataclass
 class FilePart:
@@ -128,6 +132,17 @@ class _PayloadSink:
                           fld="HFProbeCounter")
                 return
             ev = dict(value)
+            for fld in _INT_EVENT_FIELDS:
+                v = ev.get(fld)
+                if v is not None and opt_int(v) is pd.NA:
+                    msg = f"{key}.{fld} {v!r} is not an integer"
+                    if not state.salvage:
+                        raise FormatError(msg + "; read with salvage=True to keep the event "
+                                          "with this field missing",
+                                          path=label, position=where, field=fld)
+                    state.issues.append(f"{label}: {where}: {msg}; kept as missing")
+                    state.partial = True
+                    ev[fld] = None
             ev["__kind"] = "block" if key == "HFBlockEvent" else "call"
             ev["__cycle"] = state.unwrap_one(int(c))
             ev["__where"] = where
@@ -161,6 +176,16 @@ def _load_member(data: bytes, mv: memoryview, span: tuple[int, int], label: str,
             f"{name} is not valid JSON ({exc.msg})",
             path=label, position=line_col(data, v0 + exc.pos),
         ) from exc
+
+
+def _first_byte(mv: memoryview, pos: int) -> bytes:
+    """The first non-blank byte at or after ``pos`` (``b""`` at the end)."""
+    while pos < len(mv):
+        chunk = bytes(mv[pos : pos + 256]).lstrip()
+        if chunk:
+            return chunk[:1]
+        pos += 256
+    return b""
 
 
 def read_document(state: ReadState, src: Source) -> FilePart:
@@ -222,7 +247,12 @@ def read_document(state: ReadState, src: Source) -> FilePart:
         )
     footer: dict[str, Any] | None = None
     if "Footer" in members and members["Footer"][2] >= 0:
-        footer = _load_member(data, mv, members["Footer"][1:], label, "Footer")
+        got = _load_member(data, mv, members["Footer"][1:], label, "Footer")
+        if isinstance(got, dict):
+            footer = got
+        elif got is not None:
+            state.bad(label, "Footer", f"Footer is a {type(got).__name__}, not an object "
+                      "(FilePathChain and ErrorMessages cannot be read)")
 
     payload_member = members.get("Payload", (-1, -1, -1))[0]
     if payload_member < 0:
@@ -230,6 +260,13 @@ def read_document(state: ReadState, src: Source) -> FilePart:
             state.issues.append(f"{label}: truncated before the Payload; no data kept")
         else:
             raise FormatError("no Payload array", path=label, position="Payload")
+    else:
+        first = _first_byte(mv, members["Payload"][1])
+        if first not in (b"[", b""):
+            kind = {b"{": "an object", b"n": "null", b'"': "a string"}.get(first, "a scalar")
+            state.bad(label, "Payload", f"Payload is {kind}, not an array of entries; no data "
+                      "read from it")
+            payload_member = -1
     elements = scan.elements[scan.elements[:, 0] == payload_member] if payload_member >= 0 \
         else scan.elements[:0]
 

@@ -53,7 +53,11 @@ _EXTRA_EVENT_COLUMNS = ("ipo_read_error", "la_buf")
 def parse_job_description(items: Any, issues: list[str]) -> dict[str, Any]:
     """``Header.JobDescription`` (a list of ``"key": value`` fragments) as one dict."""
     out: dict[str, Any] = {}
+    if items is None:
+        return out
     if not isinstance(items, list):
+        issues.append("Header.JobDescription is not a list of fragments; kept as item0")
+        out["item0"] = items
         return out
     for k, s in enumerate(items):
         if not isinstance(s, str):
