@@ -38,6 +38,10 @@ SUPPORTED_FORMATS: dict[str, tuple[str, str, str]] = {
         "cnctwin.iotools.parquet", "read_parquet",
         ".parquet file or cnctwin Parquet directory",
     ),
+    "sim_chunks": (
+        "cnctwin.sim.recorder", "read_parquet_chunks",
+        "cnctwin simulator chunk directory (meta.json + hf_*.parquet)",
+    ),
     "flat_csv": (
         "cnctwin.iotools.flat_csv", "read_flat_csv",
         "*_hfdata.csv flattened CSV (KIT layout)",
@@ -85,6 +89,8 @@ def detect_format(path: str | PathLike[str]) -> str:
     name = p.name.lower()
     suffix = p.suffix.lower()
     if p.is_dir():
+        if (p / "meta.json").is_file() and any(p.glob("hf_*.parquet")):
+            return "sim_chunks"
         if (p / "hf.parquet").is_file() or any(p.glob("*.parquet")):
             return "parquet"
         raise FormatError(f"directory is not a cnctwin Parquet recording; supported: "

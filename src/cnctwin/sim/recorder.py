@@ -34,6 +34,7 @@ from cnctwin.recording import (
 )
 
 __all__ = [
+    "FLOAT32_CODES",
     "Capture4AnalysisSink",
     "MemorySink",
     "ParquetChunkSink",
@@ -123,6 +124,21 @@ def _concat(frames: list[pd.DataFrame], columns: tuple[str, ...]) -> pd.DataFram
     return out[list(columns)]
 
 
+FLOAT32_CODES: tuple[str, ...] = ("CURRENT", "TORQUE", "LOAD", "POWER", "TORQUE_FFW")
+"""HF codes :class:`ParquetChunkSink` stores as float32 by default: drive values whose
+measurement noise (0.03 A current noise, 0.02 Nm torque noise) is >= 1e4 times the float32
+resolution (relative 6e-8). Positions, controller differences and speeds stay float64
+(ENC_POS needs 1e-5 mm at up to 1000 mm; CMD_SPEED - VEL_FFW = Kv CTRL_DIFF2 must hold to the
+encoder resolution for the servo identification)."""
+
+_CHUNK_FORMAT_VERSION = 2
+
+_LF_SCHEMA_FIELDS: tuple[tuple[str, str], ...] = (
+    ("cycle", "int64"), ("time", "timestamp"), ("signal", "string"), ("value", "float64"),
+    ("text", "string"),
+)
+
+
 class ParquetChunkSink:
     """Write one Parquet file per chunk into a directory.
 
@@ -130,30 +146,43 @@ class ParquetChunkSink:
     ----------
     directory : str or path-like
         Output directory (created). Files: ``hf_000000.parquet`` ... (columns ``cycle``,
-        ``time``, ``CODE|AXIS``), ``lf.parquet``, ``events.parquet``, ``meta.json``.
+        ``CODE|AXIS``), ``lf.parquet``, ``events.parquet``, ``meta.json``.
     compression : str, default 'lz4'
         Parquet compression codec of the HF files (``'lz4'``, ``'zstd'`` (level 1),
         ``'snappy'``, ``'none'``).
+    float32_codes : sequence of str, default :data:`FLOAT32_CODES`
+        HF codes stored as float32 (read back as float64); ``()`` keeps every column float64.
 
     Notes
     -----
-    HF columns are written PLAIN (no dictionary) with min/max statistics only for ``cycle``
-    and ``time``: the noisy float columns defeat the dictionary, whose hashing made the writer
+    HF columns are written PLAIN (no dictionary), data pages v2, with min/max statistics only
+    for ``cycle``: the noisy float columns defeat the dictionary, whose hashing made the writer
     as costly as the whole servo model, and the constant columns of idle axes compress to a
-    few bytes anyway. Measured on a 40-hole drilling run (``benchmarks/bench_sim.py``, one
-    core, CPU time): zstd-1 with dictionary 414x real time and 203 B/cycle; zstd-1 plain
-    1351x, 155 B/cycle; lz4 plain 2304x, 193 B/cycle (the default: ~1.2 GB for the 3.5 h
-    wear run). Values stay float64 (ENC_POS needs 1e-5 mm at up to 1000 mm).
-    LF values and events are small (10 Hz and per block) and are kept until :meth:`close`;
-    HF rows leave memory chunk by chunk.
+    few bytes anyway. The ``time`` column is not stored: the reader computes it from the
+    cycle counter and the time anchor in ``meta.json`` exactly as the simulator does
+    (:func:`cnctwin.recording.cycles_to_time`). Measured on one 50 000-cycle chunk of a
+    drilling run (one core, CPU time, ``benchmarks/bench_sim.py``): float64 with ``time``,
+    pages v1: 37 ms and 196 B/cycle; float32 drive values, no ``time``, pages v2: ~25 ms and
+    103 B/cycle (~0.5 GB for the 3.5 h wear run). Arrow IPC (Feather v2, lz4) of the same
+    table took ~20-23 ms at 101 B/cycle: not worth a second file format.
+    HF rows and LF values leave memory chunk by chunk (LF rows are appended to ``lf.parquet``
+    as they come); only the NC events (one row per block) are kept until :meth:`close`.
     """
 
-    def __init__(self, directory: str | Path, *, compression: str = "lz4") -> None:
+    def __init__(
+        self,
+        directory: str | Path,
+        *,
+        compression: str = "lz4",
+        float32_codes: tuple[str, ...] | list[str] = FLOAT32_CODES,
+    ) -> None:
         self.directory = Path(directory)
         self.compression = compression
+        self.float32_codes = tuple(float32_codes)
         self.files: list[Path] = []
         self._columns: list[str] = []
-        self._lf: list[pd.DataFrame] = []
+        self._f32: set[str] = set()
+        self._lf_writer: Any = None
         self._events: list[pd.DataFrame] = []
         self._meta: RecordingMeta | None = None
         self._last_cycle: int | None = None
@@ -163,10 +192,11 @@ class ParquetChunkSink:
         """Create the directory."""
         self.directory.mkdir(parents=True, exist_ok=True)
         self._columns = list(columns)
+        self._f32 = {c for c in self._columns if c.split("|", 1)[0] in self.float32_codes}
         self._meta = meta
 
     def write(self, chunk: RecordedChunk) -> None:
-        """Write the chunk's HF rows to the next file."""
+        """Write the chunk's HF rows to the next file and append its LF rows."""
         import pyarrow as pa
         import pyarrow.parquet as pq
 
@@ -177,28 +207,47 @@ class ParquetChunkSink:
             cc = c if prev is None else np.concatenate([[prev], c])
             self._gaps += [(g.after_cycle, g.before_cycle) for g in find_gaps(cc)]
             self._last_cycle = int(c[-1])
-        time = cycles_to_time(c, self._meta.time_anchors, cycle_time_s=self._meta.cycle_time_s)
-        arrays = [pa.array(c), pa.array(time)] + [pa.array(chunk.hf[k]) for k in self._columns]
-        table = pa.Table.from_arrays(arrays, names=["cycle", "time", *self._columns])
+        arrays = [pa.array(c)] + [
+            pa.array(chunk.hf[k].astype(np.float32) if k in self._f32 else chunk.hf[k])
+            for k in self._columns
+        ]
+        table = pa.Table.from_arrays(arrays, names=["cycle", *self._columns])
         path = self.directory / f"hf_{len(self.files):06d}.parquet"
         pq.write_table(table, path, compression=self.compression,
                        compression_level=1 if self.compression == "zstd" else None,
-                       use_dictionary=False, write_statistics=["cycle", "time"])
+                       use_dictionary=False, write_statistics=["cycle"],
+                       data_page_version="2.0")
         self.files.append(path)
         if len(chunk.lf):
-            self._lf.append(chunk.lf)
+            self._write_lf(chunk.lf)
         if len(chunk.events):
             self._events.append(chunk.events)
 
+    def _write_lf(self, lf: pd.DataFrame) -> None:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        types = {"int64": pa.int64(), "timestamp": pa.timestamp("ns", tz="UTC"),
+                 "string": pa.string(), "float64": pa.float64()}
+        schema = pa.schema([(n, types[t]) for n, t in _LF_SCHEMA_FIELDS])
+        frame = lf[list(LF_COLUMNS)]
+        table = pa.Table.from_pandas(frame, schema=schema, preserve_index=False)
+        if self._lf_writer is None:
+            self._lf_writer = pq.ParquetWriter(self.directory / "lf.parquet", schema,
+                                               compression=self.compression)
+        self._lf_writer.write_table(table)
+
     def close(self, meta: RecordingMeta) -> None:
-        """Write LF values, events and metadata; returns ``None`` (data stay on disk)."""
-        lf = _concat(self._lf, LF_COLUMNS)
+        """Write events and metadata, close ``lf.parquet``; returns ``None`` (data on disk)."""
+        if self._lf_writer is not None:
+            self._lf_writer.close()
+            self._lf_writer = None
         ev = _concat(self._events, EVENT_COLUMNS)
-        if lf is not None:
-            _write_frame(lf, self.directory / "lf.parquet", self.compression)
         if ev is not None:
             _write_frame(ev, self.directory / "events.parquet", self.compression)
         doc = {
+            "format": "cnctwin.sim chunks",
+            "format_version": _CHUNK_FORMAT_VERSION,
             "machine": meta.machine,
             "cycle_time_s": meta.cycle_time_s,
             "axis_map": {str(k): v for k, v in meta.axis_map.items()},
@@ -207,9 +256,11 @@ class ParquetChunkSink:
             "gaps": self._gaps,
             "attrs": _jsonable(meta.attrs),
             "hf_files": [p.name for p in self.files],
+            "hf_time_column": False,
+            "float32_columns": sorted(self._f32),
         }
         (self.directory / "meta.json").write_text(json.dumps(doc, indent=1), encoding="utf-8")
-        self._lf, self._events = [], []
+        self._events = []
         return None
 
 
@@ -250,17 +301,27 @@ def read_parquet_chunks(directory: str | Path) -> Recording:
     doc = json.loads(meta_path.read_text(encoding="utf-8"))
     frames = [pd.read_parquet(d / name) for name in doc["hf_files"]]
     hf = pd.concat(frames, ignore_index=True).set_index("cycle")
+    f32 = [c for c in doc.get("float32_columns", []) if c in hf.columns]
+    if f32:
+        hf[f32] = hf[f32].astype(np.float64)
+    anchors = [(int(c), pd.Timestamp(t)) for c, t in doc["time_anchors"]]
+    if "time" not in hf.columns:  # format 2: time from the counter, as the simulator did
+        hf.insert(0, "time", cycles_to_time(hf.index.to_numpy(), anchors,
+                                            cycle_time_s=doc["cycle_time_s"]))
     meta = RecordingMeta(
         machine=doc["machine"],
         cycle_time_s=doc["cycle_time_s"],
         axis_map={int(k): v for k, v in doc["axis_map"].items()},
         source_files=[str(d / n) for n in doc["hf_files"]],
         source_format=doc["source_format"],
-        time_anchors=[(int(c), pd.Timestamp(t)) for c, t in doc["time_anchors"]],
+        time_anchors=anchors,
         gaps=[CounterGap(int(a), int(b)) for a, b in doc["gaps"]],
         attrs=doc["attrs"],
     )
     lf = pd.read_parquet(d / "lf.parquet") if (d / "lf.parquet").exists() else None
+    if lf is not None and "text" in lf.columns:  # missing text is None, as in memory
+        text = lf["text"].astype(object)
+        lf["text"] = text.where(text.notna(), None)
     ev = pd.read_parquet(d / "events.parquet") if (d / "events.parquet").exists() else None
     return Recording(hf, lf=lf, events=ev, meta=meta)
 
