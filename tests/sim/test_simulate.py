@@ -174,9 +174,11 @@ def test_parquet_sink_round_trip(tmp_path: Path, square: Recording) -> None:
                                   square.lf.reset_index(drop=True), check_dtype=False)
 
 
-def test_parquet_sink_float64_option(tmp_path: Path, square: Recording) -> None:
-    sink = ParquetChunkSink(tmp_path / "run", float32_codes=())
+@pytest.mark.parametrize("file_format", ["parquet", "arrow"])
+def test_parquet_sink_float64_option(tmp_path: Path, square: Recording, file_format: str) -> None:
+    sink = ParquetChunkSink(tmp_path / "run", float32_codes=(), file_format=file_format)
     simulate(SQUARE, seed=3, sink=sink, chunk_cycles=1000)
+    assert sink.files[0].suffix == f".{file_format}"
     back = read_parquet_chunks(tmp_path / "run")
     pd.testing.assert_frame_equal(back.hf, square.hf, check_freq=False)
 

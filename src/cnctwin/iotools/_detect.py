@@ -40,7 +40,7 @@ SUPPORTED_FORMATS: dict[str, tuple[str, str, str]] = {
     ),
     "sim_chunks": (
         "cnctwin.sim.recorder", "read_parquet_chunks",
-        "cnctwin simulator chunk directory (meta.json + hf_*.parquet)",
+        "cnctwin simulator chunk directory (meta.json + hf_*.parquet/.arrow)",
     ),
     "flat_csv": (
         "cnctwin.iotools.flat_csv", "read_flat_csv",
@@ -89,7 +89,7 @@ def detect_format(path: str | PathLike[str]) -> str:
     name = p.name.lower()
     suffix = p.suffix.lower()
     if p.is_dir():
-        if (p / "meta.json").is_file() and any(p.glob("hf_*.parquet")):
+        if (p / "meta.json").is_file() and any(p.glob("hf_0*.*")):
             return "sim_chunks"
         if (p / "hf.parquet").is_file() or any(p.glob("*.parquet")):
             return "parquet"

@@ -152,6 +152,9 @@ class ParquetChunkSink:
         ``'snappy'``, ``'none'``).
     float32_codes : sequence of str, default :data:`FLOAT32_CODES`
         HF codes stored as float32 (read back as float64); ``()`` keeps every column float64.
+    file_format : {'parquet', 'arrow'}, default 'parquet'
+        HF chunk files as Parquet (``hf_000000.parquet``) or Arrow IPC / Feather v2
+        (``hf_000000.arrow``, same compression codec). LF values and events are Parquet.
 
     Notes
     -----
@@ -175,8 +178,12 @@ class ParquetChunkSink:
         *,
         compression: str = "lz4",
         float32_codes: tuple[str, ...] | list[str] = FLOAT32_CODES,
+        file_format: str = "parquet",
     ) -> None:
+        if file_format not in ("parquet", "arrow"):
+            raise ConfigError(f"file_format must be 'parquet' or 'arrow', not {file_format!r}")
         self.directory = Path(directory)
+        self.file_format = file_format
         self.compression = compression
         self.float32_codes = tuple(float32_codes)
         self.files: list[Path] = []
@@ -212,11 +219,17 @@ class ParquetChunkSink:
             for k in self._columns
         ]
         table = pa.Table.from_arrays(arrays, names=["cycle", *self._columns])
-        path = self.directory / f"hf_{len(self.files):06d}.parquet"
-        pq.write_table(table, path, compression=self.compression,
-                       compression_level=1 if self.compression == "zstd" else None,
-                       use_dictionary=False, write_statistics=["cycle"],
-                       data_page_version="2.0")
+        path = self.directory / f"hf_{len(self.files):06d}.{self.file_format}"
+        if self.file_format == "arrow":
+            import pyarrow.feather as pf
+
+            pf.write_feather(table, path, compression=_ipc_codec(self.compression),
+                             compression_level=1 if self.compression == "zstd" else None)
+        else:
+            pq.write_table(table, path, compression=self.compression,
+                           compression_level=1 if self.compression == "zstd" else None,
+                           use_dictionary=False, write_statistics=["cycle"],
+                           data_page_version="2.0")
         self.files.append(path)
         if len(chunk.lf):
             self._write_lf(chunk.lf)
@@ -264,6 +277,15 @@ class ParquetChunkSink:
         return None
 
 
+def _ipc_codec(compression: str) -> str:
+    if compression in ("lz4", "zstd"):
+        return compression
+    if compression in ("none", "uncompressed"):
+        return "uncompressed"
+    raise ConfigError(f"Arrow IPC files support compression 'lz4', 'zstd' or 'none', "
+                      f"not {compression!r}")
+
+
 def _write_frame(frame: pd.DataFrame, path: Path, compression: str) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -299,7 +321,8 @@ def read_parquet_chunks(directory: str | Path) -> Recording:
     if not meta_path.exists():
         raise ConfigError(f"{d} has no meta.json; pass a directory written by ParquetChunkSink")
     doc = json.loads(meta_path.read_text(encoding="utf-8"))
-    frames = [pd.read_parquet(d / name) for name in doc["hf_files"]]
+    frames = [pd.read_feather(d / name) if name.endswith(".arrow") else pd.read_parquet(d / name)
+              for name in doc["hf_files"]]
     hf = pd.concat(frames, ignore_index=True).set_index("cycle")
     f32 = [c for c in doc.get("float32_columns", []) if c in hf.columns]
     if f32:
