@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from cnctwin.exceptions import FormatError
-from cnctwin.iotools import read_umich, read_umich_dataset
+from cnctwin.iotools import read_umich, read_umich_dataset, read_umich_labels
 
 UMICH = Path(__file__).parents[1] / "data" / "real" / "umich-cnc-mill"
 
@@ -135,3 +135,54 @@ def test_no_label_row(tmp_path: Path) -> None:
     assert "labels" not in rec.meta.attrs
     assert any("no label row for experiment 99" in i for i in rec.meta.issues)
     assert np.all(rec.hf["VALID"].to_numpy() == 0.0)  # first rows have feedrate 50
+
+
+# ---------------------------------------------------------------- damaged labels / encoding
+def _labels(tmp_path: Path, edit: dict[int, str]) -> Path:
+    """experiments.csv with lines replaced (1-based line number -> text)."""
+    lines = (UMICH / "experiments.csv").read_text(encoding="utf-8").splitlines()
+    for k, text in edit.items():
+        lines[k - 1] = text
+    p = tmp_path / "experiments.csv"
+    p.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return p
+
+
+def test_labels_short_row(tmp_path: Path) -> None:
+    """A row missing fields used to give None labels (or AttributeError on a cut-off row)."""
+    p = _labels(tmp_path, {3: "2,wax,20,4.0"})
+    with pytest.raises(FormatError, match="row has 4 fields, the header 7") as ei:
+        read_umich_labels(p)
+    assert ei.value.position == "line 3"
+
+
+def test_labels_experiment_listed_twice(tmp_path: Path) -> None:
+    """A repeated experiment number used to overwrite the earlier row silently."""
+    lines = (UMICH / "experiments.csv").read_text(encoding="utf-8").splitlines()
+    p = _labels(tmp_path, {4: lines[1]})  # line 4 repeats experiment 1 (line 2)
+    with pytest.raises(FormatError, match=r"experiment 1 is listed twice \(lines 2 and 4\)"):
+        read_umich_labels(p)
+
+
+def test_labels_bad_yes_no(tmp_path: Path) -> None:
+    """A yes/no cell with other text used to become None (as if empty)."""
+    p = _labels(tmp_path, {2: "1,wax,6,4.0,unworn,maybe,yes"})
+    with pytest.raises(FormatError, match="machining_finalized 'maybe' is not yes or no") as ei:
+        read_umich_labels(p)
+    assert ei.value.position == "line 2"
+    # empty stays "not given" (the source leaves passed_visual_inspection empty)
+    ok = read_umich_labels(_labels(tmp_path, {2: "1,wax,6,4.0,unworn,no,"}))
+    assert ok[1]["machining_finalized"] is False and ok[1]["passed_visual_inspection"] is None
+
+
+def test_not_utf8(tmp_path: Path) -> None:
+    """Non-UTF-8 bytes used to escape as UnicodeDecodeError."""
+    p = tmp_path / "experiment_01.csv"
+    p.write_bytes(b"X1_ActualPosition\n\xff\xfe\n")
+    with pytest.raises(FormatError, match="not UTF-8") as ei:
+        read_umich(p)
+    assert ei.value.path == str(p)
+    q = tmp_path / "experiments.csv"
+    q.write_bytes(b"No,tool_condition\n1,\xffworn\n")
+    with pytest.raises(FormatError, match="not UTF-8"):
+        read_umich_labels(q)

@@ -96,13 +96,16 @@ _INVALID_X1_POSITION = 198.0
 _EXP_RE = re.compile(r"experiment_(\d+)", re.IGNORECASE)
 
 
-def _yes_no(value: str) -> bool | None:
+def _yes_no(value: str, name: str) -> bool | None:
+    """``yes``/``no`` (and y/n, true/false, 1/0) as a bool; an empty cell is ``None``."""
     v = value.strip().lower()
     if v in ("yes", "y", "true", "1"):
         return True
     if v in ("no", "n", "false", "0"):
         return False
-    return None
+    if v == "":
+        return None
+    raise ValueError(f"{name} {value!r} is not yes or no")
 
 
 def read_umich_labels(path: str | PathLike[str]) -> dict[int, dict[str, Any]]:
@@ -127,31 +130,46 @@ def read_umich_labels(path: str | PathLike[str]) -> dict[int, dict[str, Any]]:
     if not p.exists():
         raise FormatError("labels file not found", path=str(p))
     out: dict[int, dict[str, Any]] = {}
-    with p.open(newline="", encoding="utf-8") as fh:
-        reader = csv.DictReader(fh)
-        needed = {"No", "tool_condition"}
-        if reader.fieldnames is None or not needed <= set(reader.fieldnames):
-            raise FormatError(
-                f"header must contain {sorted(needed)}, found {reader.fieldnames}",
-                path=str(p), position="line 1",
-            )
-        for line, row in enumerate(reader, start=2):
-            try:
-                no = int(row["No"])
-                labels: dict[str, Any] = {
-                    "material": row.get("material", ""),
-                    "feedrate": float(row["feedrate"]) if row.get("feedrate") else None,
-                    "clamp_pressure": (float(row["clamp_pressure"])
-                                       if row.get("clamp_pressure") else None),
-                    "tool_condition": row["tool_condition"].strip(),
-                    "machining_finalized": _yes_no(row.get("machining_finalized") or ""),
-                    "passed_visual_inspection": _yes_no(
-                        row.get("passed_visual_inspection") or ""),
-                }
-            except (TypeError, ValueError) as exc:
-                raise FormatError(f"bad label row: {exc}", path=str(p),
-                                  position=f"line {line}") from None
-            out[no] = labels
+    try:
+        with p.open(newline="", encoding="utf-8") as fh:
+            reader = csv.DictReader(fh)
+            needed = {"No", "tool_condition"}
+            if reader.fieldnames is None or not needed <= set(reader.fieldnames):
+                raise FormatError(
+                    f"header must contain {sorted(needed)}, found {reader.fieldnames}",
+                    path=str(p), position="line 1",
+                )
+            entries = [(reader.line_num, row) for row in reader]
+            n_fields = len(reader.fieldnames)
+    except UnicodeDecodeError as exc:
+        raise FormatError(f"not UTF-8 text ({exc})", path=str(p)) from None
+    first_line: dict[int, int] = {}
+    for line, row in entries:
+        if None in row or None in row.values():  # DictReader: extra fields / missing fields
+            got = n_fields + len(row.get(None) or []) - sum(v is None for v in row.values())
+            raise FormatError(f"row has {got} fields, the header {n_fields}", path=str(p),
+                              position=f"line {line}")
+        try:
+            no = int(row["No"])
+            labels: dict[str, Any] = {
+                "material": row.get("material", ""),
+                "feedrate": float(row["feedrate"]) if row.get("feedrate") else None,
+                "clamp_pressure": (float(row["clamp_pressure"])
+                                   if row.get("clamp_pressure") else None),
+                "tool_condition": row["tool_condition"].strip(),
+                "machining_finalized": _yes_no(row.get("machining_finalized") or "",
+                                               "machining_finalized"),
+                "passed_visual_inspection": _yes_no(
+                    row.get("passed_visual_inspection") or "", "passed_visual_inspection"),
+            }
+        except (TypeError, ValueError) as exc:
+            raise FormatError(f"bad label row: {exc}", path=str(p),
+                              position=f"line {line}") from None
+        if no in first_line:
+            raise FormatError(f"experiment {no} is listed twice (lines {first_line[no]} and "
+                              f"{line})", path=str(p), position=f"line {line}", field="No")
+        first_line[no] = line
+        out[no] = labels
     return out
 
 
@@ -187,8 +205,11 @@ def read_umich(
     if not p.exists():
         raise FormatError("file not found", path=spath)
     issues: list[str] = []
-    with p.open(newline="", encoding="utf-8") as fh:
-        rows = list(csv.reader(fh))
+    try:
+        with p.open(newline="", encoding="utf-8") as fh:
+            rows = list(csv.reader(fh))
+    except UnicodeDecodeError as exc:
+        raise FormatError(f"not UTF-8 text ({exc})", path=spath) from None
     if not rows:
         raise FormatError("empty file", path=spath)
     header = rows[0]
