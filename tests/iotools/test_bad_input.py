@@ -282,3 +282,41 @@ def test_missing_reader_module(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) 
     p = _write(tmp_path, b'{"header": {"key": "dataobject"}, "body": {"datapoint": []}}')
     with pytest.raises(FormatError, match="reader is not available"):
         read_recording(p)
+
+
+# ---------------------------------------------------------------------------- other readers
+@pytest.mark.parametrize("reader", ["read_thermal_camera_csv", "read_dynamometer_csv",
+                                    "read_edge_dataobject"])
+def test_not_utf8_is_a_format_error(tmp_path: Path, reader: str) -> None:
+    """Non-UTF-8 bytes used to escape as UnicodeDecodeError; now the file and byte are named."""
+    import cnctwin.iotools as iot
+
+    p = tmp_path / "junk.csv"
+    p.write_bytes(b"time_s,value\n0,\xff\n")
+    with pytest.raises(FormatError, match="not UTF-8 text") as info:
+        getattr(iot, reader)(p)
+    assert info.value.path == str(p) and info.value.position == "byte 15"
+
+
+def test_edge_dataobject_array_of_non_objects(tmp_path: Path) -> None:
+    """A JSON array of numbers used to escape as TypeError from json.loads."""
+    from cnctwin.iotools import read_edge_dataobject
+
+    p = _write(tmp_path, b"[1, 2, 3]", "msgs.json")
+    with pytest.raises(FormatError, match="message is a int, not a JSON object") as info:
+        read_edge_dataobject(p)
+    assert info.value.path is not None and info.value.path.startswith(str(p))
+
+
+def test_trace_syntax_error_is_not_truncation(tmp_path: Path) -> None:
+    """Broken XML syntax used to be reported as a truncated file."""
+    from cnctwin.iotools import read_sinumerik_trace
+
+    p = _write(tmp_path, b"<traceSession><a></b></traceSession>", "t.xml")
+    with pytest.raises(FormatError, match="XML error: mismatched tag") as info:
+        read_sinumerik_trace(p)
+    assert not isinstance(info.value, TruncatedFileError)
+    assert info.value.position == "line 1, column 19"
+    cut = _write(tmp_path, b"<traceSession><a>", "cut.xml")
+    with pytest.raises(TruncatedFileError):
+        read_sinumerik_trace(cut)

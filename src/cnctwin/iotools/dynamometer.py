@@ -163,7 +163,11 @@ def read_dynamometer_csv(
     spath = str(p)
     if not p.exists():
         raise FormatError("file not found", path=spath)
-    text = p.read_text(encoding="utf-8-sig")
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise FormatError(f"not UTF-8 text ({exc.reason})", path=spath,
+                          position=f"byte {exc.start}") from None
     delim, decimal = _sniff(text)
     reader = csv.reader(io.StringIO(text), delimiter=delim)
     try:

@@ -48,6 +48,9 @@ __all__ = ["EdgeDataobjectAssembler", "parse_edge_dataobject", "read_edge_dataob
 def _load(message: str | bytes | dict[str, Any], label: str) -> dict[str, Any]:
     if isinstance(message, dict):
         return message
+    if not isinstance(message, (str, bytes, bytearray)):
+        raise FormatError(f"message is a {type(message).__name__}, not a JSON object",
+                          path=label)
     try:
         doc = json.loads(message)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
@@ -238,13 +241,18 @@ def read_edge_dataobject(
     """
     if isinstance(path_or_bytes, bytes):
         label = "<bytes>"
-        text = path_or_bytes.decode("utf-8")
+        raw = path_or_bytes
     else:
         p = Path(path_or_bytes)
         label = str(p)
         if not p.exists():
             raise FormatError("file not found", path=label)
-        text = p.read_text(encoding="utf-8")
+        raw = p.read_bytes()
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise FormatError(f"not UTF-8 text ({exc.reason})", path=label,
+                          position=f"byte {exc.start}") from None
     stripped = text.strip()
     messages: list[Any]
     if stripped.startswith("["):

@@ -57,6 +57,7 @@ from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
 from typing import Any
+from xml.parsers import expat
 
 import numpy as np
 import pandas as pd
@@ -66,6 +67,13 @@ from cnctwin.recording import Recording, RecordingMeta, find_gaps
 from cnctwin.signals import DEFAULT_AXIS_MAP
 
 __all__ = ["TRACE_VARIABLE_MAP", "read_sinumerik_trace"]
+
+_EOF_ERRORS = frozenset({
+    expat.errors.codes[expat.errors.XML_ERROR_NO_ELEMENTS],
+    expat.errors.codes[expat.errors.XML_ERROR_UNCLOSED_TOKEN],
+    expat.errors.codes[expat.errors.XML_ERROR_PARTIAL_CHAR],
+})
+"""expat error codes of an XML document that ends early."""
 
 TRACE_VARIABLE_MAP: dict[str, str] = {
     "nckServoDataCmdPos2ndEnc64": "DES_POS",
@@ -254,7 +262,10 @@ def read_sinumerik_trace(
         line_no, col_no = exc.position if hasattr(exc, "position") else (0, 0)
         msg = f"XML error: {exc}"
         if not salvage:
-            raise TruncatedFileError(
+            # input that ends early (expat: no element found / unclosed token) is truncated;
+            # any other error (bad syntax, binary junk) is a plain FormatError
+            cls = TruncatedFileError if getattr(exc, "code", None) in _EOF_ERRORS else FormatError
+            raise cls(
                 msg + " (pass salvage=True to keep the records read so far)",
                 path=spath, position=f"line {line_no}, column {col_no}",
             ) from None

@@ -134,7 +134,11 @@ def read_thermal_camera_csv(
     spath = str(p)
     if not p.exists():
         raise FormatError("file not found", path=spath)
-    text = p.read_text(encoding="utf-8-sig")
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise FormatError(f"not UTF-8 text ({exc.reason})", path=spath,
+                          position=f"byte {exc.start}") from None
     lines = text.splitlines()
     header_line = None
     delim = ","
