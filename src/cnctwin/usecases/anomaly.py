@@ -208,6 +208,9 @@ class EnvelopeDetector(Detector):
         Extra margin as a fraction of the learned band width (and at least ``min_margin``).
     min_margin : float, default 0.05
         Minimum absolute margin [unit of ``signal``].
+    smoothing : float, default 1
+        EWMA time constant applied to the signal first [samples]; 1 = none. The EWMA restarts
+        when the progress goes backwards (a new pass of the operation).
 
     Notes
     -----
@@ -223,43 +226,59 @@ class EnvelopeDetector(Detector):
         n_bins: int = 50,
         margin: float = 0.1,
         min_margin: float = 0.05,
+        smoothing: float = 1.0,
     ) -> None:
         if n_bins < 1:
             raise ConfigError(f"n_bins must be >= 1, not {n_bins}")
+        if smoothing < 1:
+            raise ConfigError(f"smoothing must be >= 1 sample, not {smoothing}")
         self.signal = signal
         self.progress = progress
         self.n_bins = n_bins
         self.margin = margin
         self.min_margin = min_margin
+        self.smoothing = smoothing
+        self._ewma: float | None = None
+        self._last_p = -math.inf
         self.inputs = (signal, progress)
         self._lo = np.full(n_bins, np.inf)
         self._hi = np.full(n_bins, -np.inf)
 
     def _params(self) -> dict[str, Any]:
         return {"signal": self.signal, "progress": self.progress, "n_bins": self.n_bins,
-                "margin": self.margin, "min_margin": self.min_margin}
+                "margin": self.margin, "min_margin": self.min_margin,
+                "smoothing": self.smoothing}
 
     def _bin(self, p: float) -> int:
         return min(max(int(p * self.n_bins), 0), self.n_bins - 1)
 
+    def _value(self, x: Mapping[str, float]) -> float:
+        v, p = float(x[self.signal]), float(x[self.progress])
+        if self._ewma is None or p < self._last_p or not math.isfinite(self._ewma):
+            self._ewma = v
+        else:
+            self._ewma += (v - self._ewma) / self.smoothing
+        self._last_p = p
+        return self._ewma
+
     def learn_one(self, x: Mapping[str, float]) -> None:
         b = self._bin(float(x[self.progress]))
-        v = float(x[self.signal])
+        v = self._value(x)
         self._lo[b] = min(self._lo[b], v)
         self._hi[b] = max(self._hi[b], v)
 
     def score_one(self, x: Mapping[str, float]) -> float:
         b = self._bin(float(x[self.progress]))
+        v = self._value(x)
         lo, hi = self._lo[b], self._hi[b]
         if not np.isfinite(lo):
             return 0.0
         m = max(self.margin * (hi - lo), self.min_margin)
-        v = float(x[self.signal])
         return float(max(lo - m - v, v - hi - m, 0.0) / m)
 
     @classmethod
     def _unit_test_params(cls) -> dict[str, Any]:
-        return {"n_bins": 10}
+        return {"n_bins": 10, "smoothing": 3.0}
 
 
 class SpectralDetector(Detector):

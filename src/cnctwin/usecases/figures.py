@@ -6,6 +6,8 @@
 * :func:`plot_deviation_paths`: desired and encoder paths per hole in 3D, X-Z, Y-Z or X-Y
   (Figures 5.6-5.9).
 * :func:`plot_anomaly_scores`: a detector score over time with alarms and fault onsets.
+* :func:`plot_loose_tap`: Z encoder position, spindle current and dynamometer torque around a
+  loose-tap event (Figure 5.10).
 
 Figures are built on :class:`matplotlib.figure.Figure` directly (no pyplot state, no GUI
 backend needed); nothing is shown or saved here: call ``fig.savefig(path)``.
@@ -28,6 +30,7 @@ __all__ = [
     "plot_anomaly_scores",
     "plot_deviation_paths",
     "plot_hole_means",
+    "plot_loose_tap",
     "plot_set_temperature",
 ]
 
@@ -205,4 +208,94 @@ def plot_anomaly_scores(
     ax.set_xlabel("time [s]")
     ax.set_ylabel("score")
     ax.set_title(title or "anomaly score (red: alarms, green dashed: fault onsets)")
+    return fig
+
+
+def _tapping_torque_on_hf(rec: Recording, z_axis: str) -> np.ndarray | None:
+    """Dynamometer torque on the HF clock of a tapping recording, or None if not alignable.
+
+    In rigid tapping the spindle current is dominated by the reversal (inertia), so the
+    current-based :func:`cnctwin.twin.align_dynamometer` finds no clean lag. Here the clock
+    offset comes from the engagement instead: |Mz| against "Z below the surface", the
+    surface being the Z encoder position at the cut starts of the hole record.
+    """
+    import warnings
+
+    from cnctwin.analysis.align import AlignmentWarning, align
+    from cnctwin.usecases.holes import hole_record
+
+    try:
+        holes = hole_record(rec)
+        z = rec.hf[f"ENC_POS|{z_axis}"].to_numpy(dtype=float)
+        idx = np.searchsorted(rec.cycles, holes["cut_start_cycle"].to_numpy(dtype=np.int64))
+        surface = float(np.median(z[np.clip(idx, 0, z.size - 1)]))
+        dyn = rec.external["dynamometer"].data
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", AlignmentWarning)
+            al = align(rec.time_s, (z < surface).astype(float), dyn.index.to_numpy(float),
+                       np.abs(dyn["mz_nm"].to_numpy()), max_lag_s=None, polarity="positive")
+    except Exception:  # no hole or no dynamometer data: leave the panel out, do not guess
+        return None
+    t_dyn = dyn.index.to_numpy(float) + al.lag_s
+    return np.interp(rec.time_s, t_dyn, dyn["mz_nm"].to_numpy(), left=np.nan, right=np.nan)
+
+
+def plot_loose_tap(
+    rec: Recording,
+    *,
+    around_s: float,
+    span_s: tuple[float, float] = (-1.0, 2.0),
+    onset_s: float | None = None,
+    alarms_s: Sequence[float] = (),
+    z_axis: str = "Z1",
+    spindle: str = "SP1",
+) -> Figure:
+    """Z encoder position, spindle current and dynamometer torque around an event (Fig. 5.10).
+
+    Panels: Z ``ENC_POS``, Z following error (``DES_POS - ENC_POS``, where the fluctuation of
+    the encoder position is visible at µm scale), spindle current, dynamometer torque.
+
+    Parameters
+    ----------
+    rec : Recording
+        Tapping recording; the dynamometer (external channel ``dynamometer``, column ``mz_nm``)
+        is drawn when present, its clock aligned on the engagement (|Mz| against Z below the
+        surface).
+    around_s : float
+        Centre of the plot, recording time from the first sample [s] (e.g. the first alarm).
+    span_s : (float, float)
+        Window relative to ``around_s`` [s].
+    onset_s : float, optional
+        True fault onset to mark [s].
+    alarms_s : sequence of float
+        Alarms to mark [s].
+    """
+    t = rec.time_s
+    sel = (t >= around_s + span_s[0]) & (t <= around_s + span_s[1])
+    if not sel.any():
+        raise ConfigError(f"no samples within {span_s} s of {around_s:.2f} s")
+    panels: list[tuple[str, np.ndarray]] = [
+        (f"ENC_POS|{z_axis} [mm]", rec.hf[f"ENC_POS|{z_axis}"].to_numpy(dtype=float)[sel]),
+        (f"{z_axis} following error [µm]",
+         1e3 * (rec.hf[f"DES_POS|{z_axis}"] - rec.hf[f"ENC_POS|{z_axis}"]).to_numpy()[sel]),
+        (f"CURRENT|{spindle} [A]", rec.hf[f"CURRENT|{spindle}"].to_numpy(dtype=float)[sel]),
+    ]
+    if "dynamometer" in rec.external:
+        mz = _tapping_torque_on_hf(rec, z_axis)
+        if mz is not None:
+            panels.append(("dynamometer torque Mz [Nm]", mz[sel]))
+    fig = Figure(figsize=(9, 2.2 * len(panels)), layout="constrained")
+    axs = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    x = t[sel]
+    for ax, (label, y) in zip(axs, panels, strict=True):
+        ax.plot(x, y, lw=0.7)
+        ax.set_ylabel(label, fontsize=8)
+        ax.grid(alpha=0.3)
+        if onset_s is not None:
+            ax.axvline(onset_s, color="C2", ls="--", lw=1.2)
+        for a_s in alarms_s:
+            if x[0] <= a_s <= x[-1]:
+                ax.axvline(a_s, color="C3", lw=0.8)
+    axs[-1].set_xlabel("time [s]")
+    axs[0].set_title("loose tap: green dashed = true onset (hidden), red = alarm", fontsize=9)
     return fig
