@@ -70,7 +70,9 @@ def _cut_stream(rec, holes: pd.DataFrame) -> pd.DataFrame:  # type: ignore[no-un
      (HardnessChange(hole=16, factor=1.15), 5.0), (None, None)],
 )
 def test_faults_at_hidden_times(fault, max_delay) -> None:  # type: ignore[no-untyped-def]
-    res = tool_wear_run(n_holes=24, seed=5, faults=[fault] if fault else [])
+    # 30 s pauses between sets: the fault times and the scored span below were set with them
+    res = tool_wear_run(n_holes=24, seed=5, faults=[fault] if fault else [],
+                        gap_between_sets_s=30.0)
     rec = res.recording
     holes = hole_record(rec)
     onsets = [o for o in res.truth["fault_onsets_s"] if o is not None]
