@@ -65,6 +65,7 @@ __all__ = [
     "calibrate",
     "calibrate_from_recording",
     "estimate_poles",
+    "field_weakening_onset_rpm",
     "fit_friction",
     "identify_inertia",
     "linear_region",
@@ -400,6 +401,44 @@ def plot_air_cut(stats: pd.DataFrame, *, columns: Sequence[str] | None = None) -
 
 
 # ====================================================================== linear region (§4.1)
+def field_weakening_onset_rpm(stats: pd.DataFrame, *, spindle: str = "SP1",
+                              threshold: float = 1.01) -> float | None:
+    """Lowest plateau speed where the drive applies field-weakening current [rpm].
+
+    Parameters
+    ----------
+    stats : pandas.DataFrame
+        :func:`~cnctwin.spindle.air_cut_statistics` with the LF means of the smoothed absolute
+        current (r0068) and Iq (r0078).
+    spindle : str
+        Spindle axis.
+    threshold : float, default 1.01
+        ``|I| / |Iq|`` above which Id is counted as present (on two plateaus in a row).
+
+    Returns
+    -------
+    float or None
+        The speed, or None if the LF currents are not recorded or never diverge.
+
+    Notes
+    -----
+    Thesis Fig. 3.8c: the smoothed absolute current rises away from Iq once field weakening
+    injects negative Id (|I| = sqrt(Id^2 + Iq^2)). Thesis §4.1 searches the linear region only
+    below this speed (7000 rpm from the drive parameters); here it is read from the data.
+    """
+    ci = f"CURRENT_ABS_SMOOTHED|{spindle} (LF) mean"
+    cq = f"IQ_ACT|{spindle} (LF) mean"
+    if ci not in stats or cq not in stats:
+        return None
+    order = np.argsort(stats["speed_rpm"].abs().to_numpy(), kind="stable")
+    n = stats["speed_rpm"].abs().to_numpy()[order]
+    ratio = (stats[ci].abs() / stats[cq].abs().replace(0.0, np.nan)).to_numpy()[order]
+    flags = ratio > threshold
+    # two plateaus in a row, so one noisy low-current plateau does not count
+    both = np.flatnonzero(flags[:-1] & flags[1:])
+    return float(n[both[0]]) if both.size else None
+
+
 @dataclass(frozen=True, eq=False)
 class LinearRegion:
     """Speed range where the air-cut current is linear in speed (thesis §4.1).
@@ -554,8 +593,9 @@ def _longest_linear(
     min_points: int,
     min_slope_t: float = 5.0,
 ) -> tuple[list[int], str, str]:
-    """Longest run of points on one rising line (indices into n), with the end reasons."""
-    best: tuple[int, list[int], str, str] | None = None
+    """The run of points on one rising line with the largest rise (indices into n), with the
+    end reasons."""
+    best: tuple[float, list[int], str, str] | None = None
     for s in range(0, n.size - min_points + 1):
         seed = list(range(s, s + min_points))
         a, b, *_ = _Line(n, cur, seed).fit()
@@ -571,9 +611,12 @@ def _longest_linear(
         # stretch (current limitation, field weakening) is not the friction line
         if sxx <= 0 or a2 * math.sqrt(sxx) / sigma < min_slope_t:
             continue
-        span = max(both) - min(both)
-        if best is None or span > best[0]:
-            best = (span, both, r_lo, r_hi)
+        # the friction line is the run over which the current rises most (from the lower
+        # limit to current limitation / field weakening); above field weakening the current
+        # is flat or rises slowly over many plateaus, so the longest run is the wrong one
+        rise = a2 * float(n[max(both)] - n[min(both)])
+        if best is None or rise > best[0]:
+            best = (rise, both, r_lo, r_hi)
     if best is None:
         raise IdentificationError(
             "no run of plateaus where the mean current rises linearly with speed; record "

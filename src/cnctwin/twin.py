@@ -27,7 +27,6 @@ True
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -35,9 +34,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
-from scipy import signal as sps
 
-from cnctwin.analysis.align import external_on_hf
+from cnctwin.analysis.align import align_external, external_on_hf
 from cnctwin.analysis.filters import lowpass
 from cnctwin.analysis.segments import cutting_regions, lf_on_hf, speed_plateaus, spindle_speed_rpm
 from cnctwin.exceptions import ConfigError, IdentificationError, SignalNotFoundError
@@ -48,6 +46,7 @@ from cnctwin.spindle import (
     LinearRegion,
     SpindleModel,
     air_cut_statistics,
+    field_weakening_onset_rpm,
     fit_friction,
     identify_inertia,
     linear_region,
@@ -185,54 +184,19 @@ FRICTION_MODELS: dict[str, FrictionModel] = {
 
 
 # ====================================================================== region models
-def field_weakening_onset_rpm(stats: pd.DataFrame, *, spindle: str = "SP1",
-                              threshold: float = 1.01) -> float | None:
-    """Lowest plateau speed where the drive applies field-weakening current [rpm].
-
-    Parameters
-    ----------
-    stats : pandas.DataFrame
-        :func:`~cnctwin.spindle.air_cut_statistics` with the LF means of the smoothed absolute
-        current (r0068) and Iq (r0078).
-    spindle : str
-        Spindle axis.
-    threshold : float, default 1.01
-        ``|I| / |Iq|`` above which Id is counted as present.
-
-    Returns
-    -------
-    float or None
-        The speed, or None if the LF currents are not recorded or never diverge.
-
-    Notes
-    -----
-    Thesis Fig. 3.8c: the smoothed absolute current rises away from Iq once field weakening
-    injects negative Id (|I| = sqrt(Id^2 + Iq^2)). Thesis §4.1 searches the linear region only
-    below this speed (7000 rpm from the drive parameters); here it is read from the data.
-    """
-    ci = f"CURRENT_ABS_SMOOTHED|{spindle} (LF) mean"
-    cq = f"IQ_ACT|{spindle} (LF) mean"
-    if ci not in stats or cq not in stats:
-        return None
-    ratio = stats[ci].abs() / stats[cq].abs().replace(0.0, np.nan)
-    n = stats["speed_rpm"].abs().to_numpy()
-    above = np.flatnonzero((ratio.to_numpy() > threshold) & (n > 500.0))
-    return float(n[above[0]]) if above.size else None
-
-
 RegionModel = Callable[..., LinearRegion]
 
 
 def _region_auto(stats: pd.DataFrame, segments: Sequence[NDArray[np.float64]], *,
                  fs_hz: float, poles: int | None, fw_rpm: float | None) -> LinearRegion:
-    """Thesis §4.1 criteria (:func:`~cnctwin.spindle.linear_region`) below field weakening."""
-    keep = np.ones(len(stats), dtype=bool)
-    if fw_rpm is not None:
-        keep &= stats["speed_rpm"].abs().to_numpy() < fw_rpm
-    idx = np.flatnonzero(keep)
+    """Thesis §4.1 criteria from data (:func:`~cnctwin.spindle.linear_region`).
+
+    ``fw_rpm`` (the field-weakening onset read from the LF currents) is not needed: the
+    region is the linear run with the largest current rise, which lies below it.
+    """
     return linear_region(
-        stats["speed_rpm"].abs().to_numpy()[idx], stats["current_a"].to_numpy()[idx],
-        segments=[segments[int(k)] for k in idx], fs_hz=fs_hz, poles=poles,
+        stats["speed_rpm"].abs().to_numpy(), stats["current_a"].to_numpy(),
+        segments=segments, fs_hz=fs_hz, poles=poles,
     )
 
 
@@ -424,6 +388,9 @@ def align_dynamometer(
 ) -> Recording:
     """Align the dynamometer clock to the HF clock on the cutting load.
 
+    :func:`cnctwin.analysis.align.align_external` on the spindle current (run-ups blanked,
+    lag only: a one-hole recording cannot tell a drift).
+
     Parameters
     ----------
     rec : Recording
@@ -439,69 +406,14 @@ def align_dynamometer(
     -------
     Recording
         Copy with the channel's ``offset_s`` set and ``aligned=True``.
-
-    Notes
-    -----
-    The reference is the spindle current with the run-ups blanked (the inertia current of a
-    run-up has no counterpart in the dynamometer torque) and the air-cut level removed; the
-    lag maximizes the plain (not energy-normalized) cross-correlation, which favours long
-    overlaps. :func:`cnctwin.analysis.align.align_external` normalizes by the energy of the
-    overlap and on a single-hole recording locks onto short partial overlaps (correlation
-    < 0.1 after alignment on the simulated drilling_validation cuts).
     """
-    if dynamometer not in rec.external:
-        raise SignalNotFoundError(
-            f"no external channel {dynamometer!r}; it has: {', '.join(rec.external) or 'none'}"
-        )
-    ch = rec.external[dynamometer]
-    fs = rec.fs_hz
-    i = np.abs(rec.signal(f"CURRENT|{spindle}").to_numpy(dtype=np.float64))
-    i = np.asarray(pd.Series(i).interpolate(limit_direction="both"), dtype=np.float64)
-    speed, _ = spindle_speed_rpm(rec, spindle)
-    speed = np.asarray(pd.Series(speed).ffill().bfill().fillna(0.0), dtype=np.float64)
-    ramp = np.abs(np.gradient(speed) * fs) > 50.0
-    ramp = np.convolve(ramp.astype(float), np.ones(round(0.4 * fs)), mode="same") > 0
-    base = np.quantile(i[~ramp], 0.1) if (~ramp).any() else 0.0
-    ref = np.where(ramp, base, i) - base
-    ref = lowpass(ref, 20.0, fs_hz=fs, order=2) if ref.size > 30 else ref
-    t_dyn = np.asarray(ch.data.index, dtype=np.float64)
-    tau = np.abs(ch.data[torque_column].to_numpy(dtype=np.float64))
-    grid = np.arange(t_dyn[0], t_dyn[-1], 1.0 / fs)
-    oth = np.interp(grid, t_dyn, tau)
-    oth = lowpass(oth, 20.0, fs_hz=fs, order=2) if oth.size > 30 else oth
-    r = ref - ref.mean()
-    o = oth - oth.mean()
-    c = sps.correlate(r, o, mode="full")
-    lags = sps.correlation_lags(r.size, o.size, mode="full")
-    overlap = np.minimum(lags + o.size, r.size) - np.maximum(lags, 0)
-    t0 = float(rec.time_s[0])
-    offsets = t0 + lags / fs - grid[0]
-    ok = overlap >= 0.5 * min(r.size, o.size)
-    if max_lag_s is not None:
-        ok &= np.abs(offsets) <= max_lag_s
-    if not ok.any():
-        raise IdentificationError("the dynamometer and the recording do not overlap")
-    k = int(np.argmax(np.where(ok, c, -np.inf)))
-    delta = 0.0
-    if 0 < k < c.size - 1:
-        y0, y1, y2 = c[k - 1], c[k], c[k + 1]
-        den = y0 - 2 * y1 + y2
-        if den < 0:
-            delta = float(np.clip(0.5 * (y0 - y2) / den, -0.5, 0.5))
-    offset = float(offsets[k] + delta / fs)
-    out = rec.copy()
-    out.external[dynamometer] = dataclasses.replace(ch, offset_s=offset, drift_ppm=0.0,
-                                                    aligned=True)
-    out.meta.issues.append(
-        f"external channel {dynamometer!r} aligned to the cutting current by plain "
-        f"cross-correlation: offset {offset:.5f} s"
-    )
-    return out
+    return align_external(rec, dynamometer, reference_signal=f"CURRENT|{spindle}",
+                          channel_column=torque_column, max_lag_s=max_lag_s)
 
 
 def find_cuts(rec: Recording, *, spindle: str = "SP1", z_axis: str | None = "Z1",
-              fraction: float = 0.3) -> pd.DataFrame:
-    """:func:`~cnctwin.analysis.segments.cutting_regions` with a threshold from the load level.
+              ) -> pd.DataFrame:
+    """Cutting regions of a drilling recording: :func:`~cnctwin.analysis.segments.cutting_regions`.
 
     Parameters
     ----------
@@ -509,37 +421,13 @@ def find_cuts(rec: Recording, *, spindle: str = "SP1", z_axis: str | None = "Z1"
         Recording with spindle current, speed and (optionally) the Z position.
     spindle, z_axis : str
         Axis names.
-    fraction : float, default 0.3
-        Switch-on threshold as a fraction of the cut level: the 99th percentile of |I| at
-        constant speed minus its 5th percentile [-].
 
     Returns
     -------
     pandas.DataFrame
         As :func:`~cnctwin.analysis.segments.cutting_regions`.
-
-    Notes
-    -----
-    The automatic threshold of ``cutting_regions`` takes the noise from the lower half of the
-    excess current; in a single-hole recording (thesis Fig. 4.5) the drill is in the material
-    for more than half of the constant-speed time and that "noise" is the cut itself, so no
-    region is found. A threshold relative to the load level does not depend on the duty cycle.
     """
-    cur = np.abs(rec.signal(f"CURRENT|{spindle}").to_numpy(dtype=np.float64))
-    speed, _ = spindle_speed_rpm(rec, spindle)
-    speed = np.asarray(pd.Series(speed).ffill().bfill().fillna(0.0), dtype=np.float64)
-    fs = rec.fs_hz
-    steady = np.abs(np.gradient(speed) * fs) < 50.0
-    steady &= np.abs(speed) > 1.0
-    steady = np.convolve((~steady).astype(float), np.ones(round(0.4 * fs)), mode="same") == 0
-    ok = steady & np.isfinite(cur)
-    if ok.sum() < 10:
-        return cutting_regions(rec, spindle=spindle, z_axis=z_axis)
-    sm = lowpass(np.where(np.isfinite(cur), cur, 0.0), 5.0, fs_hz=fs, order=2) \
-        if cur.size > 30 else cur
-    lvl = float(np.quantile(sm[ok], 0.99) - np.quantile(sm[ok], 0.05))
-    return cutting_regions(rec, spindle=spindle, z_axis=z_axis,
-                           current_threshold=max(fraction * lvl, 1e-3))
+    return cutting_regions(rec, spindle=spindle, z_axis=z_axis)
 
 
 # ====================================================================== options and results

@@ -112,3 +112,60 @@ def test_external_on_hf_uses_drift_and_warns_unaligned() -> None:
     t = rec.time_s
     k = 10000  # t = 20 s -> own time (20 - 1) / (1 + 1e-4)
     assert hf["ramp"].iloc[k] == pytest.approx((t[k] - 1.0) / (1 + 1e-4), abs=1e-9)
+
+
+# ------------------------------------------------------------------ one pulse (one hole)
+def _pulse(t: np.ndarray, start: float, stop: float, edge_s: float = 0.05) -> np.ndarray:
+    """A smooth pulse (raised-cosine edges of ``edge_s``) of height 1 from start to stop."""
+    up = np.clip((t - start) / edge_s, 0, 1)
+    down = np.clip((stop - t) / edge_s, 0, 1)
+    return 0.5 - 0.5 * np.cos(np.pi * np.minimum(up, down))
+
+
+def test_single_pulse_drift_is_ill_posed_and_falls_back_to_lag_only() -> None:
+    rng = np.random.default_rng(7)
+    t_ref = np.arange(0, 4.0, 1 / 500.0)
+    t_oth = np.arange(0, 4.0, 1 / 1000.0)
+    ref = 0.5 + 4.0 * _pulse(t_ref, 0.8, 2.6) + rng.normal(0, 0.05, t_ref.size)
+    # other own time t is reference time t + LAG_S: its pulse sits LAG_S earlier on its clock
+    oth = 4.0 * _pulse(t_oth + LAG_S, 0.8, 2.6) + rng.normal(0, 0.05, t_oth.size)
+    with pytest.warns(AlignmentWarning, match="lag-only"):
+        a = align(t_ref, ref, t_oth, oth, max_lag_s=None, estimate_drift=True)
+    assert not a.drift_estimated and a.drift_ppm == 0.0
+    assert "at most one event" in a.note
+    # sub-sample: 61.7 samples at 500 Hz; tolerance 0.25 ms = 1/8 sample (two 50 ms edges)
+    assert a.lag_s == pytest.approx(LAG_S, abs=2.5e-4)
+    assert a.correlation > 0.95
+    # two pulses far apart: the drift is well posed and estimated
+    ref2 = ref + 4.0 * _pulse(t_ref, 3.0, 3.6)
+    oth2 = oth + 4.0 * _pulse(t_oth + LAG_S, 3.0, 3.6)
+    a2 = align(t_ref, ref2, t_oth, oth2, max_lag_s=None, estimate_drift=True)
+    assert a2.drift_estimated and a2.note == ""
+    assert abs(a2.drift_ppm) < 1000.0
+
+
+@pytest.fixture(scope="module")
+def cast_iron_hole() -> tuple[Recording, dict]:  # type: ignore[type-arg]
+    """One simulated hole, thesis cut 2 (cast iron, 2400 rpm, 0.3 mm/rev, Fig. 3.6/4.5b)."""
+    from cnctwin.sim import scenarios as sc
+
+    res = sc.drilling_validation(seed=3, cuts=[("grey_cast_iron", 2400.0, 0.30)])
+    return res.recordings[0], res.truth["cuts"][0]
+
+
+def test_align_external_on_a_one_hole_recording(cast_iron_hole) -> None:  # type: ignore[no-untyped-def]
+    """Issue #4 item 1: before the fix the lag locked onto a partial overlap (+0.82 s instead of
+    -1.70 s, correlation 0.09) and the drift estimate raised IdentificationError."""
+    rec, truth = cast_iron_hole
+    true_offset = truth["dynamometer"][0]["clock_offset_s"]  # -1.7 s, drift 35 ppm (sim truth)
+    out = align_external(rec, "dynamometer")
+    # the spindle current follows the torque through the speed loop: allow 1.5 samples (3 ms)
+    assert out.external["dynamometer"].offset_s == pytest.approx(true_offset, abs=3e-3)
+    with pytest.warns(AlignmentWarning, match="lag-only"):
+        out2 = align_external(rec, "dynamometer", estimate_drift=True)
+    ch = out2.external["dynamometer"]
+    assert ch.aligned and ch.drift_ppm == 0.0
+    assert ch.offset_s == pytest.approx(true_offset, abs=3e-3)
+    lag_samples = ch.offset_s * rec.fs_hz
+    assert abs(lag_samples - round(lag_samples)) > 1e-6  # sub-sample, not snapped to the grid
+    assert "lag-only" in out2.meta.issues[-1]

@@ -117,3 +117,53 @@ def test_cutting_regions_without_z_and_fixed_threshold() -> None:
     assert reg["z_start_mm"].isna().all()
     # a threshold above the cut current finds nothing (and says so with an empty frame)
     assert cutting_regions(rec, current_threshold=10.0).empty
+
+
+# ------------------------------------------------------------------ one simulated hole
+@pytest.fixture(scope="module")
+def cast_iron_hole() -> tuple[Recording, dict]:  # type: ignore[type-arg]
+    """Thesis cuts 4 and 2 (cast iron, 3200 rpm 0.4 mm/rev and 2400 rpm 0.3 mm/rev, Fig. 4.5),
+    simulated: one hole per recording, the drill in the material for more than half of the
+    time at speed."""
+    from cnctwin.sim import scenarios as sc
+
+    res = sc.drilling_validation(seed=3, cuts=[("grey_cast_iron", 3200.0, 0.40),
+                                               ("grey_cast_iron", 2400.0, 0.30)])
+    return res.recordings, res.truth["cuts"]  # type: ignore[return-value]
+
+
+@pytest.mark.parametrize("k", [0, 1])
+@pytest.mark.parametrize("kwargs", [{}, {"z_axis": None}, {"air_from_z": False}])
+def test_cutting_regions_on_one_cast_iron_hole(cast_iron_hole, k, kwargs) -> None:  # type: ignore[no-untyped-def]
+    """Issue #4 item 2: before the fix the noise came from the lower half of the excess current,
+    which in a one-hole recording is the cut itself, and no region was found."""
+    recs, truth = cast_iron_hole
+    rec, cut = recs[k], truth[k]
+    reg = cutting_regions(rec, **kwargs)
+    assert len(reg) == 1
+    c0 = rec.cycles[0]
+    first = (cut["cut_first_cycle"] - c0) * rec.meta.cycle_time_s
+    full = (cut["full_engagement_first_cycle"] - c0) * rec.meta.cycle_time_s
+    z = rec.hf["ENC_POS|Z1"].to_numpy()
+    bottom = float(rec.time_s[int(np.argmin(z))])  # the drill stops feeding and retracts
+    # the region starts during the drill-point entry (threshold at 30 % of the cut level) and
+    # ends within 0.1 s of the hole bottom (5 Hz smoothing + hysteresis)
+    assert first <= reg["start_s"].iloc[0] <= full + 0.05
+    assert reg["end_s"].iloc[0] == pytest.approx(bottom, abs=0.1)
+    # air level: the air-cut current at the cutting speed, well below the cut current
+    assert 0.3 < reg["baseline_a"].iloc[0] < 0.8
+    assert reg["mean_current_a"].iloc[0] > 4.0 * reg["baseline_a"].iloc[0]
+    assert reg.attrs["noise_from"] in ("z_air", "rolling_std")
+    assert reg.attrs["noise_sigma_a"] < 0.1 * reg.attrs["threshold_a"]
+
+
+def test_cutting_regions_noise_from_z_air_in_multi_hole_recording() -> None:
+    """With several holes there is air at the cutting speed between them: Z tells it apart."""
+    rec, holes = _drilling()
+    reg = cutting_regions(rec)
+    assert reg.attrs["noise_from"] == "z_air"
+    # the generator's noise is 0.05 A per sample; 5 Hz smoothing leaves about 0.05 *
+    # sqrt(2 * 5 / 500) ~ 7 mA (plus the 80 Hz line, filtered out)
+    assert 0.002 < reg.attrs["noise_sigma_a"] < 0.02
+    assert len(reg) == len(holes)
+    assert reg["baseline_a"].iloc[0] == pytest.approx(0.53, abs=0.02)

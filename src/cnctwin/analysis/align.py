@@ -30,6 +30,7 @@ from cnctwin.exceptions import (
     SignalNotFoundError,
 )
 from cnctwin.recording import Recording
+from cnctwin.signals import parse_column
 
 __all__ = ["Alignment", "AlignmentWarning", "align", "align_external", "external_on_hf"]
 
@@ -59,6 +60,11 @@ class Alignment:
         Samples of the common grid where both signals exist after alignment.
     polarity : int
         +1 if the signals move together, -1 if one is the negative of the other.
+    drift_estimated : bool
+        True if ``drift_ppm`` was estimated; False for a lag-only alignment (not asked for,
+        or asked for but ill-posed: see ``note``).
+    note : str
+        Why a requested drift estimate fell back to lag-only alignment ("" otherwise).
     """
 
     lag_s: float
@@ -68,6 +74,8 @@ class Alignment:
     fs_hz: float
     n_overlap: int
     polarity: int
+    drift_estimated: bool = False
+    note: str = ""
 
 
 def _uniform(
@@ -105,6 +113,7 @@ def _peak_offset(
     max_lag_s: float | None,
     polarity: Literal["auto", "positive", "negative"],
     center_s: float = 0.0,
+    min_overlap_fraction: float = 0.5,
 ) -> tuple[float, int]:
     """Offset (other own time -> reference time) at the correlation peak, sub-sample."""
     n_r = int(np.floor((ref_t[-1] - ref_t[0]) * fs_hz)) + 1
@@ -125,34 +134,39 @@ def _peak_offset(
                 f"no lag within {max_lag_s:g} s of {center_s:g} s; the records' own times start "
                 f"{ref_t[0]:.3f} s and {oth_t[0]:.3f} s; raise max_lag_s"
             )
-    # normalise by the energies of the overlapping parts (normalized cross-correlation), so
-    # the changing overlap length does not tilt the peak; ignore short overlaps
-    r_lo = np.maximum(lags, 0)
-    r_hi = np.minimum(lags + o.size, r.size)
-    o_lo = np.maximum(-lags, 0)
-    o_hi = o_lo + np.maximum(r_hi - r_lo, 0)
-    overlap = r_hi - r_lo
-    cr = np.concatenate([[0.0], np.cumsum(r * r)])
-    co = np.concatenate([[0.0], np.cumsum(o * o)])
-    valid = overlap > 0.2 * min(r.size, o.size)
-    e_r = cr[np.clip(r_hi, 0, r.size)] - cr[np.clip(r_lo, 0, r.size)]
-    e_o = co[np.clip(o_hi, 0, o.size)] - co[np.clip(o_lo, 0, o.size)]
-    den = np.sqrt(np.maximum(e_r * e_o, 0.0))
-    valid &= den > 0
-    c = np.where(valid, c / np.where(den > 0, den, 1.0), 0.0)
+    # plain (de-meaned, not overlap-normalized) correlation over lags whose overlap covers at
+    # least min_overlap_fraction of the shorter record: normalizing by the energy of the
+    # overlap lets short partial overlaps of a single pulse win (one-hole recordings)
+    overlap = np.minimum(lags + o.size, r.size) - np.maximum(lags, 0)
+    valid = overlap >= max(min_overlap_fraction * min(r.size, o.size), 1.0)
+    if not (allowed & valid).any():
+        raise IdentificationError(
+            f"no lag with an overlap of at least {min_overlap_fraction:.0%} of the shorter "
+            "record; the two sources do not overlap in time (check their clocks) or lower "
+            "min_overlap_fraction"
+        )
     score = np.where(allowed & valid, c, 0.0)
     if polarity == "positive":
+        score = np.where(allowed & valid, c, -np.inf)
         k = int(np.argmax(score))
         sign = 1
     elif polarity == "negative":
+        score = np.where(allowed & valid, c, np.inf)
         k = int(np.argmin(score))
         sign = -1
     else:
         k = int(np.argmax(np.abs(score)))
         sign = 1 if score[k] >= 0 else -1
+    # refine near the peak on the Pearson correlation of each overlap: the plain correlation
+    # of de-meaned records is tilted by the changing overlap, which moves the vertex of a
+    # broad peak (a single pulse) by samples; neighbouring lags overlap almost equally, so
+    # locally the Pearson correlation has no tilt and no preference for short overlaps
+    pear = _overlap_pearson(r, o, c, lags)
+    near = allowed & valid & (np.abs(np.arange(c.size) - k) <= max(2, round(0.05 * fs_hz)))
+    k = int(np.argmax(np.where(near, sign * pear, -np.inf)))
     delta = 0.0
     if 0 < k < c.size - 1:
-        y0, y1, y2 = sign * c[k - 1], sign * c[k], sign * c[k + 1]
+        y0, y1, y2 = sign * pear[k - 1], sign * pear[k], sign * pear[k + 1]
         den = y0 - 2 * y1 + y2
         if den < 0:
             delta = float(np.clip(0.5 * (y0 - y2) / den, -0.5, 0.5))
@@ -165,6 +179,30 @@ def _peak_offset(
             stacklevel=3,
         )
     return float(offsets[k] + delta / fs_hz), sign
+
+
+def _overlap_pearson(
+    r: NDArray[np.float64], o: NDArray[np.float64], c: NDArray[np.float64],
+    lags: NDArray[np.int64],
+) -> NDArray[np.float64]:
+    """Pearson correlation of the overlapping parts for every lag (0 where undefined)."""
+    r_lo = np.clip(lags, 0, r.size)
+    r_hi = np.clip(lags + o.size, 0, r.size)
+    n = np.maximum(r_hi - r_lo, 0)
+    o_lo = np.clip(-lags, 0, o.size)
+    o_hi = o_lo + n
+    sr = np.concatenate([[0.0], np.cumsum(r)])
+    qr = np.concatenate([[0.0], np.cumsum(r * r)])
+    so = np.concatenate([[0.0], np.cumsum(o)])
+    qo = np.concatenate([[0.0], np.cumsum(o * o)])
+    nn = np.maximum(n, 1)
+    s_r = sr[r_hi] - sr[r_lo]
+    s_o = so[o_hi] - so[o_lo]
+    v_r = qr[r_hi] - qr[r_lo] - s_r * s_r / nn
+    v_o = qo[o_hi] - qo[o_lo] - s_o * s_o / nn
+    den = np.sqrt(np.maximum(v_r * v_o, 0.0))
+    ok = (n > 2) & (den > 0)
+    return np.where(ok, (c - s_r * s_o / nn) / np.where(ok, den, 1.0), 0.0)
 
 
 def _pearson_after(
@@ -198,6 +236,8 @@ def align(
     lowpass_hz: float | None = None,
     polarity: Literal["auto", "positive", "negative"] = "auto",
     drift_window_fraction: float = 0.35,
+    min_overlap_fraction: float = 0.5,
+    max_drift_ppm: float = 1000.0,
 ) -> Alignment:
     """Estimate the clock offset (and optionally drift) of ``other`` against ``reference``.
 
@@ -224,18 +264,36 @@ def align(
     drift_window_fraction : float, default 0.35
         Length of the start/end windows for the drift estimate, as a fraction of the other
         record.
+    min_overlap_fraction : float, default 0.5
+        Lags whose overlap is shorter than this fraction of the shorter record are not
+        considered.
+    max_drift_ppm : float, default 1000
+        A drift estimate beyond this is rejected as ill-posed [ppm] (quartz clocks drift
+        tens of ppm).
 
     Returns
     -------
     Alignment
+        ``drift_estimated`` False and ``note`` set when a requested drift estimate was
+        ill-posed and the result is the lag-only alignment.
 
     Notes
     -----
     The other source is resampled (linear interpolation) onto a uniform grid at the reference
     rate, both are de-meaned, and the lag maximizing :func:`scipy.signal.correlate` is mapped
     to seconds with :func:`scipy.signal.correlation_lags`. A parabola through the peak and its
-    two neighbours refines it to a fraction of a sample. Lags whose overlap is shorter than
-    20 % of the shorter record are ignored.
+    two neighbours refines it to a fraction of a sample. The correlation is the plain one (not
+    normalized by the energy of each overlap, which lets a short partial overlap of a single
+    pulse win); lags with less than ``min_overlap_fraction`` overlap are ignored.
+
+    A drift needs two timing references far apart: the other signal must change level (Schmitt
+    trigger at 40 %/60 % of its 5-99 % range) at least three times, i.e. hold at least two
+    events, and the start and end windows must each hold such an edge. One pulse (a one-hole
+    drilling recording) gives only the rise and fall of the same cut, whose widths differ between
+    current and torque (speed loop, inertia, drill exit), so the drift is ill-posed: then, as
+    when a window alignment fails or the drift exceeds ``max_drift_ppm``, the lag-only
+    alignment is returned with ``drift_estimated=False``, the reason in ``note`` and an
+    :class:`AlignmentWarning`.
 
     Examples
     --------
@@ -257,29 +315,26 @@ def align(
         oth = lowpass(oth, lowpass_hz, fs_hz=fs_oth)
     elif fs_oth > 1.01 * fs_hz:
         oth = lowpass(oth, 0.4 * fs_hz, fs_hz=fs_oth)
-    offset, sign = _peak_offset(ref_t, ref, oth_t, oth, fs_hz, max_lag_s, polarity)
+    if not 0.0 < min_overlap_fraction <= 1.0:
+        raise ConfigError(f"min_overlap_fraction must be in (0, 1], not {min_overlap_fraction!r}")
+    offset, sign = _peak_offset(ref_t, ref, oth_t, oth, fs_hz, max_lag_s, polarity,
+                                min_overlap_fraction=min_overlap_fraction)
     drift = 0.0
+    estimated = False
+    note = ""
     if estimate_drift:
         if not 0.05 <= drift_window_fraction <= 0.5:
             raise ConfigError(
                 f"drift_window_fraction must be in [0.05, 0.5], not {drift_window_fraction!r}"
             )
-        span = oth_t[-1] - oth_t[0]
-        w = drift_window_fraction * span
-        pol: Literal["positive", "negative"] = "positive" if sign > 0 else "negative"
-        centres: list[float] = []
-        offs: list[float] = []
-        for lo in (oth_t[0], oth_t[-1] - w):
-            m = (oth_t >= lo) & (oth_t <= lo + w)
-            # search near the global estimate: +-5 % of the window
-            o_k, _ = _peak_offset(
-                ref_t, ref, oth_t[m], oth[m], fs_hz, 0.05 * w, pol, center_s=offset
-            )
-            centres.append(lo + w / 2.0)
-            offs.append(o_k)
-        slope = (offs[1] - offs[0]) / (centres[1] - centres[0])
-        drift = slope * 1e6
-        offset = offs[0] - slope * centres[0]
+        est = _drift_from_windows(ref_t, ref, oth_t, oth, fs_hz, offset, sign,
+                                  drift_window_fraction, max_drift_ppm)
+        if isinstance(est, str):
+            note = f"drift not estimated ({est}); lag-only alignment"
+            warnings.warn(note, AlignmentWarning, stacklevel=2)
+        else:
+            offset, drift = est
+            estimated = True
     r, n_ov = _pearson_after(ref_t, ref, oth_t, oth, offset, drift)
     if np.isfinite(r) and abs(r) < 0.3:
         warnings.warn(
@@ -296,7 +351,64 @@ def align(
         fs_hz=float(fs_hz),
         n_overlap=n_ov,
         polarity=sign,
+        drift_estimated=estimated,
+        note=note,
     )
+
+
+def _edges(t: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Times where ``x`` switches between its low and high level (Schmitt trigger at 40 % and
+    60 % of its 5-99 % range)."""
+    lo, hi = np.quantile(x, [0.05, 0.99])
+    if not hi > lo:
+        return np.empty(0)
+    v = (x - lo) / (hi - lo)
+    state = np.where(v > 0.6, 1, np.where(v < 0.4, 0, -1))
+    idx = np.where(state >= 0, np.arange(v.size), -1)
+    np.maximum.accumulate(idx, out=idx)
+    known = idx >= 0
+    on = state[idx[known]] == 1
+    return np.asarray(t[known][1:][np.diff(on.astype(np.int8)) != 0], dtype=np.float64)
+
+
+def _drift_from_windows(
+    ref_t: NDArray[np.float64],
+    ref: NDArray[np.float64],
+    oth_t: NDArray[np.float64],
+    oth: NDArray[np.float64],
+    fs_hz: float,
+    offset: float,
+    sign: int,
+    fraction: float,
+    max_drift_ppm: float,
+) -> tuple[float, float] | str:
+    """(offset, drift_ppm) from the start and end windows, or why that is ill-posed."""
+    span = oth_t[-1] - oth_t[0]
+    w = fraction * span
+    edges = _edges(oth_t, oth)
+    if edges.size < 3:
+        return (f"the other signal has {edges.size} level change(s), i.e. at most one event "
+                "(one cut); a drift needs at least two separated events")
+    pol: Literal["positive", "negative"] = "positive" if sign > 0 else "negative"
+    centres: list[float] = []
+    offs: list[float] = []
+    for lo in (oth_t[0], oth_t[-1] - w):
+        if not np.any((edges >= lo) & (edges <= lo + w)):
+            return (f"the window {lo:.3f}-{lo + w:.3f} s of the other record holds no event "
+                    "edge")
+        m = (oth_t >= lo) & (oth_t <= lo + w)
+        # search near the global estimate: +-5 % of the window
+        try:
+            o_k, _ = _peak_offset(ref_t, ref, oth_t[m], oth[m], fs_hz, 0.05 * w, pol,
+                                  center_s=offset)
+        except IdentificationError as exc:
+            return f"window {lo:.3f}-{lo + w:.3f} s: {exc}"
+        centres.append(lo + w / 2.0)
+        offs.append(o_k)
+    slope = (offs[1] - offs[0]) / (centres[1] - centres[0])
+    if abs(slope * 1e6) > max_drift_ppm:
+        return f"the estimate {slope * 1e6:.0f} ppm exceeds max_drift_ppm={max_drift_ppm:g}"
+    return offs[0] - slope * centres[0], slope * 1e6
 
 
 def _channel(rec: Recording, channel_name: str) -> pd.DataFrame:
@@ -318,6 +430,9 @@ def align_external(
     estimate_drift: bool = False,
     lowpass_hz: float | None = 20.0,
     polarity: Literal["auto", "positive", "negative"] = "auto",
+    blank_speed_changes: bool = True,
+    accel_limit_rpm_per_s: float = 50.0,
+    min_overlap_fraction: float = 0.5,
 ) -> Recording:
     """Align an external channel (dynamometer) to the recording's HF time base.
 
@@ -340,12 +455,28 @@ def align_external(
         low-passed, Fig. 3.6b; 20 Hz keeps the cut edges that carry the timing).
     polarity : {'auto', 'positive', 'negative'}, default 'auto'
         Sign of the relation (see :func:`align`).
+    blank_speed_changes : bool, default True
+        Leave out reference samples within 0.2 s of a change of the spindle speed (run-ups,
+        run-downs), when the HF ``CMD_SPEED`` of the reference's axis is recorded (the LF
+        speed is too coarse).
+    accel_limit_rpm_per_s : float, default 50
+        Speed change rate above which a sample counts as a run-up [rpm/s].
+    min_overlap_fraction : float, default 0.5
+        Smallest overlap of the two records considered (see :func:`align`).
 
     Returns
     -------
     Recording
         A copy whose channel has ``offset_s``, ``drift_ppm`` and ``aligned=True`` set; the
-        estimate and its correlation are also noted in ``meta.issues``.
+        estimate and its correlation are also noted in ``meta.issues``, and so is a drift
+        estimate that fell back to lag-only alignment (one-hole recordings).
+
+    Notes
+    -----
+    A spindle run-up or run-down draws the inertia current (tens of A) that the dynamometer
+    never sees; left in, it dominates the correlation of a short drilling recording. Those
+    samples are dropped from the reference (the grid interpolates across them), so only the
+    cutting load carries the timing.
     """
     data = _channel(rec, channel_name)
     if channel_column not in data.columns:
@@ -354,6 +485,9 @@ def align_external(
             f"{', '.join(map(str, data.columns))}"
         )
     ref = rec.signal(reference_signal).to_numpy(dtype=np.float64)
+    if blank_speed_changes:
+        ref = np.where(_speed_changing(rec, reference_signal, accel_limit_rpm_per_s), np.nan,
+                       ref)
     a = align(
         rec.time_s,
         ref,
@@ -363,6 +497,7 @@ def align_external(
         estimate_drift=estimate_drift,
         lowpass_hz=lowpass_hz,
         polarity=polarity,
+        min_overlap_fraction=min_overlap_fraction,
     )
     out = rec.copy()
     ch = out.external[channel_name]
@@ -372,8 +507,27 @@ def align_external(
     out.meta.issues.append(
         f"external channel {channel_name!r} aligned to {reference_signal} by cross-correlation: "
         f"offset {a.lag_s:.5f} s, drift {a.drift_ppm:.2f} ppm, correlation {a.correlation:.3f}"
+        + (f"; {a.note}" if a.note else "")
     )
     return out
+
+
+def _speed_changing(rec: Recording, reference_signal: str,
+                    accel_limit_rpm_per_s: float) -> NDArray[np.bool_]:
+    """Samples within 0.2 s of a spindle speed change (all False without an HF speed)."""
+    _, axis = parse_column(reference_signal)
+    col = f"CMD_SPEED|{axis or 'SP1'}"
+    if not rec.has(col):
+        return np.zeros(len(rec.hf), dtype=bool)
+    speed = rec.hf[col].to_numpy(dtype=np.float64)
+    speed = np.asarray(pd.Series(speed).ffill().bfill().fillna(0.0), dtype=np.float64)
+    ramp = np.abs(np.gradient(speed) * rec.fs_hz) > accel_limit_rpm_per_s if speed.size > 1 \
+        else np.zeros(speed.size, dtype=bool)
+    k = max(1, round(0.4 * rec.fs_hz))
+    out = np.convolve(ramp.astype(np.float64), np.ones(k), mode="same") > 0
+    if out.all():
+        return np.zeros(out.size, dtype=bool)
+    return np.asarray(out, dtype=bool)
 
 
 def external_on_hf(

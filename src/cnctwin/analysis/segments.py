@@ -260,6 +260,8 @@ def cutting_regions(
     merge_gap_s: float = 0.1,
     require_z_down: bool = True,
     min_z_depth_mm: float = 0.01,
+    air_from_z: bool = True,
+    z_feed_mm_per_s: float = 0.2,
 ) -> pd.DataFrame:
     """Cutting regions: spindle current above its air-cut level while the spindle turns.
 
@@ -274,8 +276,8 @@ def cutting_regions(
         Feed axis into the part; ``None`` ignores axis positions.
     current_threshold : float, optional
         Switch-on threshold on the excess current |I| - baseline [A]. Default: automatic,
-        the larger of 8 robust standard deviations of the air-cut excess and 30 % of its
-        99.5th percentile.
+        the larger of 8 robust standard deviations of the air-cut excess and 30 % of the
+        99.5th percentile of the excess.
     min_duration_s : float, default 0.2
         Shortest region kept [s].
     smooth_hz : float, default 5.0
@@ -283,9 +285,10 @@ def cutting_regions(
     hysteresis : float, default 0.5
         Switch-off threshold as a fraction of the switch-on threshold.
     baseline_quantile : float, default 0.1
-        The air-cut baseline at each commanded speed is this quantile of the smoothed |I| at
-        that speed (speeds rounded to 10 rpm). Assumes the spindle spends at least this
-        fraction of its time at each cutting speed in air.
+        Without air samples from the Z axis (see ``air_from_z``), the air-cut baseline at
+        each commanded speed is this quantile of the smoothed |I| at that speed (speeds
+        rounded to 10 rpm); this assumes the spindle spends at least this fraction of its
+        time at each cutting speed in air.
     accel_limit_rpm_per_s : float, default 200.0
         Samples where the commanded speed changes faster than this (run-ups, where the
         inertia draws current) are never cutting [rpm/s].
@@ -297,6 +300,16 @@ def cutting_regions(
         its start (a retract at the end does not matter).
     min_z_depth_mm : float, default 0.01
         Smallest downward Z travel that confirms a cut [mm].
+    air_from_z : bool, default True
+        If the Z position is recorded, take the air-cut level and the noise from the
+        samples where the spindle turns at constant speed and Z does *not* feed down (a
+        drill can only cut while it moves into the part; ``1 / smooth_hz`` is left out
+        around every downward move, where the smoothing rings): per speed the mean |I| of
+        those samples is the baseline, the robust spread of the smoothed |I| the noise.
+        Where fewer than 0.1 s of such samples exist at a speed, ``baseline_quantile``
+        applies.
+    z_feed_mm_per_s : float, default 0.2
+        Z speed below ``-z_feed_mm_per_s`` counts as feeding down [mm/s].
 
     Returns
     -------
@@ -305,12 +318,20 @@ def cutting_regions(
         ``start_s``, ``end_s``, ``speed_rpm`` (median commanded), ``mean_current_a``,
         ``baseline_a`` (air-cut level), ``z_start_mm``, ``z_end_mm`` (NaN without Z),
         ``block`` (NC block active at the start, "" without events). ``attrs`` hold the
-        thresholds used.
+        thresholds used and ``noise_from`` ('z_air', 'lower_half' or 'rolling_std').
 
     Notes
     -----
     Thesis §4.3 averages current and torque over the first 0.6 s of each cutting region
     (Fig. 4.5); the regions here provide those starts.
+
+    In a one-hole recording (thesis Fig. 4.5) the drill is in the material for most of the
+    time at speed, so statistics of all samples at the cutting speed describe the cut, not
+    the air: their lower half is cut current and an 8-sigma threshold from it lies above
+    the cut. The air level therefore comes from the Z axis (samples not feeding down)
+    where it is recorded; without Z the noise is the smaller of the lower-half spread and
+    the 10th percentile of the 0.4 s rolling standard deviation of the smoothed current
+    (a stretch of air is quiet, a cut is not).
     """
     i_col = f"CURRENT|{spindle}"
     current = rec.signal(i_col).to_numpy(dtype=np.float64)
@@ -325,6 +346,10 @@ def cutting_regions(
     except SignalNotFoundError:
         speed = np.full(a.size, np.nan)
     has_speed = bool(np.isfinite(speed).all())
+    z_col = f"ENC_POS|{z_axis}" if z_axis else None
+    z = rec.hf[z_col].to_numpy(dtype=np.float64) if z_col and rec.has(z_col) else None
+    air = _air_from_z(z, fs, z_feed_mm_per_s, 1.0 / smooth_hz) \
+        if z is not None and air_from_z else None
     if has_speed:
         key = np.round(speed / 10.0) * 10.0
         baseline = np.empty_like(sm)
@@ -334,18 +359,34 @@ def cutting_regions(
         ramp = _rolling((np.abs(accel) > accel_limit_rpm_per_s).astype(np.float64),
                         2 * dilate + 1, "max") > 0
         turning = (np.abs(speed) > 1.0) & ~ramp
+        n_air_min = max(3, round(0.1 * fs))
         for k in np.unique(key):
             m = key == k
             mq = m & turning
+            if air is not None and np.count_nonzero(mq & air) >= n_air_min:
+                baseline[m] = np.mean(a[mq & air])
+                continue
             ref = sm[mq] if mq.any() else sm[m]
             baseline[m] = np.quantile(ref, baseline_quantile)
     else:
         baseline = np.full_like(sm, np.quantile(sm, baseline_quantile))
         turning = np.ones(sm.size, dtype=bool)
     excess = sm - baseline
-    quiet = excess[turning & (excess <= np.quantile(excess[turning], 0.5))] if turning.any() \
-        else excess
-    sigma = 1.4826 * float(np.median(np.abs(quiet - np.median(quiet)))) if quiet.size else 0.0
+    quiet_air = turning & air if air is not None else None
+    if quiet_air is not None and np.count_nonzero(quiet_air) >= max(3, round(0.1 * fs)):
+        q = excess[quiet_air]
+        sigma = 1.4826 * float(np.median(np.abs(q - np.median(q))))
+        noise_from = "z_air"
+    else:
+        noise_from = "lower_half"
+        quiet = excess[turning & (excess <= np.quantile(excess[turning], 0.5))] \
+            if turning.any() else excess
+        sigma = 1.4826 * float(np.median(np.abs(quiet - np.median(quiet)))) if quiet.size \
+            else 0.0
+        if turning.sum() > round(0.4 * fs):
+            roll = float(np.quantile(_rolling(sm, round(0.4 * fs), "std")[turning], 0.1))
+            if roll < sigma:
+                sigma, noise_from = roll, "rolling_std"
     if current_threshold is None:
         p995 = float(np.quantile(excess[turning], 0.995)) if turning.any() else 0.0
         high = max(8.0 * sigma, 0.3 * p995, 1e-9)
@@ -363,8 +404,6 @@ def cutting_regions(
         else:
             merged.append([s, e])
     n_min = round(min_duration_s * fs)
-    z_col = f"ENC_POS|{z_axis}" if z_axis else None
-    z = rec.hf[z_col].to_numpy(dtype=np.float64) if z_col and rec.has(z_col) else None
     keep: list[tuple[int, int]] = []
     for s, e in merged:
         if e - s + 1 < n_min:
@@ -384,9 +423,23 @@ def cutting_regions(
     df["z_end_mm"] = [float(z[e]) if z is not None else np.nan for _, e in keep]
     df["block"] = _blocks_at(rec, df["start_cycle"].to_numpy())
     df.attrs.update(
-        {"threshold_a": high, "release_a": low, "noise_sigma_a": sigma, "smooth_hz": smooth_hz}
+        {"threshold_a": high, "release_a": low, "noise_sigma_a": sigma, "smooth_hz": smooth_hz,
+         "noise_from": noise_from}
     )
     return df
+
+
+def _air_from_z(z: NDArray[np.float64], fs_hz: float, feed_mm_per_s: float,
+                margin_s: float) -> NDArray[np.bool_]:
+    """Samples where Z does not feed down (``margin_s`` around every downward move)."""
+    zf = np.asarray(pd.Series(z).interpolate(limit_direction="both"), dtype=np.float64)
+    if not np.isfinite(zf).all():
+        return np.zeros(z.size, dtype=bool)
+    v = np.gradient(lowpass(zf, min(10.0, 0.4 * fs_hz), fs_hz=fs_hz, order=2)
+                    if zf.size > 30 else zf) * fs_hz
+    down = (v < -feed_mm_per_s).astype(np.float64)
+    n = 2 * max(1, round(margin_s * fs_hz)) + 1
+    return np.asarray(_rolling(down, n, "max") == 0, dtype=bool)
 
 
 def _blocks_at(rec: Recording, cycles: NDArray[np.int64]) -> list[str]:
