@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from cnctwin.exceptions import ConfigError, SignalNotFoundError
@@ -109,3 +110,91 @@ def test_simulated_holes_in_tolerance() -> None:
     assert len(plot_hole_means(holes, wear_um=np.arange(6.0)).axes) == 3
     assert len(plot_anomaly_scores([0, 1, 2], [0, 1, -1], alarms_s=[1.0],
                                    fault_onsets_s=[0.9], learn_until_s=0.5).axes) == 1
+
+
+# ----------------------------------------------------------------------------- dynamic indicators
+def test_axis_stiffness_model_matches_the_servo_kernel() -> None:
+    # the linear disturbance model of feed_axis_dynamic_stiffness against the numba servo
+    # (125 us loops, quantised 10 nm encoder, regularised friction) under a 40 Hz force of
+    # 60 N with hidden random loop gains, slide mass and friction; 5 % tolerance
+    import dataclasses
+
+    from cnctwin.sim.machine import Machine
+    from cnctwin.sim.servo import simulate_servo
+    from cnctwin.usecases.quality import feed_axis_dynamic_stiffness
+
+    rng = np.random.default_rng(17)
+    for _ in range(3):
+        ax = dataclasses.replace(
+            Machine.thesis_default().axis("X1"),
+            speed_kp_nm_s_per_rad=float(rng.uniform(1.0, 2.2)),
+            speed_ti_s=float(rng.uniform(0.005, 0.012)),
+            mass_kg=float(rng.uniform(200.0, 600.0)),
+            coulomb_n=float(rng.uniform(80.0, 220.0)),
+            kv_m_min_per_mm=float(rng.uniform(1.5, 4.0)))
+        f_hz = float(rng.uniform(25.0, 60.0))
+        n = 3000
+        t = np.arange(n) * 0.002
+        force = 60.0 * np.sin(2 * np.pi * f_hz * t)
+        tr = simulate_servo(np.zeros((1, n)), [ax], force_n=force[None, :])
+        d = tr.axis("ENC_POS", "X1")[1000:] * 1000.0  # um, after the start transient
+        tt = t[1000:]
+        a = np.column_stack([np.ones_like(tt), np.cos(2 * np.pi * f_hz * tt),
+                             np.sin(2 * np.pi * f_hz * tt)])
+        c, *_ = np.linalg.lstsq(a, d, rcond=None)
+        measured = 60.0 / math.hypot(c[1], c[2])
+        model = float(feed_axis_dynamic_stiffness(ax, f_hz).stiffness_n_per_um[0])
+        assert measured == pytest.approx(model, rel=0.05)
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_hole_quality_recovers_hidden_walk_and_runout(seed: int) -> None:
+    # hidden: lip-height difference, wear asymmetry, entry (chisel-edge) force ratio, worn walk
+    # ratio, walk direction, X/Y loop gains and friction (random_loop_overrides); wear
+    # accelerated (22 um/hole) so 12 holes go from new to ~240 um. The analysis gets the
+    # recording, the machine and the drill description, not the drilling model.
+    from cnctwin.sim.scenarios import ScenarioConfig, random_loop_overrides
+
+    rng = np.random.default_rng(seed)
+    ov = {"wear.rate_um_per_hole": 22.0, "wear.run_in_um": 0.0,
+          "drilling.lip_height_difference_um": float(rng.uniform(4, 16)),
+          "drilling.wear_asymmetry": float(rng.uniform(0.1, 0.3)),
+          "drilling.entry_force_ratio": float(rng.uniform(0.02, 0.05)),
+          "drilling.walk_force_ratio_worn": float(rng.uniform(0.03, 0.08)),
+          **random_loop_overrides(seed)}
+    res = tool_wear_run(n_holes=12, seed=seed, overrides=ov, dynamometer=False,
+                        walk_direction_rad=float(rng.uniform(-math.pi, math.pi)))
+    cfg = ScenarioConfig.build(ov)
+    rec = res.recording
+    q = hole_quality(rec, hole_record(rec), machine=cfg.machine, drill=cfg.drill)
+    t = pd.DataFrame(res.truth["holes"])
+    assert len(q) == len(t) == 12
+
+    def rel(est: str, true: str) -> np.ndarray:
+        return np.abs(q[est].to_numpy() / t[true].to_numpy() - 1.0)
+
+    # rotating (1x spindle) force from the lock-in amplitude x axis stiffness: measured <= 2 %
+    assert rel("rotating_force_est_n", "rotating_force_n").max() < 0.05
+    # chisel-edge entry force and its direction from the entry-window response fit:
+    # measured <= 5 % and <= 0.04 rad
+    assert rel("entry_force_est_n", "entry_force_peak_n").max() < 0.10
+    dang = np.angle(np.exp(1j * (q["entry_force_direction_rad"] - t["entry_direction_rad"])))
+    assert np.abs(dang).max() < 0.1
+    # tool-tip hole position error (F_entry / k_tip) per hole
+    assert rel("tip_position_error_est_um", "tip_position_error_um").max() < 0.10
+    # static walk: weakest (a ramp that the speed-loop integral mostly absorbs): the sum over
+    # the run within 30 %
+    assert q["walk_force_est_n"].sum() / t["walk_force_n"].sum() == pytest.approx(1.0, abs=0.3)
+    # growth with wear: the slide run-out (um) tracks the wear and the true force ratio
+    assert np.corrcoef(q["runout_um"], t["wear_um"])[0, 1] > 0.99
+    growth = q["runout_um"].iloc[-1] / q["runout_um"].iloc[0]
+    assert growth == pytest.approx(t["rotating_force_n"].iloc[-1] / t["rotating_force_n"].iloc[0],
+                                   rel=0.1)
+    # sub-micrometre, above the 10 nm encoder resolution
+    assert q["runout_um"].min() > 0.02 and q["runout_um"].max() < 1.0
+    # flags: a tolerance between the smallest and largest tip error splits the holes
+    tol = float(t["tip_position_error_um"].median()) / 1000.0
+    q2 = hole_quality(rec, hole_record(rec), machine=cfg.machine, drill=cfg.drill,
+                      tip_tolerance_mm=tol)
+    truth_flags = t["tip_position_error_um"].to_numpy() > 1000.0 * tol
+    assert (q2["tip_position_oot"].to_numpy() == truth_flags).mean() >= 0.9

@@ -213,8 +213,8 @@ class DrillingModel:
     lip_ripple : float
         Relative amplitude of the lip-pass (flutes x rotation) ripple. 0.02
     walk_force_ratio_new, walk_force_ratio_worn : float
-        Static lateral force / thrust for a new tool and at ``walk_wear_ref_um`` once the
-        point is engaged (lip asymmetry grows with wear -> straightness error, thesis §5.3).
+        Static lateral force / thrust for a new tool and at ``walk_wear_ref_um`` (lip
+        asymmetry grows with wear -> straightness error, thesis §5.3).
         0.01, 0.06
     lip_height_difference_um : float
         Axial lip-height difference delta of the new (reground) drill [um]; with two lips
@@ -487,7 +487,7 @@ def drilling_load(
     lip-height difference, :func:`rotating_force_n` (1x spindle frequency, 40 Hz at 2400 rpm);
     (2) the chisel-edge entry force F_e = ratio (1 + g VB/VB_ref) F_full 4 u (1 - u),
     u = z / L_point, in ``entry_direction_rad`` (skidding until the point is centred);
-    (3) the static walk ratio(VB) x thrust in ``walk_direction_rad`` once the point is in.
+    (3) the static walk ratio(VB) x thrust in ``walk_direction_rad``.
     """
     d = drill if drill is not None else Drill()
     m = get_material(material)
@@ -541,8 +541,8 @@ def drilling_load(
     walk = mdl.walk_force_ratio_new + (mdl.walk_force_ratio_worn - mdl.walk_force_ratio_new) * (
         wear_rel
     )
-    # static walk once the point is engaged (the hole guides the drill from then on)
-    lat = walk * thrust * (r_out >= 1.0)
+    # static walk, rising with the thrust while the point enters
+    lat = walk * thrust
     fx = lat * math.cos(walk_direction_rad)
     fy = lat * math.sin(walk_direction_rad)
     # chisel-edge skid at entry: bump over the point length, random direction per hole

@@ -17,19 +17,47 @@ Indicators (per hole, over the cut from the surface to the bottom):
 
 These are servo-side indicators: the encoder measures the axis, not the tool tip, so bending of
 the drill itself is not seen. They flag holes to inspect; they do not replace a CMM.
+
+Dynamic indicators (:func:`hole_runout`): the speed-loop integral rejects slow lateral forces,
+so the static walk is invisible in ``ENC - DES``, but two lateral forces are fast enough to pass
+the axis' dynamic compliance (:func:`feed_axis_dynamic_stiffness`):
+
+* the force rotating with the spindle (unequal lip heights, grows with wear): a 1x spindle
+  frequency component of the X/Y deviation (40 Hz at 2400 rpm), measured by a lock-in fit
+  over the full-engagement part of the cut -> ``runout_um``;
+* the chisel-edge skid at entry (~0.2 s while the point enters): a bump of the X/Y deviation
+  whose direction is the skid direction -> ``entry_deviation_um``, ``entry_direction_rad``.
+
+With the axis description (``machine``) the amplitudes become forces (amplitude x dynamic
+stiffness); with the drill (``drill``) tool-tip estimates follow: hole position error
+F_entry / k_tip, orbit radius runout + F_rot / (g k_tip), oversize twice that
+(:class:`cnctwin.sim.tool.Drill`).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
+from numpy.typing import ArrayLike, NDArray
 
 from cnctwin.exceptions import ConfigError, SignalNotFoundError
 from cnctwin.recording import Recording
 
-__all__ = ["deviation_paths", "hole_quality"]
+if TYPE_CHECKING:
+    from cnctwin.sim.machine import FeedAxis, Machine
+    from cnctwin.sim.tool import Drill
+
+__all__ = [
+    "AxisStiffness",
+    "deviation_paths",
+    "feed_axis_dynamic_stiffness",
+    "hole_quality",
+    "hole_runout",
+]
 
 
 def _hole_rows(rec: Recording, holes: pd.DataFrame) -> pd.DataFrame:
@@ -108,6 +136,10 @@ def hole_quality(
     straightness_tolerance_mm: float | None = None,
     nominal_depth_mm: float | None = None,
     depth_tolerance_mm: float = 0.1,
+    machine: Machine | None = None,
+    drill: Drill | None = None,
+    tip_tolerance_mm: float = 0.05,
+    oversize_tolerance_mm: float = 0.02,
     axes: tuple[str, str, str] = ("X1", "Y1", "Z1"),
 ) -> pd.DataFrame:
     """Position error, straightness and out-of-tolerance flags per hole.
@@ -126,6 +158,14 @@ def hole_quality(
         Programmed depth; with it ``depth_error_mm`` and ``depth_oot`` are filled [mm].
     depth_tolerance_mm : float, default 0.1
         Depth tolerance [mm].
+    machine, drill : optional
+        Axis and tool descriptions for the force and tool-tip estimates of
+        :func:`hole_runout` (columns added when the hole record has ``speed_rpm``).
+    tip_tolerance_mm : float, default 0.05
+        Tolerance of the estimated tool-tip position error (hole position) [mm]. [E] +-0.05
+        mm is a usual positional tolerance of drilled holes without a pilot
+    oversize_tolerance_mm : float, default 0.02
+        Tolerance of the estimated hole oversize [mm]. [E]
     axes : (str, str, str)
         Lateral X, lateral Y and drilling axis.
 
@@ -133,8 +173,10 @@ def hole_quality(
     -------
     pandas.DataFrame
         Per hole: ``hole``, ``position_error_x_mm``, ``position_error_y_mm``,
-        ``position_error_mm``, ``straightness_mm``, ``depth_error_mm``, ``position_oot``,
-        ``straightness_oot``, ``depth_oot``, ``out_of_tolerance`` (any flag).
+        ``position_error_mm``, ``straightness_mm``, ``depth_error_mm``, the columns of
+        :func:`hole_runout`, ``position_oot``, ``straightness_oot``, ``depth_oot``,
+        ``tip_position_oot``, ``oversize_oot`` (False without estimates), ``out_of_tolerance``
+        (any flag).
 
     Notes
     -----
@@ -160,11 +202,275 @@ def hole_quality(
         q["depth_error_mm"] = q["hole"].map(depth).astype(float) - nominal_depth_mm
     else:
         q["depth_error_mm"] = math.nan
+    if "speed_rpm" in holes.columns and len(q):
+        ro = hole_runout(rec, holes, machine=machine, drill=drill, axes=axes)
+        q = q.merge(ro, on="hole", how="left")
     q["position_oot"] = q["position_error_mm"] > tolerance_mm
     q["straightness_oot"] = q["straightness_mm"] > st_tol
     q["depth_oot"] = q["depth_error_mm"].abs() > depth_tolerance_mm
-    q["out_of_tolerance"] = q["position_oot"] | q["straightness_oot"] | q["depth_oot"]
+    q["tip_position_oot"] = (q["tip_position_error_est_um"] > 1000.0 * tip_tolerance_mm
+                             if "tip_position_error_est_um" in q else False)
+    q["oversize_oot"] = (q["hole_oversize_est_um"] > 1000.0 * oversize_tolerance_mm
+                         if "hole_oversize_est_um" in q else False)
+    q["out_of_tolerance"] = (q["position_oot"] | q["straightness_oot"] | q["depth_oot"]
+                             | q["tip_position_oot"] | q["oversize_oot"])
     q.attrs.update({"tolerance_mm": tolerance_mm, "straightness_tolerance_mm": st_tol,
                     "nominal_depth_mm": nominal_depth_mm,
-                    "depth_tolerance_mm": depth_tolerance_mm})
+                    "depth_tolerance_mm": depth_tolerance_mm,
+                    "tip_tolerance_mm": tip_tolerance_mm,
+                    "oversize_tolerance_mm": oversize_tolerance_mm})
     return q
+
+
+@dataclass(frozen=True)
+class AxisStiffness:
+    """Result of :func:`feed_axis_dynamic_stiffness`.
+
+    Attributes
+    ----------
+    frequency_hz : numpy.ndarray
+        Frequencies [Hz].
+    stiffness_n_per_um : numpy.ndarray
+        |F / x| at the slide [N/um].
+    phase_rad : numpy.ndarray
+        Phase of F / x [rad].
+    """
+
+    frequency_hz: NDArray[np.float64]
+    stiffness_n_per_um: NDArray[np.float64]
+    phase_rad: NDArray[np.float64]
+
+
+def feed_axis_dynamic_stiffness(
+    axis: FeedAxis, frequency_hz: ArrayLike, *, standstill: bool = True
+) -> AxisStiffness:
+    """Dynamic stiffness of a position-controlled ball-screw axis against a force at the slide.
+
+    Parameters
+    ----------
+    axis : cnctwin.sim.machine.FeedAxis
+        Axis description (inertia, pitch, speed-controller gains, Kv, friction).
+    frequency_hz : array-like
+        Frequencies [Hz].
+    standstill : bool, default True
+        Linearise the Coulomb + Stribeck friction of a standing slide as the damper
+        (F_c + F_s) / v_eps of its smoothing band (``friction_smoothing_mm_s``).
+
+    Returns
+    -------
+    AxisStiffness
+
+    Notes
+    -----
+    With rho = pitch / 2 pi [m/rad], motor angle theta = x / rho, a P position loop (Kv, closed
+    in the drive with DSC), a PI speed loop (Kp, Ti) and a PT1 current loop (T_i):
+
+        F / x = [J s^2 + Kp (1 + 1/(Ti s)) (s + Kv) / (1 + T_i s)] / rho^2 + c s
+
+    (J at the motor, c the viscous + linearised friction at the slide). The integral makes the
+    axis infinitely stiff at 0 Hz; around the speed-loop corner it is softest. Default X axis:
+    J = 2.5e-3 kg m^2, Kp = 1.5 Nm s/rad, Ti = 8 ms, Kv = 41.7 1/s, rho = 1.59 mm/rad:
+    ~140 N/um at 40 Hz without friction (a 20 N rotating force -> 0.14 um), ~230 N/um with
+    the standstill friction band. Structure after Altintas et al., Machine tool feed drives,
+    CIRP Annals 60 (2011) 779-796 (disturbance response of ball-screw drives).
+    """
+    f = np.atleast_1d(np.asarray(frequency_hz, dtype=np.float64))
+    s = 2j * np.pi * np.maximum(f, 1e-9)
+    rho = axis.screw_pitch_mm / 1000.0 / (2.0 * math.pi)
+    ctrl = (axis.speed_kp_nm_s_per_rad * (1.0 + 1.0 / (axis.speed_ti_s * s)) * (s + axis.kv_per_s)
+            / (1.0 + axis.equiv_currctrl_time_s * s))
+    c_mm = axis.viscous_n_per_mm_s
+    if standstill:
+        c_mm += (axis.coulomb_n + axis.stribeck_n) / axis.friction_smoothing_mm_s
+    k = (axis.total_inertia_kgm2 * s * s + ctrl) / rho**2 + c_mm * 1000.0 * s
+    return AxisStiffness(f, np.abs(k) / 1e6, np.angle(k))
+
+
+def _axis_response_um_per_n(axis: FeedAxis, force: NDArray[np.float64], dt_s: float,
+                            *, standstill: bool = True) -> NDArray[np.float64]:
+    """Slide displacement [um] of the position-controlled axis under a force history [N].
+
+    Linear model of :func:`feed_axis_dynamic_stiffness` as H(s) = x / F, simulated with a
+    zero-order hold on the force (scipy.signal.lsim).
+    """
+    from scipy.signal import lsim
+
+    rho = axis.screw_pitch_mm / 1000.0 / (2.0 * math.pi)
+    c_mm = axis.viscous_n_per_mm_s
+    if standstill:
+        c_mm += (axis.coulomb_n + axis.stribeck_n) / axis.friction_smoothing_mm_s
+    c_rot = c_mm * 1000.0 * rho**2  # at the motor [Nm s/rad]
+    j, kp, ti = axis.total_inertia_kgm2, axis.speed_kp_nm_s_per_rad, axis.speed_ti_s
+    tc, kv = axis.equiv_currctrl_time_s, axis.kv_per_s
+    num = [rho**2 * ti * tc * 1e6, rho**2 * ti * 1e6, 0.0]
+    den = np.polyadd(np.polymul([j, c_rot, 0.0], [ti * tc, ti, 0.0]),
+                     kp * np.array([ti, ti * kv + 1.0, kv]))
+    t = np.arange(force.size) * dt_s
+    _, y, _ = lsim((num, den), force, t, interp=False)
+    return np.asarray(y, dtype=np.float64)
+
+
+def _alias_hz(f: float, fs: float) -> float:
+    return abs(((f + fs / 2.0) % fs) - fs / 2.0)
+
+
+def _lockin(t: NDArray[np.float64], d: NDArray[np.float64], f_hz: float) -> float:
+    """Amplitude of the f_hz sinusoid in d(t) (least squares with offset and trend)."""
+    w = 2.0 * math.pi * f_hz
+    a = np.column_stack([np.ones_like(t), t - t.mean(), np.cos(w * t), np.sin(w * t)])
+    coef, *_ = np.linalg.lstsq(a, d, rcond=None)
+    return float(math.hypot(coef[2], coef[3]))
+
+
+def hole_runout(
+    rec: Recording,
+    holes: pd.DataFrame,
+    *,
+    point_length_mm: float = 4.25 / math.tan(math.radians(70.0)),
+    machine: Machine | None = None,
+    drill: Drill | None = None,
+    axes: tuple[str, str, str] = ("X1", "Y1", "Z1"),
+) -> pd.DataFrame:
+    """Spindle-frequency run-out and entry deviation of X/Y per hole (dynamic indicators).
+
+    Parameters
+    ----------
+    rec : Recording
+        Recording with ``DES_POS``/``ENC_POS`` of the three axes.
+    holes : pandas.DataFrame
+        Hole record (needs ``speed_rpm``).
+    point_length_mm : float
+        Axial length of the drill point (D/2)/tan(sigma/2) [mm]; default 8.5 mm, 140 deg.
+    machine : cnctwin.sim.machine.Machine, optional
+        Axis description: adds force estimates (amplitude x :func:`feed_axis_dynamic_stiffness`).
+    drill : cnctwin.sim.tool.Drill, optional
+        With ``machine``: tool-tip estimates from the drill's tip stiffness and run-out.
+    axes : (str, str, str)
+        Lateral X, lateral Y and drilling axis.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Per hole: ``hole``, ``spindle_hz``, ``alias_hz`` (frequency seen at the recording rate),
+        ``runout_x_um``, ``runout_y_um``, ``runout_um`` (mean of the two: slide orbit radius),
+        ``entry_deviation_x_um``, ``entry_deviation_y_um``, ``entry_deviation_um``,
+        ``entry_direction_rad`` (largest excursion of the revolution-averaged deviation);
+        with ``machine``: ``rotating_force_est_n``, ``entry_force_est_x_n``/``_y_n``,
+        ``entry_force_est_n``, ``entry_force_direction_rad``, ``walk_force_est_x_n``/``_y_n``,
+        ``walk_force_est_n``; with ``drill`` too: ``tip_position_error_est_um``,
+        ``tip_straightness_est_um``, ``tip_orbit_radius_est_um``, ``hole_oversize_est_um``.
+
+    Notes
+    -----
+    Run-out: lock-in fit a cos(wt) + b sin(wt) + offset + trend of ``ENC - DES`` of X and of Y
+    over the cut deeper than two point lengths (full engagement), w = 2 pi x alias of n/60 at the
+    recording rate; amplitude sqrt(a^2 + b^2). Entry: ``ENC - DES`` minus its mean over the
+    0.1 s before the tip reaches the surface, averaged over one spindle revolution, from the
+    surface to three point lengths deep; the largest excursion (vector) gives amplitude and
+    direction. Forces (with ``machine``): least-squares fit of the entry window with the axis'
+    responses to the walk (rising with the thrust) and to the chisel-edge bump (``_entry_fit``);
+    rotating force = run-out amplitude x |K(n/60)|. On the simulated wear run these recover the
+    hidden forces to a few per cent (rotating, entry) and ~25 % (walk): docs/hole-quality.md.
+    """
+    paths = deviation_paths(rec, holes, axes=axes)
+    if "speed_rpm" not in holes.columns:
+        raise ConfigError("hole_runout needs the hole record's speed_rpm column")
+    fs = rec.fs_hz
+    speed = holes.set_index("hole")["speed_rpm"]
+    cyc = rec.cycles
+    dx_all = (rec.hf[f"ENC_POS|{axes[0]}"] - rec.hf[f"DES_POS|{axes[0]}"]).to_numpy(np.float64)
+    dy_all = (rec.hf[f"ENC_POS|{axes[1]}"] - rec.hf[f"DES_POS|{axes[1]}"]).to_numpy(np.float64)
+    rows = []
+    for hole, p in paths.groupby("hole", sort=True):
+        h = int(str(hole))
+        f_sp = abs(float(speed.get(h, math.nan))) / 60.0
+        fa = _alias_hz(f_sp, fs) if math.isfinite(f_sp) else math.nan
+        z = p["des_z_mm"].to_numpy()
+        t = p["t_s"].to_numpy()
+        dx = (p["enc_x_mm"] - p["des_x_mm"]).to_numpy() * 1000.0
+        dy = (p["enc_y_mm"] - p["des_y_mm"]).to_numpy() * 1000.0
+        full = z < -2.0 * point_length_mm
+        row: dict[str, float] = {"hole": h, "spindle_hz": f_sp, "alias_hz": fa}
+        span = float(np.ptp(t[full])) if full.sum() > 2 else 0.0
+        ok = math.isfinite(fa) and fa > 2.0 / max(span, 1e-9)
+        if ok and full.sum() >= 20:
+            row["runout_x_um"] = _lockin(t[full], dx[full], fa)
+            row["runout_y_um"] = _lockin(t[full], dy[full], fa)
+        else:
+            row["runout_x_um"] = row["runout_y_um"] = math.nan
+        row["runout_um"] = 0.5 * (row["runout_x_um"] + row["runout_y_um"])
+        # entry: baseline before contact from the full recording, then the bump
+        c0 = int(p["cycle"].iloc[0])
+        i0 = int(np.searchsorted(cyc, c0))
+        nb = max(round(0.1 * fs), 1)
+        bx = float(np.mean(dx_all[max(i0 - nb, 0):i0 + 1])) * 1000.0
+        by = float(np.mean(dy_all[max(i0 - nb, 0):i0 + 1])) * 1000.0
+        ent = (z <= 0.0) & (z >= -3.0 * point_length_mm)
+        ex, ey = dx[ent] - bx, dy[ent] - by
+        nrev = max(round(fs / fa), 1) if math.isfinite(fa) and fa > 0 else 1
+        if ex.size >= nrev:
+            kern = np.ones(nrev) / nrev
+            ex = np.convolve(ex, kern, mode="valid")
+            ey = np.convolve(ey, kern, mode="valid")
+        if ex.size:
+            k = int(np.argmax(np.hypot(ex, ey)))
+            row["entry_deviation_x_um"], row["entry_deviation_y_um"] = float(ex[k]), float(ey[k])
+        else:
+            row["entry_deviation_x_um"] = row["entry_deviation_y_um"] = math.nan
+        row["entry_deviation_um"] = math.hypot(row["entry_deviation_x_um"],
+                                               row["entry_deviation_y_um"])
+        row["entry_direction_rad"] = math.atan2(row["entry_deviation_y_um"],
+                                                row["entry_deviation_x_um"])
+        if machine is not None and ent.sum() > 10:
+            fit = _entry_fit(machine.axis(axes[0]), machine.axis(axes[1]),
+                             t[ent], -z[ent], dx[ent] - bx, dy[ent] - by,
+                             point_length_mm=point_length_mm, alias_hz=fa, dt_s=1.0 / fs)
+            row.update(fit)
+        if machine is not None:
+            ax_x, ax_y = machine.axis(axes[0]), machine.axis(axes[1])
+            kx = float(feed_axis_dynamic_stiffness(ax_x, f_sp).stiffness_n_per_um[0])
+            ky = float(feed_axis_dynamic_stiffness(ax_y, f_sp).stiffness_n_per_um[0])
+            row["rotating_force_est_n"] = 0.5 * (row["runout_x_um"] * kx
+                                                 + row["runout_y_um"] * ky)
+            if drill is not None:
+                kt = drill.tip_stiffness_n_per_um
+                row["tip_position_error_est_um"] = row["entry_force_est_n"] / kt
+                row["tip_straightness_est_um"] = row["walk_force_est_n"] / (
+                    drill.guided_stiffness_gain * kt)
+                orbit = drill.radial_runout_um + row["rotating_force_est_n"] / (
+                    drill.guided_stiffness_gain * kt)
+                row["tip_orbit_radius_est_um"] = orbit
+                row["hole_oversize_est_um"] = 2.0 * orbit
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _entry_fit(ax_x: FeedAxis, ax_y: FeedAxis, t: NDArray[np.float64],
+               depth_mm: NDArray[np.float64], dx_um: NDArray[np.float64],
+               dy_um: NDArray[np.float64], *, point_length_mm: float, alias_hz: float,
+               dt_s: float) -> dict[str, float]:
+    """Entry and walk forces from the entry window by fitting the axis' force responses.
+
+    Force shapes over the depth u = clip(depth / L_point, 0, 1): the walk rises with the
+    thrust (u), the chisel-edge skid is a bump 4 u (1 - u); each goes through the axis model
+    (:func:`_axis_response_um_per_n`); regressors per axis: offset, the two responses and
+    u cos / u sin at the spindle alias frequency (the rotating force rising with the thrust).
+    """
+    u = np.clip(depth_mm / point_length_mm, 0.0, 1.0)
+    shapes = (u, 4.0 * u * (1.0 - u))
+    w = 2.0 * math.pi * alias_hz if math.isfinite(alias_hz) else 0.0
+    out: dict[str, float] = {}
+    for tag, ax, d in (("x", ax_x, dx_um), ("y", ax_y, dy_um)):
+        resp = [_axis_response_um_per_n(ax, g, dt_s) for g in shapes]
+        cols = [np.ones_like(t), *resp]
+        if w > 0:
+            cols += [u * np.cos(w * t), u * np.sin(w * t)]
+        coef, *_ = np.linalg.lstsq(np.column_stack(cols), d, rcond=None)
+        out[f"walk_force_est_{tag}_n"] = float(coef[1])
+        out[f"entry_force_est_{tag}_n"] = float(coef[2])
+    out["walk_force_est_n"] = math.hypot(out["walk_force_est_x_n"], out["walk_force_est_y_n"])
+    out["entry_force_est_n"] = math.hypot(out["entry_force_est_x_n"],
+                                          out["entry_force_est_y_n"])
+    out["entry_force_direction_rad"] = math.atan2(out["entry_force_est_y_n"],
+                                                  out["entry_force_est_x_n"])
+    return out
