@@ -105,3 +105,51 @@ def test_tapping_reverses_on_extraction() -> None:
 def test_unknown_material() -> None:
     with pytest.raises(ConfigError, match="known"):
         drill_torque_nm(0.1, 1000, material="unobtainium")
+
+
+def test_rotating_force_from_two_lip_forces() -> None:
+    # independent construction: two lips at 0 and pi, chip thicknesses f/2 + delta and
+    # f/2 - delta, each pushed by a normal force proportional to its chip with axial part
+    # N sin(kappa) and radial part N cos(kappa) pointing outward along its lip. The lips'
+    # axial parts make the lip share s of the thrust; the resultant radial vector's length is
+    # the rotating force. Hidden random delta, wear asymmetry, point angle, feed and thrust.
+    from cnctwin.sim.cutting import DrillingModel, lip_height_difference_um, rotating_force_n
+    from cnctwin.sim.tool import Drill
+
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        mdl = DrillingModel(lip_height_difference_um=float(rng.uniform(2, 20)),
+                            wear_asymmetry=float(rng.uniform(0.0, 0.4)),
+                            lip_thrust_share=float(rng.uniform(0.4, 0.7)))
+        drill = Drill(point_angle_deg=float(rng.uniform(118, 140)))
+        f = float(rng.uniform(0.08, 0.4))
+        fz = float(rng.uniform(300, 3000))
+        wear = float(rng.uniform(0, 300))
+        delta = float(lip_height_difference_um(wear, model=mdl)) / 1000.0
+        h = np.array([f / 2 + min(delta, f / 2), f / 2 - min(delta, f / 2)])
+        kappa = drill.kappa_rad
+        n_per_h = mdl.lip_thrust_share * fz / (h.sum() * math.sin(kappa))
+        lip_dirs = np.array([[1.0, 0.0], [-1.0, 0.0]])  # lips at 0 and pi
+        radial = (n_per_h * h * math.cos(kappa))[:, None] * lip_dirs
+        expected = float(np.hypot(*radial.sum(axis=0)))
+        got = float(rotating_force_n(fz, f, wear, drill=drill, model=mdl))
+        assert got == pytest.approx(expected, rel=1e-9)
+
+
+def test_rotating_force_turns_with_the_spindle_and_grows_with_wear() -> None:
+    # the lateral force at full engagement: a 1x spindle-frequency component whose amplitude
+    # is the lip force (Fourier coefficient over whole revolutions), growing with wear
+    from cnctwin.sim.cutting import rotating_force_n
+
+    ang = np.linspace(0, 20 * math.pi, 2000, endpoint=False)  # 10 revolutions
+    z = np.full(ang.size, 8.0)
+    amps = []
+    for w in (0.0, 277.0):
+        load = drilling_load(z, 2400.0, 0.167, wear_um=w, spindle_angle_rad=ang)
+        amp = abs(np.mean((load.fx_n + 1j * load.fy_n) * np.exp(-1j * ang)))
+        amps.append(amp)
+        assert amp == pytest.approx(float(rotating_force_n(load.thrust_n.mean(), 0.167, w)),
+                                    rel=1e-6)
+    # [D] 21 N new -> 64 N at 277 um (delta 8 -> 15.8 um, thrust x1.57)
+    assert amps[0] == pytest.approx(20.8, abs=0.5)
+    assert amps[1] / amps[0] == pytest.approx(3.1, abs=0.15)
