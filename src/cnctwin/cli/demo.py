@@ -582,7 +582,14 @@ def section_position_loop(ctx: DemoContext) -> None:
     position_loop_section(ctx)
 
 
-DEMO_SECTIONS: list[SectionBuilder] = [section_position_loop]
+def section_use_cases(ctx: DemoContext) -> None:
+    """Use-case section (issue #6); imported lazily to keep ``cnctwin --help`` fast."""
+    from cnctwin.usecases.report import use_cases_section
+
+    use_cases_section(ctx)
+
+
+DEMO_SECTIONS: list[SectionBuilder] = [section_position_loop, section_use_cases]
 """Extension hook: builders ``(DemoContext) -> None`` appended by other topics (position loop,
 issue #5; use cases, issue #6). They run after :data:`SPINDLE_SECTIONS`."""
 
