@@ -64,6 +64,8 @@ class SignalSpec:
         Unit on a linear feed axis.
     unit_rotary : str
         Unit on a rotary axis or spindle.
+    unit_spindle : str
+        Unit on a spindle where it differs from ``unit_rotary`` ("" = same).
     thesis_name : str
         Name in the thesis' Tables 2.1 / 2.2 ("" when the thesis does not list it).
     aliases : tuple of str
@@ -87,12 +89,16 @@ class SignalSpec:
     opcua_path: str = ""
     note: str = ""
     dtype: str = "float64"
+    unit_spindle: str = ""
 
     def unit_for(self, axis: str | None) -> str:
         """Unit of this signal on ``axis`` (linear axes get ``unit_linear``)."""
         if axis is None:
             return self.unit_linear
-        return self.unit_linear if axis_kind(axis) == "linear" else self.unit_rotary
+        kind = axis_kind(axis)
+        if kind == "spindle" and self.unit_spindle:
+            return self.unit_spindle
+        return self.unit_linear if kind == "linear" else self.unit_rotary
 
 
 _HF: tuple[SignalSpec, ...] = (
@@ -143,11 +149,13 @@ _HF: tuple[SignalSpec, ...] = (
     ),
     SignalSpec(
         "VEL_FFW", "hf", "Velocity feedforward added to the position-controller output.",
-        "mm/min", "rpm", "Velocity feedforward", ("VelocityFeedForward", "VelocityFeedforward"),
-        note="Siemens documents mm/s (deg/s), and the real C4A file agrees: VEL_FFW equals "
-        "d(DES_POS)/dt in mm/s (deg/s) with ratio 1.000 on X1, Y1, C1, SP1 "
-        "(docs/real-data-servo.md). The catalog unit and the simulator still say mm/min (rpm); "
-        "aligning both on per-second units is open. cnctwin.servo reads the unit from the data.",
+        "mm/s", "deg/s", "Velocity feedforward", ("VelocityFeedForward", "VelocityFeedforward"),
+        unit_spindle="rpm",
+        note="Per second, as Siemens documents and the real C4A file shows: VEL_FFW equals "
+        "d(DES_POS)/dt in mm/s (deg/s) with ratio 1.000 on X1, Y1, C1 "
+        "(docs/real-data-servo.md); the simulator writes these units. Spindle: rpm (the "
+        "simulated spindle in speed control and the spindle analyses use rpm; the real file's "
+        "SP1, positioning, shows deg/s). cnctwin.servo reads the unit from the data.",
     ),
     SignalSpec(
         "TORQUE_FFW", "hf", "Torque (force) feedforward value sent from the NC to the drive.",
@@ -156,9 +164,9 @@ _HF: tuple[SignalSpec, ...] = (
     ),
     SignalSpec(
         "CMD_SPEED", "hf", "Speed command sent from the NC to the drive (controller output + "
-        "velocity feedforward).", "mm/min", "rpm", "Speed command",
-        ("CommandedSpeed", "SpeedCommand"),
-        note="Same unit convention as VEL_FFW.",
+        "velocity feedforward).", "mm/s", "deg/s", "Speed command",
+        ("CommandedSpeed", "SpeedCommand"), unit_spindle="rpm",
+        note="Same unit convention as VEL_FFW (per second; spindle rpm).",
     ),
     SignalSpec(
         "CURRENT", "hf", "Actual torque-generating drive current (Iq), signed.", "A", "A",
@@ -317,7 +325,8 @@ def glossary_markdown(specs: Iterable[SignalSpec] | None = None) -> str:
             if s.kind != kind:
                 continue
             lines.append(
-                f"| `{s.code}` | {s.description} | {s.unit_linear} | {s.unit_rotary} | "
+                f"| `{s.code}` | {s.description} | {s.unit_linear} | {s.unit_rotary}"
+                f"{f' (spindle: {s.unit_spindle})' if s.unit_spindle else ''} | "
                 f"{s.thesis_name} | {', '.join(s.aliases)} | {s.sinamics_parameter} | {s.note} |"
             )
         lines.append("")

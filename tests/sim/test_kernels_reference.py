@@ -53,6 +53,13 @@ def test_servo_kernel_bit_identical_to_reference_chunked() -> None:
         _servo_kernel(*args, st_new.values, st_new.history, out_new, TC, m.inner_steps)
         servo_kernel_reference(*args, st_ref.values, st_ref.history, out_ref, TC,
                                m.inner_steps)
+        # VEL_FFW (5) and CMD_SPEED (7): the reference kernel records mm/min (rpm), the kernel
+        # now per second (mm/s, deg/s); compared through the factor to 1 ulp (rtol 3e-16)
+        for a, factor in enumerate(60.0 if not ax.rotary else 1.0 / 6.0 for ax in m.axes):
+            for i in (5, 7):
+                np.testing.assert_allclose(out_new[a, i] * factor, out_ref[a, i], rtol=3e-16,
+                                           atol=0.0)
+                out_new[a, i] = out_ref[a, i]
         np.testing.assert_array_equal(out_new, out_ref)
         np.testing.assert_array_equal(st_new.values, st_ref.values)
         np.testing.assert_array_equal(st_new.history, st_ref.history)

@@ -40,8 +40,8 @@ def test_following_error_without_ffw_is_v_over_kv() -> None:
     tr = simulate_servo(_ramp(2000)[None, :], [ax])
     fe = tr.axis("DES_POS", "X1") - tr.axis("ENC_POS", "X1")
     assert fe[-300:].mean() == pytest.approx(0.160, rel=0.02)
-    # CMD_SPEED (mm/min, catalog unit) carries the whole feed: no feedforward
-    assert tr.axis("CMD_SPEED", "X1")[-300:].mean() == pytest.approx(FEED_MM_MIN, rel=0.01)
+    # CMD_SPEED (mm/s, catalog unit) carries the whole feed: no feedforward
+    assert tr.axis("CMD_SPEED", "X1")[-300:].mean() == pytest.approx(V_MM_S, rel=0.01)
     assert np.all(tr.axis("VEL_FFW", "X1") == 0.0)
 
 
@@ -62,7 +62,7 @@ def test_speed_ffw_removes_steady_controller_difference(mode: int) -> None:
     diff2 = tr.axis("CTRL_DIFF2", "X1")
     assert np.abs(diff2[-300:]).max() < 0.010
     assert np.abs(diff2[-300:].mean()) < 0.002
-    assert tr.axis("VEL_FFW", "X1")[-1] == pytest.approx(FEED_MM_MIN, rel=1e-6)
+    assert tr.axis("VEL_FFW", "X1")[-1] == pytest.approx(V_MM_S, rel=1e-6)
     # DES_POS - ENC_POS = v x (jerk MA delay (m-1) Tc / 2 + balancing time MD32810)
     m = round(ax.jerk_time_s / TC)
     lag_s = (m - 1) * TC / 2 + ax.equiv_speedctrl_time_s
@@ -190,13 +190,22 @@ def test_chunked_equals_one_shot() -> None:
                                       arr, err_msg=code)
 
 
-def test_rotary_units_rpm() -> None:
-    # catalog: VEL_FFW/CMD_SPEED in rpm on rotary axes; 1 rpm = 6 deg/s
-    c = Machine.thesis_default().axis("C1")
+def test_velocity_units_per_second() -> None:
+    # catalog and real C4A file (docs/real-data-servo.md §1.1): VEL_FFW/CMD_SPEED in deg/s on
+    # rotary axes and mm/s on linear axes; LF SPEED_SMOOTHED (r0063) in rpm: 60 deg/s = 10 rpm
+    m = Machine.thesis_default()
+    c = m.axis("C1")
     n = 1500
-    des = np.clip(np.arange(n) * TC - 0.2, 0, None) * 60.0  # 60 deg/s = 10 rpm
+    des = np.clip(np.arange(n) * TC - 0.2, 0, None) * 60.0  # 60 deg/s
     tr = simulate_servo(des[None, :], [dataclasses.replace(c, jerk_filter_type=0)])
-    assert tr.axis("VEL_FFW", "C1")[-1] == pytest.approx(10.0, rel=1e-6)
+    assert tr.axis("VEL_FFW", "C1")[-1] == pytest.approx(60.0, rel=1e-6)
+    assert tr.axis("CMD_SPEED", "C1")[-1] == pytest.approx(60.0, rel=1e-3)
+    assert tr.axis("SPEED_SMOOTHED", "C1")[-1] == pytest.approx(10.0, rel=1e-3)
+    x = m.axis("X1")
+    des_x = np.clip(np.arange(n) * TC - 0.2, 0, None) * 400.0 / 60.0  # 400 mm/min
+    tx = simulate_servo(des_x[None, :], [dataclasses.replace(x, jerk_filter_type=0)])
+    assert tx.axis("VEL_FFW", "X1")[-1] == pytest.approx(400.0 / 60.0, rel=1e-6)  # mm/s
+    assert tx.axis("SPEED_SMOOTHED", "X1")[-1] == pytest.approx(400.0, rel=1e-3)  # mm/min
 
 
 def test_shape_errors() -> None:

@@ -98,7 +98,7 @@ def test_following_error_v_over_kv_through_recording() -> None:
     rec = simulate(LINE, m).recording
     assert rec is not None
     fe = rec.signal("DES_POS", "X1") - rec.signal("ENC_POS", "X1")
-    v = rec.signal("CMD_SPEED", "X1")
+    v = rec.signal("CMD_SPEED", "X1") * 60.0  # mm/s (catalog) -> mm/min
     steady = fe[(v > 399.0) & (v < 401.0)]
     assert len(steady) > 500
     assert steady.median() == pytest.approx(0.160, rel=0.02)

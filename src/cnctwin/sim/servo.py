@@ -18,8 +18,10 @@ following thesis Fig. 3.1 and SINUMERIK function manuals G2/K3/B2 (physics-and-p
 Conventions
 -----------
 * Positions in mm on linear axes and deg on rotary axes (catalog units).
-* ``VEL_FFW`` and ``CMD_SPEED`` in mm/min (linear) and rpm of the axis (rotary), the unit
-  convention of :mod:`cnctwin.signals` (the real C4A file shows 400.0 during a 400 mm/min move).
+* ``VEL_FFW`` and ``CMD_SPEED`` per second: mm/s (linear) and deg/s (rotary), the unit
+  convention of :mod:`cnctwin.signals` and of the real Capture4Analysis file (VEL_FFW equals
+  d(DES_POS)/dt in mm/s, docs/real-data-servo.md §1.1). The LF ``SPEED_SMOOTHED`` (r0063)
+  stays in mm/min (rpm), its catalog unit.
 * ``TORQUE`` and ``TORQUE_FFW``: force at the slide in N on linear axes (motor torque times
   2 pi / pitch), motor torque in Nm on rotary axes (catalog units).
 * ``CURRENT``: torque-generating current Iq in A rms (as :mod:`cnctwin.sim.spindle`).
@@ -238,8 +240,11 @@ def _servo_kernel(
         inv_vs = 1.0 / vs
         h_over_j = h / jm
         hg = h * g
-        # unit factors: load units/s -> recorded speed unit
-        v_out = 60.0 if not rotary else 1.0 / 6.0  # mm/s -> mm/min ; deg/s -> rpm
+        # unit factors: load units/s -> recorded speed units. HF VEL_FFW/CMD_SPEED per second
+        # (v_out, kept as a factor so the code matches the reference kernel); LF r0063 in
+        # mm/min or rpm (v_lf)
+        v_out = 1.0
+        v_lf = 60.0 if not rotary else 1.0 / 6.0  # mm/s -> mm/min ; deg/s -> rpm
         f_out = 1.0 / r if not rotary else 1.0  # Nm motor -> N at slide ; Nm stays Nm
         # discrete filter coefficients
         cur_t = par[a, P_EQ_CURR]
@@ -448,7 +453,7 @@ def _servo_kernel(
             pw = tact * w + rph * iq * iq
             temp += tc * (rph * iq * iq - (temp - tamb) / rth) / cth
             vload = w * g
-            lf_speed += a_lf * (vload * v_out - lf_speed)
+            lf_speed += a_lf * (vload * v_lf - lf_speed)
             lf_iabs += a_lf * (abs(iq) - lf_iabs)
             lf_iq += a_lf * (iq - lf_iq)
             lf_util += a_lf * (abs(tset) / tmax * 100.0 - lf_util)
@@ -497,7 +502,7 @@ def _servo_kernel(
                     fz_xd = xd
                     fz_f = fext
                     fz_iq = iq
-                    fz_vl = vload * v_out
+                    fz_vl = vload * v_lf
                     fz_util = abs(tset) / tmax * 100.0
 
         st[a, S_XF1] = xf1
