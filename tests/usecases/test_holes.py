@@ -180,3 +180,18 @@ def test_missing_signals_raise() -> None:
     rec2 = Recording.from_arrays(np.arange(100), {"DES_POS|Z1": np.ones(100)})
     with pytest.raises(SignalNotFoundError, match="CURRENT"):
         hole_record(rec2)
+
+
+def test_real_capture4analysis_has_no_drilling() -> None:
+    # the real C4A file (docs/real-data-capture4analysis.md): one fast Z move (G0, 252 m/min)
+    # with the spindle standing (|n| < 0.01 rpm) - not a hole; the segmentation says so
+    from pathlib import Path
+
+    from cnctwin.iotools import read_recording
+
+    path = (Path(__file__).parents[1] / "data" / "real" / "capture4analysis"
+            / "example_data_ff429d74-6482-4d4f-80e1-31419d9bd56c.json")
+    rec = read_recording(path)
+    holes = hole_record(rec)
+    assert len(holes) == 0
+    assert any("not a hole" in m and "5558098" in m for m in holes.attrs["issues"])

@@ -315,6 +315,7 @@ def hole_record(
     first_hole: int = 0,
     time_origin: pd.Timestamp | None = None,
     min_travel_mm: float = 0.5,
+    min_speed_rpm: float = 10.0,
     store: bool = True,
 ) -> pd.DataFrame:
     """One row per hole: segmentation, current, torque, energy, thrust, deviations, tool.
@@ -344,6 +345,9 @@ def hole_record(
         cycle of ``rec``.
     min_travel_mm : float, default 0.5
         Shortest feed travel counted as a plunge [mm].
+    min_speed_rpm : float, default 10
+        A plunge whose median |spindle speed| in the cut is lower is a positioning move, not a
+        hole: skipped with an entry in ``attrs["issues"]`` [rpm].
     store : bool, default True
         Also store the table in ``rec.meta.attrs["holes"]``.
 
@@ -431,8 +435,8 @@ def hole_record(
                 continue
         groups.append([k])
 
-    rows = []
-    for h, grp in enumerate(groups):
+    rows: list[dict[str, object]] = []
+    for grp in groups:
         first = plunges[grp[0]]
         last = plunges[grp[-1]]
         bottom = min((plunges[i].bottom for i in grp), key=lambda b: float(za[b]))
@@ -460,6 +464,13 @@ def hole_record(
         sl = np.concatenate(parts)
         if sl.size == 0:
             sl = np.arange(cut_start, cut_end + 1)
+        n_med = float(np.nanmedian(np.abs(speed[sl]))) if sl.size else math.nan
+        if not n_med >= min_speed_rpm:
+            issues.append(f"plunge at cycle {int(cycles[first.feed_start])} with the spindle "
+                          f"at {n_med:.3g} rpm (< min_speed_rpm {min_speed_rpm:g}) is not a "
+                          "hole: skipped")
+            continue
+        h = len(rows)
         nwin = max(1, round(window_s * fs))
         fw = sl[:nwin]
         omega = speed[sl] * 2.0 * math.pi / 60.0
