@@ -198,3 +198,6 @@ def test_hole_quality_recovers_hidden_walk_and_runout(seed: int) -> None:
                       tip_tolerance_mm=tol)
     truth_flags = t["tip_position_error_um"].to_numpy() > 1000.0 * tol
     assert (q2["tip_position_oot"].to_numpy() == truth_flags).mean() >= 0.9
+    from cnctwin.usecases.figures import plot_hole_quality
+
+    assert len(plot_hole_quality(q2, truth=t).axes) == 3

@@ -5,6 +5,7 @@
   temperature per hole, measured and predicted (Figure 5.5).
 * :func:`plot_deviation_paths`: desired and encoder paths per hole in 3D, X-Z, Y-Z or X-Y
   (Figures 5.6-5.9).
+* :func:`plot_hole_quality`: per-hole run-out, force and tool-tip estimates (with truth).
 * :func:`plot_anomaly_scores`: a detector score over time with alarms and fault onsets.
 * :func:`plot_loose_tap`: Z encoder position, spindle current and dynamometer torque around a
   loose-tap event (Figure 5.10).
@@ -30,6 +31,7 @@ __all__ = [
     "plot_anomaly_scores",
     "plot_deviation_paths",
     "plot_hole_means",
+    "plot_hole_quality",
     "plot_loose_tap",
     "plot_set_temperature",
 ]
@@ -298,4 +300,61 @@ def plot_loose_tap(
                 ax.axvline(a_s, color="C3", lw=0.8)
     axs[-1].set_xlabel("time [s]")
     axs[0].set_title("loose tap: green dashed = true onset (hidden), red = alarm", fontsize=9)
+    return fig
+
+
+def plot_hole_quality(quality: pd.DataFrame, *, truth: pd.DataFrame | None = None) -> Figure:
+    """Dynamic hole-quality indicators per hole (companion of Figures 5.6-5.9).
+
+    Parameters
+    ----------
+    quality : pandas.DataFrame
+        Output of :func:`~cnctwin.usecases.quality.hole_quality` (with ``machine`` and
+        ``drill`` for the force and tool-tip panels).
+    truth : pandas.DataFrame, optional
+        Simulator per-hole truth (``truth.json`` ``holes``) drawn as markers.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        (a) X/Y run-out at the spindle frequency [µm]; (b) estimated rotating, entry and walk
+        forces [N]; (c) estimated tool-tip position error and hole oversize [µm] with the
+        tolerances of ``quality.attrs``.
+    """
+    if "runout_um" not in quality.columns:
+        raise ConfigError("quality table has no run-out columns; the hole record needs "
+                          "speed_rpm (hole_quality adds them)")
+    fig = Figure(figsize=(9, 8), layout="constrained")
+    axs = fig.subplots(3, 1, sharex=True)
+    h = quality["hole"].to_numpy()
+    axs[0].plot(h, quality["runout_x_um"], ".-", label="X")
+    axs[0].plot(h, quality["runout_y_um"], ".-", label="Y")
+    axs[0].set_ylabel("run-out 1x [µm]")
+    axs[0].legend(fontsize=7)
+    pairs = (("rotating_force_est_n", "rotating_force_n", "rotating"),
+             ("entry_force_est_n", "entry_force_peak_n", "entry"),
+             ("walk_force_est_n", "walk_force_n", "walk"))
+    for est, true, lab in pairs:
+        if est in quality.columns:
+            line = axs[1].plot(h, quality[est], ".-", label=f"{lab} (est.)")[0]
+            if truth is not None and true in truth.columns:
+                axs[1].plot(truth["hole"], truth[true], "x", color=line.get_color(),
+                            label=f"{lab} (truth)")
+    axs[1].set_ylabel("force [N]")
+    axs[1].legend(fontsize=7, ncol=2)
+    for est, true, lab, tol in (
+            ("tip_position_error_est_um", "tip_position_error_um", "position error",
+             "tip_tolerance_mm"),
+            ("hole_oversize_est_um", "hole_oversize_um", "oversize", "oversize_tolerance_mm")):
+        if est in quality.columns:
+            line = axs[2].plot(h, quality[est], ".-", label=f"{lab} (est.)")[0]
+            if truth is not None and true in truth.columns:
+                axs[2].plot(truth["hole"], truth[true], "x", color=line.get_color(),
+                            label=f"{lab} (truth)")
+            if tol in quality.attrs:
+                axs[2].axhline(1000.0 * float(quality.attrs[tol]), color=line.get_color(),
+                               ls=":", lw=1)
+    axs[2].set_ylabel("tool tip [µm]")
+    axs[2].set_xlabel("hole")
+    axs[2].legend(fontsize=7, ncol=2)
     return fig
