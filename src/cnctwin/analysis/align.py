@@ -157,16 +157,28 @@ def _peak_offset(
     else:
         k = int(np.argmax(np.abs(score)))
         sign = 1 if score[k] >= 0 else -1
-    # refine near the peak on the Pearson correlation of each overlap: the plain correlation
-    # of de-meaned records is tilted by the changing overlap, which moves the vertex of a
-    # broad peak (a single pulse) by samples; neighbouring lags overlap almost equally, so
-    # locally the Pearson correlation has no tilt and no preference for short overlaps
-    pear = _overlap_pearson(r, o, c, lags)
-    near = allowed & valid & (np.abs(np.arange(c.size) - k) <= max(2, round(0.05 * fs_hz)))
-    k = int(np.argmax(np.where(near, sign * pear, -np.inf)))
+    # refine near the peak on a fixed support: the plain correlation of de-meaned records is
+    # tilted by the overlap that changes with the lag, which moves the vertex of a broad peak
+    # (a single pulse) by samples; summing over the same samples of ``o`` for every lag near
+    # the peak removes the tilt (the de-meaning constant then adds the same to every lag)
+    half = max(2, round(0.05 * fs_hz))
+    lag0 = int(lags[k])
+    m0 = max(0, -lag0) + half
+    m1 = min(o.size, r.size - lag0) - half
+    loc = np.arange(max(0, k - half), min(c.size, k + half + 1))
+    if m1 - m0 >= 8:
+        cf = np.array([float(np.dot(r[m0 + int(lags[j]):m1 + int(lags[j])], o[m0:m1]))
+                       for j in loc])
+        cf = np.where((allowed & valid)[loc], sign * cf, -np.inf)
+        j = int(np.argmax(cf))
+        k = int(loc[j])
+        y = cf
+    else:
+        j = k - int(loc[0])
+        y = np.where((allowed & valid)[loc], sign * c[loc], -np.inf)
     delta = 0.0
-    if 0 < k < c.size - 1:
-        y0, y1, y2 = sign * pear[k - 1], sign * pear[k], sign * pear[k + 1]
+    if 0 < j < y.size - 1 and np.isfinite(y[j - 1]) and np.isfinite(y[j + 1]):
+        y0, y1, y2 = y[j - 1], y[j], y[j + 1]
         den = y0 - 2 * y1 + y2
         if den < 0:
             delta = float(np.clip(0.5 * (y0 - y2) / den, -0.5, 0.5))
@@ -179,30 +191,6 @@ def _peak_offset(
             stacklevel=3,
         )
     return float(offsets[k] + delta / fs_hz), sign
-
-
-def _overlap_pearson(
-    r: NDArray[np.float64], o: NDArray[np.float64], c: NDArray[np.float64],
-    lags: NDArray[np.int64],
-) -> NDArray[np.float64]:
-    """Pearson correlation of the overlapping parts for every lag (0 where undefined)."""
-    r_lo = np.clip(lags, 0, r.size)
-    r_hi = np.clip(lags + o.size, 0, r.size)
-    n = np.maximum(r_hi - r_lo, 0)
-    o_lo = np.clip(-lags, 0, o.size)
-    o_hi = o_lo + n
-    sr = np.concatenate([[0.0], np.cumsum(r)])
-    qr = np.concatenate([[0.0], np.cumsum(r * r)])
-    so = np.concatenate([[0.0], np.cumsum(o)])
-    qo = np.concatenate([[0.0], np.cumsum(o * o)])
-    nn = np.maximum(n, 1)
-    s_r = sr[r_hi] - sr[r_lo]
-    s_o = so[o_hi] - so[o_lo]
-    v_r = qr[r_hi] - qr[r_lo] - s_r * s_r / nn
-    v_o = qo[o_hi] - qo[o_lo] - s_o * s_o / nn
-    den = np.sqrt(np.maximum(v_r * v_o, 0.0))
-    ok = (n > 2) & (den > 0)
-    return np.where(ok, (c - s_r * s_o / nn) / np.where(ok, den, 1.0), 0.0)
 
 
 def _pearson_after(
@@ -475,8 +463,8 @@ def align_external(
     -----
     A spindle run-up or run-down draws the inertia current (tens of A) that the dynamometer
     never sees; left in, it dominates the correlation of a short drilling recording. Those
-    samples are dropped from the reference (the grid interpolates across them), so only the
-    cutting load carries the timing.
+    samples are bridged by linear interpolation (ends held), so only the cutting load carries
+    the timing.
     """
     data = _channel(rec, channel_name)
     if channel_column not in data.columns:
@@ -486,8 +474,12 @@ def align_external(
         )
     ref = rec.signal(reference_signal).to_numpy(dtype=np.float64)
     if blank_speed_changes:
-        ref = np.where(_speed_changing(rec, reference_signal, accel_limit_rpm_per_s), np.nan,
-                       ref)
+        blank = _speed_changing(rec, reference_signal, accel_limit_rpm_per_s)
+        if blank.any():
+            # bridge the blanked samples on the uniform HF grid (ends held), so the low-pass
+            # in align() sees evenly spaced samples
+            ref = np.asarray(pd.Series(np.where(blank, np.nan, ref)).interpolate(
+                limit_direction="both"), dtype=np.float64)
     a = align(
         rec.time_s,
         ref,
