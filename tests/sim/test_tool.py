@@ -37,3 +37,22 @@ def test_tool_temperature_chunking() -> None:
     a = tool_temperature(p[:700], dt_s=0.002, thermal=th)
     b = tool_temperature(p[700:], dt_s=0.002, thermal=th, initial_c=float(a[-1]))
     np.testing.assert_allclose(np.r_[a, b], one, rtol=1e-12)
+
+
+def test_drill_tip_stiffness_cantilever_in_series() -> None:
+    # solid rod (ratio 1), D 10 mm, E 600 GPa, L 50 mm: 3 E I / L^3 with I = pi D^4 / 64
+    # = 490.87 mm^4 -> 7068.6 N/mm = 7.07 N/um by hand; a 1e9 N/um spindle adds nothing,
+    # an equal one halves it; doubling L divides the drill part by 8
+    from cnctwin.sim.tool import Drill
+
+    stiff = Drill(diameter_mm=10.0, effective_diameter_ratio=1.0, overhang_mm=50.0,
+                  youngs_modulus_gpa=600.0, spindle_stiffness_n_per_um=1e9)
+    assert stiff.tip_stiffness_n_per_um == pytest.approx(7.0686, rel=1e-4)
+    half = Drill(diameter_mm=10.0, effective_diameter_ratio=1.0, overhang_mm=50.0,
+                 spindle_stiffness_n_per_um=7.0686)
+    assert half.tip_stiffness_n_per_um == pytest.approx(7.0686 / 2, rel=1e-4)
+    long = Drill(diameter_mm=10.0, effective_diameter_ratio=1.0, overhang_mm=100.0,
+                 spindle_stiffness_n_per_um=1e9)
+    assert long.tip_stiffness_n_per_um == pytest.approx(7.0686 / 8, rel=1e-4)
+    # thesis drill defaults (8.5 mm, 0.8 D effective, 50 mm, 30 N/um spindle): 1.44 N/um
+    assert Drill().tip_stiffness_n_per_um == pytest.approx(1.44, abs=0.01)
