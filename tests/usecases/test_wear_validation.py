@@ -68,8 +68,9 @@ def test_trend_and_set_pattern(validation: WearValidation) -> None:
 def test_remaining_life_forecast(validation: WearValidation) -> None:
     fc = validation.forecasts.set_index("at_hole")
     assert np.isfinite(fc["true_hole"]).all()
-    # measured: +59, +16, +4 holes at 60 / 75 / 90 % of the run (the accelerating wear phase
-    # is not in the data at 60 %); the forecast tightens as the end approaches
+    # measured: +42, +20, +5 holes at 60 / 75 / 90 % of the run, the estimator recalibrated on
+    # the 3-4 measured points drilled so far (no look-ahead); the accelerating wear phase is not
+    # in the data at 60 %, so the forecast is late there and tightens towards the end
     err = fc["error_holes"].abs().to_numpy()
     assert err[-1] <= 10.0
     assert err[1] <= 30.0
@@ -79,7 +80,8 @@ def test_remaining_life_forecast(validation: WearValidation) -> None:
 def test_tool_temperature_soft_sensor(validation: WearValidation) -> None:
     th = validation.thermal
     # calibrated on the first 4 sets of camera readings, predicts all 300 holes;
-    # camera noise 4 °C (simulator ThermalCamera). Measured 5-7 °C; tolerance 10 °C
+    # camera noise 4 °C (simulator ThermalCamera). Measured 3.1 °C on the calibration sets,
+    # 8.1 °C on all readings, 6.8 °C against the noise-free temperature; tolerance 10 °C
     assert th["fit_rmse_c"] < 8.0
     assert th["camera_rmse_c"] < 10.0
     assert th["truth_rmse_c"] < 10.0

@@ -54,8 +54,9 @@ class WearValidation:
         Last vs first hole of a set (:func:`~cnctwin.usecases.wear.set_pattern`) of the
         estimated and of the true cutting torque [-].
     forecasts : pandas.DataFrame
-        Per forecast point: ``at_hole``, ``forecast_hole``, ``low``/``high`` (90 %),
-        ``true_hole`` (true crossing of the limit), ``error_holes``.
+        Per forecast point: ``at_hole``, ``n_measured`` (measured points up to it: the
+        estimator is recalibrated on those only, no look-ahead), ``forecast_hole``,
+        ``low``/``high`` (90 %), ``true_hole`` (true crossing of the limit), ``error_holes``.
     limit_um : float
         Wear limit of the forecast [µm].
     thermal : dict
@@ -99,7 +100,8 @@ class WearValidation:
         for r in self.forecasts.itertuples(index=False):
             rows.append((f"forecast of {self.limit_um:g} µm at hole {r.at_hole}",
                          f"hole {r.forecast_hole:.0f} (90 %: {r.low:.0f}-{r.high:.0f}), "
-                         f"true {r.true_hole:.0f}, error {r.error_holes:+.0f} holes"))
+                         f"true {r.true_hole:.0f}, error {r.error_holes:+.0f} holes "
+                         f"({r.n_measured} measured points so far)"))
         th = self.thermal
         if th:
             rows += [
@@ -192,8 +194,15 @@ def validate_wear(
     rows = []
     for f in np.atleast_1d(np.asarray(forecast_at, dtype=np.float64)):
         k = int(f * n)
-        fc = forecast_remaining_life(idx[:k], w[:k], limit_um=limit_um, window=win, degree=2)
-        rows.append({"at_hole": int(idx[k - 1]), "forecast_hole": fc.index_at_limit,
+        # no look-ahead: recalibrate on the measured points drilled so far
+        past = [i for i in meas if i < k]
+        if len(past) < 2:
+            continue
+        wk = WearEstimator().fit(inc[past], true_w[past], fit_offset=len(past) >= 3).predict(
+            inc[:k])
+        fc = forecast_remaining_life(idx[:k], wk, limit_um=limit_um, window=win, degree=2)
+        rows.append({"at_hole": int(idx[k - 1]), "n_measured": len(past),
+                     "forecast_hole": fc.index_at_limit,
                      "low": idx[k - 1] + fc.remaining_low, "high": idx[k - 1] + fc.remaining_high,
                      "true_hole": true_cross, "error_holes": fc.index_at_limit - true_cross})
     thermal: dict[str, float] = {}
