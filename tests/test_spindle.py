@@ -397,3 +397,23 @@ def test_linear_region_on_a_full_sweep_to_18000_rpm(full_sweep) -> None:  # type
     kt = sp["kt_nm_per_a"]
     assert fit.slope_a_per_rpm == pytest.approx(sp["viscous_friction_nm_per_rpm"] / kt, rel=0.05)
     assert fit.offset_a == pytest.approx(sp["coulomb_friction_nm"] / kt, rel=0.05)
+
+
+def test_air_cut_statistics_fig_3_8_and_3_9_on_the_full_sweep(full_sweep) -> None:  # type: ignore[no-untyped-def]
+    """Issue #4 item 3: per speed mean/min/max of the six Fig. 3.8 quantities and the
+    correlation matrix of the means (Fig. 3.9) on the simulated sweep."""
+    rec, _ = full_sweep
+    stats = air_cut_statistics(rec)
+    six = ("CURRENT|SP1", "TORQUE|SP1", "CURRENT_ABS_SMOOTHED|SP1 (LF)",
+           "TORQUE_UTIL|SP1 (LF)", "POWER|SP1", "LOAD|SP1")  # Fig. 3.8 a-f
+    for name in six:
+        lo, mean, hi = (stats[f"{name} {s}"].to_numpy() for s in ("min", "mean", "max"))
+        assert np.all(lo <= mean) and np.all(mean <= hi), name
+    corr = air_cut_correlation(stats)
+    assert {f"{n} mean" for n in six} <= set(corr.index)
+    # HF current and LF Iq are the same q-axis current; LOAD is the torque in % of rated
+    assert corr.loc["CURRENT|SP1 mean", "IQ_ACT|SP1 (LF) mean"] > 0.99
+    assert corr.loc["TORQUE|SP1 mean", "LOAD|SP1 mean"] > 0.99
+    # the smoothed absolute current leaves Iq above field weakening (Fig. 3.8c): their means
+    # correlate far less than Iq with the HF current
+    assert corr.loc["CURRENT_ABS_SMOOTHED|SP1 (LF) mean", "IQ_ACT|SP1 (LF) mean"] < 0.9
