@@ -164,10 +164,10 @@ class ParquetChunkSink:
     few bytes anyway. The ``time`` column is not stored: the reader computes it from the
     cycle counter and the time anchor in ``meta.json`` exactly as the simulator does
     (:func:`cnctwin.recording.cycles_to_time`). Measured on one 50 000-cycle chunk of a
-    drilling run (one core, CPU time, ``benchmarks/bench_sim.py``): float64 with ``time``,
-    pages v1: 37 ms and 196 B/cycle; float32 drive values, no ``time``, pages v2: ~25 ms and
-    103 B/cycle (~0.5 GB for the 3.5 h wear run). Arrow IPC (Feather v2, lz4) of the same
-    table took ~20-23 ms at 101 B/cycle: not worth a second file format.
+    drilling run (one core, CPU time, median of 12; BENCHMARKS.md "Simulator"): float64 with
+    ``time``, pages v1: 37 ms and 196 B/cycle; float32 drive values, no ``time``, pages v2:
+    30 ms and 108 B/cycle (~0.6 GB for the wear run); Arrow IPC (Feather v2, lz4,
+    ``file_format='arrow'``): 19 ms and 106 B/cycle.
     HF rows and LF values leave memory chunk by chunk (LF rows are appended to ``lf.parquet``
     as they come); only the NC events (one row per block) are kept until :meth:`close`.
     """
