@@ -194,11 +194,11 @@ def _cmd_wear(args: argparse.Namespace) -> int:
     return 0
 
 
-def _stream(recs: list[Any], holes: pd.DataFrame, detector: str) -> pd.DataFrame:
+def _stream(recs: list[Any], holes: pd.DataFrame | None, detector: str) -> pd.DataFrame:
     from cnctwin.usecases.anomaly import signal_stream
 
-    return signal_stream(recs, holes,
-                         cutting_only=detector in ("envelope", "physics", "spectral"))
+    return signal_stream(recs, holes, cutting_only=holes is not None and detector in
+                         ("envelope", "physics", "spectral"))
 
 
 def _cmd_anomalies(args: argparse.Namespace) -> int:
@@ -220,14 +220,24 @@ def _cmd_anomalies(args: argparse.Namespace) -> int:
         except Exception:
             holes = pd.DataFrame(columns=["hole", "cut_start_cycle", "cut_end_cycle"])
     else:
-        _, holes = _holes(args.files)
+        try:
+            _, holes = _holes(args.files)
+        except ConfigError:
+            if args.detector == "envelope":  # needs the progress through each hole
+                raise
+            holes = None
+            print("note: no hole found; scoring every sample (not only the cuts)")
     data = _stream(recs, holes, args.detector)
     if data.empty:
         raise ConfigError("nothing to score: no cutting samples in the recordings")
+    for issue in data.attrs.get("issues", []):
+        print(f"note: {issue}")
     det = {
         "envelope": lambda: EnvelopeDetector(),
         "physics": lambda: PhysicsResidualDetector(),
-        "spectral": lambda: SpectralDetector(fs_hz=recs[0].fs_hz),
+        # default band 20-240 Hz at 500 Hz, scaled with the sampling rate (UMich: 10 Hz)
+        "spectral": lambda: SpectralDetector(fs_hz=recs[0].fs_hz, band_hz=(
+            0.04 * recs[0].fs_hz, 0.48 * recs[0].fs_hz)),
         "tapping": lambda: TappingDetector(),
     }[args.detector]()
     t = data["time_s"].to_numpy()

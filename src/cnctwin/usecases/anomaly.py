@@ -38,7 +38,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
-from cnctwin.exceptions import ConfigError
+from cnctwin.exceptions import ConfigError, SignalNotFoundError
 
 if TYPE_CHECKING:
     from cnctwin.recording import Recording
@@ -623,7 +623,8 @@ def signal_stream(
         ``time_s`` (from the first sample of the first recording) [s], ``current_a`` [A],
         ``speed_rpm`` (actual spindle speed) [rpm], ``predicted_current_a`` (spindle twin with
         the thesis parameters at zero cutting torque) [A], ``z_error_mm`` (DES_POS - ENC_POS of
-        Z1, 0 if absent) [mm], ``progress`` [-], ``hole`` [-].
+        Z1, 0 if absent) [mm], ``progress`` [-], ``hole`` [-]. Without a spindle speed
+        signal the speed (and the prediction) is NaN and ``attrs["issues"]`` says so.
     """
     from cnctwin.analysis.segments import spindle_speed_rpm
     from cnctwin.spindle import SpindleModel
@@ -633,10 +634,15 @@ def signal_stream(
     model = SpindleModel.from_parameters("thesis_spinner_840dsl")
     origin = pd.Timestamp(recordings[0].hf["time"].iloc[0])
     parts = []
+    issues: list[str] = []
     for r in recordings:
         t = ((pd.DatetimeIndex(r.hf["time"]) - origin) / pd.Timedelta(seconds=1)).to_numpy()
         cur = r.hf["CURRENT|SP1"].to_numpy(dtype=np.float64)
-        speed, _ = spindle_speed_rpm(r, "SP1")
+        try:
+            speed, _ = spindle_speed_rpm(r, "SP1")
+        except SignalNotFoundError as exc:  # e.g. UMich: no CMD_SPEED; keep, flag
+            speed = np.full(len(cur), np.nan)
+            issues.append(f"{r.meta.source_files[:1]}: spindle speed NaN ({exc})")
         d = pd.DataFrame({"time_s": t, "current_a": cur, "speed_rpm": speed,
                           "predicted_current_a": model.predict_current_a(0.0, speed)})
         if r.has("DES_POS|Z1") and r.has("ENC_POS|Z1"):
@@ -660,6 +666,7 @@ def signal_stream(
     data = pd.concat(parts, ignore_index=True)
     if cutting_only:
         data = data[data["hole"] >= 0].reset_index(drop=True)
+    data.attrs["issues"] = issues
     return data
 
 
