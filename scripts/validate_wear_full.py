@@ -1,7 +1,8 @@
 """Validate the chapter-5 use cases on the full simulated 2676-hole wear run (issue #6).
 
-Too long for the test suite (about 2 min of simulation on 2 shared cores, 2 GB of Parquet), so
-this script runs it once and writes ``docs/validation-usecases.md``:
+Runs what ``tests/usecases/test_wear_full.py``, ``test_wear_validation.py`` and
+``test_trials.py`` assert (with more seeds) and writes the numbers to
+``docs/validation-usecases.md``:
 
 1. simulate :func:`cnctwin.sim.scenarios.tool_wear_run` (2676 holes, thesis §5.1, hidden wear
    curve) into a Parquet chunk directory (memory stays small while simulating);
@@ -23,7 +24,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import shutil
 import subprocess
@@ -33,61 +33,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cnctwin.recording import Recording, RecordingMeta, cycles_to_time
 from cnctwin.usecases.holes import hole_record
-from cnctwin.usecases.wearcheck import WearValidation, validate_wear
-
-
-def windowed_hole_record(directory: Path, *, files_per_window: int = 10) -> pd.DataFrame:
-    """Hole record of a ParquetChunkSink directory without loading it whole."""
-    doc = json.loads((directory / "meta.json").read_text(encoding="utf-8"))
-    files: list[str] = doc["hf_files"]
-    anchors = [(int(c), pd.Timestamp(t)) for c, t in doc["time_anchors"]]
-    origin = anchors[0][1]
-    events = pd.read_parquet(directory / "events.parquet") if (
-        directory / "events.parquet").exists() else None
-    # a window starts mid-hole: holes whose cut starts in its first `margin` cycles are taken
-    # from the previous window, which runs one chunk file (100 s) beyond its main part
-    margin = round(10.0 / float(doc["cycle_time_s"]))
-    parts = []
-    for i in range(0, len(files), files_per_window):
-        names = files[i:i + files_per_window + 1]  # one file of overlap
-        frames = [pd.read_parquet(directory / n) for n in names]
-        main_end = (int(frames[files_per_window]["cycle"].iloc[0])
-                    if len(frames) > files_per_window else None)
-        hf = pd.concat(frames, ignore_index=True).set_index("cycle")
-        del frames
-        f32 = [c for c in doc.get("float32_columns", []) if c in hf.columns]
-        if f32:
-            hf[f32] = hf[f32].astype(np.float64)
-        if "time" not in hf.columns:
-            hf.insert(0, "time", cycles_to_time(hf.index.to_numpy(), anchors,
-                                                cycle_time_s=doc["cycle_time_s"]))
-        c0, c1 = int(hf.index[0]), int(hf.index[-1])
-        ev = None
-        if events is not None and "cycle" in events.columns:
-            ev = events[(events["cycle"] >= c0) & (events["cycle"] <= c1)].reset_index(drop=True)
-        meta = RecordingMeta(machine=doc["machine"], cycle_time_s=doc["cycle_time_s"],
-                             axis_map={int(k): v for k, v in doc["axis_map"].items()},
-                             source_files=[str(directory / n) for n in names],
-                             source_format=doc["source_format"], time_anchors=anchors,
-                             attrs=doc["attrs"])
-        rec = Recording(hf, events=ev, meta=meta)
-        h = hole_record(rec, time_origin=origin, store=False)
-        del rec, hf
-        keep = h["cut_start_cycle"] >= (c0 + margin if i else c0)
-        if main_end is not None:
-            keep &= h["cut_start_cycle"] < main_end + margin
-        parts.append(h[keep])
-        print(f"  window {i // files_per_window + 1}/"
-              f"{(len(files) + files_per_window - 1) // files_per_window}: "
-              f"{int(keep.sum())} holes", flush=True)
-    out = pd.concat(parts, ignore_index=True).sort_values("cut_start_cycle")
-    out = out.reset_index(drop=True)
-    out["hole"] = np.arange(len(out))
-    out["set"] = out["hole"] // 6
-    out["position_in_set"] = out["hole"] % 6
-    return out
+from cnctwin.usecases.wearcheck import WearValidation, hole_record_chunked, validate_wear
 
 
 def _md(df: pd.DataFrame, floatfmt: str = ".3g") -> str:
@@ -126,7 +73,7 @@ def run_full(seed: int, out: Path) -> tuple[WearValidation, dict[str, float]]:
     res = tool_wear_run(out, seed=seed, fmt="parquet", dynamometer=False, progress=progress)
     timing["simulation_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
-    holes = windowed_hole_record(res.recording_paths[0])
+    holes = hole_record_chunked(res.recording_paths[0], verbose=True)
     timing["hole_record_s"] = time.perf_counter() - t1
     truth = pd.read_csv(out / "holes.csv")
     camera = pd.read_csv(out / "thermal_camera.csv")
@@ -203,8 +150,12 @@ def write_doc(path: Path, full: WearValidation | None, timing: dict[str, float],
             "",
             _md(full.table()),
             "",
-            "Test: too slow for the suite (> 90 s); the suite runs the 300-hole version below "
-            "(`tests/usecases/test_wear_validation.py`).",
+            "Test: `tests/usecases/test_wear_full.py` (marked slow; the same run, seed 1, "
+            "~50 s wall on an idle 2-vCPU machine) asserts wear RMS < 12 µm, trend correlation "
+            "> 0.99 and RMS < 5 %-points, pattern within 0.5 %-points, forecast at 90 % within "
+            "100 holes, soft sensor RMS < 15 °C. The analysis never holds the whole recording: "
+            "`cnctwin.usecases.wearcheck.hole_record_chunked` builds the hole record window by "
+            "window from the Parquet chunk files.",
             "",
         ]
     lines += [

@@ -49,7 +49,7 @@ def test_loose_tap_detected_at_hidden_hole() -> None:
     assert lt["misses"] == 0 and lt["detected"] == lt["with_fault"] >= 3
     assert lt["delay_max_s"] < 0.3
     assert lt["false_alarms"] == 0
-    assert summary.loc["none", "false_alarms"] == 0
+    assert summary.loc["tapping_no_fault", "false_alarms"] == 0
     # Figure 5.10 analogue: Z encoder position, spindle current and dynamometer torque
     t = next(t for t in trials if t.onset_s is not None)
     assert t.onset_s is not None

@@ -1,9 +1,9 @@
 """Wear, trend, set pattern, remaining life and tool-temperature soft sensor on a simulated run
 with a hidden wear curve (issue #6, point 2).
 
-The full 2676-hole run takes longer than a test should (about 2 min of simulation on 2 shared
-cores), so it is validated by ``scripts/validate_wear_full.py`` (numbers in
-docs/validation-usecases.md). Here: the same simulator, a 300-hole run with the thesis wear
+The full 2676-hole run is tests/usecases/test_wear_full.py (~50 s); this faster check (~15 s)
+covers the whole tool life at a finer scale per hole: the same simulator, a 300-hole run with
+the thesis wear
 curve compressed to 300 holes (0 -> ~277 µm, the thesis end value, thesis §5.1), written to
 ``tmp_path`` through the Parquet chunk sink and read back like a user's recording. The analysis
 sees the recording and the camera CSV; the truth gives only 5 "microscope" wear readings and the

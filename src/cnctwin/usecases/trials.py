@@ -43,8 +43,9 @@ __all__ = [
     "summarize_trials",
 ]
 
-FAULT_KINDS: tuple[str, ...] = ("loose_tool", "breakage", "chatter", "hardness", "none")
-"""Fault kinds of :func:`fault_trial` (``none``: a fault-free run for the false-alarm rate)."""
+FAULT_KINDS: tuple[str, ...] = ("loose_tool", "tapping_no_fault", "breakage", "hardness",
+                                 "chatter", "drilling_no_fault")
+"""``Trial.kind`` values: the fault, or a fault-free tapping / drilling run (false alarms)."""
 
 _SEED_KEY = 6  # issue number: the hidden draw uses its own random stream [seed, 6]
 
@@ -141,7 +142,7 @@ def loose_tap_trial(
     det = detector if detector is not None else TappingDetector()
     bt = backtest(det, data, time_s=data["time_s"], learn_until_s=learn_until,
                   fault_onsets_s=onsets, max_delay_s=max_delay_s, persistent=True)
-    kind = "loose_tool" if onsets else "none"
+    kind = "loose_tool" if onsets else "tapping_no_fault"
     return Trial(kind, seed, {"loose_from_hole": loose if loose < n_holes else None},
                  onsets[0] if onsets else None, repr(det), bt, data, learn_until, res)
 
@@ -260,8 +261,8 @@ def fault_trial(
     bt = backtest(det, data, time_s=data["time_s"], learn_until_s=learn_until,
                   fault_onsets_s=onsets, max_delay_s=max_delay_s, threshold=threshold,
                   persistent=True)
-    return Trial(kind, seed, hidden, onsets[0] if onsets else None, repr(det), bt, data,
-                 learn_until, res)
+    return Trial("drilling_no_fault" if kind == "none" else kind, seed, hidden,
+                 onsets[0] if onsets else None, repr(det), bt, data, learn_until, res)
 
 
 def summarize_trials(trials: list[Trial]) -> pd.DataFrame:

@@ -10,7 +10,9 @@ readings, the camera-independent truth and the scoring only.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,6 +20,8 @@ import pandas as pd
 from numpy.typing import ArrayLike
 
 from cnctwin.exceptions import ConfigError
+from cnctwin.recording import Recording, RecordingMeta, cycles_to_time
+from cnctwin.usecases.holes import hole_record
 from cnctwin.usecases.wear import (
     WearEstimator,
     forecast_remaining_life,
@@ -26,7 +30,7 @@ from cnctwin.usecases.wear import (
     set_pattern,
 )
 
-__all__ = ["WearValidation", "validate_wear"]
+__all__ = ["WearValidation", "hole_record_chunked", "validate_wear"]
 
 
 @dataclass
@@ -226,3 +230,79 @@ def validate_wear(
         float(true_w[-1]), float(w[-1]), trend_corr, trend_rms, rise_est, rise_true,
         pd.DataFrame(rows), limit_um, thermal, w,
     )
+
+
+def hole_record_chunked(
+    directory: str | Path, *, files_per_window: int = 10, verbose: bool = False
+) -> pd.DataFrame:
+    """Hole record of a simulator Parquet chunk directory without loading it whole.
+
+    The full 2676-hole run is ~13 million cycles; :func:`~cnctwin.usecases.holes.hole_record`
+    is run on windows of ``files_per_window`` HF chunk files plus one file of overlap, and each
+    hole is taken from the window in whose main part its cut starts (a window starting in the
+    middle of a hole leaves that hole to the previous window, which reaches one chunk file
+    beyond). Holes are renumbered in order; sets of 6.
+
+    Parameters
+    ----------
+    directory : str or path
+        A :class:`~cnctwin.sim.recorder.ParquetChunkSink` directory (``meta.json``,
+        ``hf_*.parquet``, ``events.parquet``).
+    files_per_window : int, default 10
+        HF chunk files per window (50 000 cycles each by default: 10 files ~ 300 MB).
+    verbose : bool, default False
+        Print one line per window.
+    """
+    directory = Path(directory)
+    if not (directory / "meta.json").is_file():
+        raise ConfigError(f"{directory} has no meta.json; pass a directory written by the "
+                          "simulator's ParquetChunkSink (tool_wear_run(out, fmt='parquet'))")
+    doc = json.loads((directory / "meta.json").read_text(encoding="utf-8"))
+    files: list[str] = doc["hf_files"]
+    anchors = [(int(c), pd.Timestamp(t)) for c, t in doc["time_anchors"]]
+    origin = anchors[0][1]
+    events = pd.read_parquet(directory / "events.parquet") if (
+        directory / "events.parquet").exists() else None
+    # a window starts mid-hole: holes whose cut starts in its first `margin` cycles are taken
+    # from the previous window, which runs one chunk file (100 s) beyond its main part
+    margin = round(10.0 / float(doc["cycle_time_s"]))
+    parts = []
+    for i in range(0, len(files), files_per_window):
+        names = files[i:i + files_per_window + 1]  # one file of overlap
+        frames = [pd.read_parquet(directory / n) for n in names]
+        main_end = (int(frames[files_per_window]["cycle"].iloc[0])
+                    if len(frames) > files_per_window else None)
+        hf = pd.concat(frames, ignore_index=True).set_index("cycle")
+        del frames
+        f32 = [c for c in doc.get("float32_columns", []) if c in hf.columns]
+        if f32:
+            hf[f32] = hf[f32].astype(np.float64)
+        if "time" not in hf.columns:
+            hf.insert(0, "time", cycles_to_time(hf.index.to_numpy(), anchors,
+                                                cycle_time_s=doc["cycle_time_s"]))
+        c0, c1 = int(hf.index[0]), int(hf.index[-1])
+        ev = None
+        if events is not None and "cycle" in events.columns:
+            ev = events[(events["cycle"] >= c0) & (events["cycle"] <= c1)].reset_index(drop=True)
+        meta = RecordingMeta(machine=doc["machine"], cycle_time_s=doc["cycle_time_s"],
+                             axis_map={int(k): v for k, v in doc["axis_map"].items()},
+                             source_files=[str(directory / n) for n in names],
+                             source_format=doc["source_format"], time_anchors=anchors,
+                             attrs=doc["attrs"])
+        rec = Recording(hf, events=ev, meta=meta)
+        h = hole_record(rec, time_origin=origin, store=False)
+        del rec, hf
+        keep = h["cut_start_cycle"] >= (c0 + margin if i else c0)
+        if main_end is not None:
+            keep &= h["cut_start_cycle"] < main_end + margin
+        parts.append(h[keep])
+        if verbose:
+            print(f"  window {i // files_per_window + 1}/"
+                  f"{(len(files) + files_per_window - 1) // files_per_window}: "
+                  f"{int(keep.sum())} holes", flush=True)
+    out = pd.concat(parts, ignore_index=True).sort_values("cut_start_cycle")
+    out = out.reset_index(drop=True)
+    out["hole"] = np.arange(len(out))
+    out["set"] = out["hole"] // 6
+    out["position_in_set"] = out["hole"] % 6
+    return out
