@@ -1,0 +1,44 @@
+"""Edge streaming runtime: live Databus/MQTT or replayed recordings in, results out.
+
+Layers (pure pieces first, orchestration last):
+
+* :mod:`~cnctwin.edge.cycles`: the CYCLE time base of a stream (unwrap, gaps, late rows).
+* :mod:`~cnctwin.edge.model_file`: the calibrated spindle model as a JSON/TOML file.
+* :mod:`~cnctwin.edge.pipeline`: ``Chunk``, ``Result`` and the Source/Processor/Sink protocols.
+* :mod:`~cnctwin.edge.sources`: replay of any recording file, live Databus over MQTT.
+* :mod:`~cnctwin.edge.processors`: cutting torque, per-hole record, anomaly detectors.
+* :mod:`~cnctwin.edge.forward`: the bounded on-disk queue of store-and-forward.
+* :mod:`~cnctwin.edge.sinks`: MQTT (store-and-forward), the store, JSON lines.
+* :mod:`~cnctwin.edge.runtime`: :class:`EdgeRuntime`, the loop and its status.
+
+See docs/edge.md.
+"""
+
+from cnctwin.edge.cycles import CycleTracker
+from cnctwin.edge.forward import ForwardQueue
+from cnctwin.edge.model_file import load_spindle_model, save_spindle_model
+from cnctwin.edge.pipeline import Chunk, Result
+from cnctwin.edge.processors import AnomalyProcessor, HoleProcessor, TorqueProcessor
+from cnctwin.edge.runtime import EdgeRuntime, read_status
+from cnctwin.edge.sinks import JsonLinesSink, MqttSink, StoreSink
+from cnctwin.edge.sources import DatabusSource, ReplaySource, parse_mqtt_url
+
+__all__ = [
+    "AnomalyProcessor",
+    "Chunk",
+    "CycleTracker",
+    "DatabusSource",
+    "EdgeRuntime",
+    "ForwardQueue",
+    "HoleProcessor",
+    "JsonLinesSink",
+    "MqttSink",
+    "ReplaySource",
+    "Result",
+    "StoreSink",
+    "TorqueProcessor",
+    "load_spindle_model",
+    "parse_mqtt_url",
+    "read_status",
+    "save_spindle_model",
+]

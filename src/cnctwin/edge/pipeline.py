@@ -1,0 +1,173 @@
+"""The pipeline model of the edge runtime: Source -> Processors -> Sinks on the CYCLE base.
+
+* A **source** yields :class:`Chunk` objects: ``k`` consecutive position-control cycles (the
+  unwrapped CYCLE counter, contiguous inside a chunk; a jump starts a new chunk and is carried
+  in ``gap_before``), their UTC times, the HF signals and the NC events of those cycles.
+* A **processor** turns a chunk into :class:`Result` objects (cutting torque, hole start/end,
+  alarms) and may leave per-cycle derived values in ``chunk.derived`` for later processors and
+  for the store.
+* A **sink** delivers results (MQTT with store-and-forward, the store, a JSON lines file).
+
+Every result carries the cycle it refers to and its values with units in the names, so that
+a consumer downstream can order and deduplicate them (``seq`` is set by the runtime).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from cnctwin.recording import CounterGap, Recording, RecordingMeta, empty_events
+
+__all__ = ["RESULT_KINDS", "Chunk", "Processor", "Result", "Sink", "Source"]
+
+RESULT_KINDS: dict[str, str] = {
+    "torque": "cutting torque of a contiguous run of cycles (arrays, one value per cycle)",
+    "hole_start": "a plunge of the drilling axis began (first downward Z motion)",
+    "hole": "a hole is complete: its row of cnctwin.usecases.holes.hole_record",
+    "alarm": "an anomaly score crossed its threshold upward",
+    "gap": "the CYCLE counter jumped: cycles missing (never invented)",
+    "status": "runtime status (rates, lag, counts, queue, gaps)",
+}
+"""Kinds of :class:`Result` the runtime produces."""
+
+
+@dataclass
+class Chunk:
+    """``k`` consecutive cycles of the HF stream.
+
+    Attributes
+    ----------
+    cycles : numpy.ndarray of int64
+        Unwrapped cycle counter, consecutive (``cycles[i+1] == cycles[i] + 1``).
+    time_ns : numpy.ndarray of int64
+        UTC time of each cycle [ns since the Unix epoch].
+    signals : dict of str to numpy.ndarray
+        ``CODE|AXIS`` -> float64 values per cycle.
+    events : pandas.DataFrame
+        NC events of these cycles (:data:`cnctwin.recording.EVENT_COLUMNS`).
+    gap_before : CounterGap or None
+        Missing cycles in front of this chunk.
+    cycle_time_s : float
+        Position-control cycle time [s].
+    machine : str
+        Machine name.
+    received_ns : int
+        Wall-clock time the chunk became available [ns since the epoch] (for the lag).
+    derived : dict of str to numpy.ndarray
+        Per-cycle values computed by processors (same length as ``cycles``; NaN where a value
+        is not yet known, e.g. the held-back last sample of the torque estimator).
+    """
+
+    cycles: NDArray[np.int64]
+    time_ns: NDArray[np.int64]
+    signals: dict[str, NDArray[np.float64]]
+    events: pd.DataFrame = field(default_factory=empty_events)
+    gap_before: CounterGap | None = None
+    cycle_time_s: float = 0.002
+    machine: str = ""
+    received_ns: int = 0
+    derived: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.cycles.size)
+
+    @property
+    def first_cycle(self) -> int:
+        """First cycle of the chunk."""
+        return int(self.cycles[0])
+
+    @property
+    def last_cycle(self) -> int:
+        """Last cycle of the chunk."""
+        return int(self.cycles[-1])
+
+    def to_recording(self, columns: list[str] | None = None) -> Recording:
+        """The chunk as a :class:`~cnctwin.recording.Recording` (optionally some columns)."""
+        cols = list(self.signals) if columns is None else [c for c in columns
+                                                           if c in self.signals]
+        hf = pd.DataFrame({c: self.signals[c] for c in cols},
+                          index=pd.Index(self.cycles, name="cycle"))
+        hf.insert(0, "time", pd.to_datetime(self.time_ns, unit="ns", utc=True))
+        meta = RecordingMeta(machine=self.machine, cycle_time_s=self.cycle_time_s,
+                             source_format="edge")
+        return Recording(hf, events=self.events, meta=meta)
+
+
+@dataclass(frozen=True)
+class Result:
+    """One output of the runtime.
+
+    Attributes
+    ----------
+    kind : str
+        One of :data:`RESULT_KINDS`.
+    cycle : int
+        Cycle the result refers to (first cycle for arrays, the end for a hole).
+    payload : dict
+        JSON-serialisable values, units in the key names (``torque_nm``) and in ``units``.
+    """
+
+    kind: str
+    cycle: int
+    payload: dict[str, Any]
+
+
+@runtime_checkable
+class Source(Protocol):
+    """Yields chunks; ``issues`` lists what it had to skip or repair (counted, not silent)."""
+
+    machine: str
+    cycle_time_s: float
+    issues: list[str]
+
+    def chunks(self) -> Iterator[Chunk]:
+        """Chunks in arrival order (raw counter values; the runtime unwraps and checks)."""
+        ...
+
+    def close(self) -> None:
+        """Release connections/files."""
+        ...
+
+
+@runtime_checkable
+class Processor(Protocol):
+    """Turns chunks into results."""
+
+    name: str
+
+    def process(self, chunk: Chunk) -> list[Result]:
+        """Results for this chunk (may fill ``chunk.derived``)."""
+        ...
+
+    def gap(self, gap: CounterGap) -> list[Result]:
+        """The stream jumped: finish what spans it (no interpolation across it)."""
+        ...
+
+    def finish(self) -> list[Result]:
+        """End of the stream: emit what is still held back."""
+        ...
+
+
+@runtime_checkable
+class Sink(Protocol):
+    """Delivers results."""
+
+    name: str
+
+    def write(self, messages: list[dict[str, Any]], chunk: Chunk | None) -> None:
+        """Deliver ``messages`` (and, for the store, the chunk's derived values)."""
+        ...
+
+    def status(self) -> dict[str, Any]:
+        """Counters for the status message (queue depth, drops, connection)."""
+        ...
+
+    def close(self) -> None:
+        """Flush and release."""
+        ...

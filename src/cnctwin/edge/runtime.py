@@ -1,0 +1,290 @@
+"""The edge runtime: pull chunks from a source, run the processors, hand results to sinks.
+
+:class:`EdgeRuntime` owns the CYCLE time base (:class:`~cnctwin.edge.cycles.CycleTracker`):
+it unwraps the counter, splits chunks at gaps (a ``gap`` message and every processor's
+:meth:`gap` hook run first, so nothing spans missing cycles and nothing is interpolated), and
+keeps late or repeated rows out of the processing while counting them. It numbers the
+messages (``seq``), writes ``status.json`` into the state directory and sends a ``status``
+message every ``status_every_s``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cnctwin.edge.cycles import CycleTracker
+from cnctwin.edge.pipeline import Chunk, Processor, Result, Sink, Source
+from cnctwin.recording import CounterGap
+
+__all__ = ["EdgeRuntime", "read_status"]
+
+STATUS_FILE = "status.json"
+
+
+@dataclass
+class _Counters:
+    cycles: int = 0
+    chunks: int = 0
+    messages: int = 0
+    holes: int = 0
+    alarms: int = 0
+    started_wall: float = field(default_factory=time.monotonic)
+    busy_s: float = 0.0
+    lag_s: float = float("nan")
+    age_s: float = float("nan")
+    last_cycle: int | None = None
+    recent: list[tuple[float, int]] = field(default_factory=list)
+
+
+class EdgeRuntime:
+    """Source -> processors -> sinks on the CYCLE base.
+
+    Parameters
+    ----------
+    source : Source
+        :class:`~cnctwin.edge.sources.ReplaySource`, :class:`~cnctwin.edge.sources.DatabusSource`
+        or anything with ``chunks()``.
+    processors : sequence of Processor
+        Run in order on every chunk (the torque processor first: others use its values).
+    sinks : sequence of Sink
+        Receive every message.
+    state_dir : str or path-like, optional
+        Where ``status.json`` is written (default: no file).
+    machine : str, optional
+        Machine name in the messages (default the source's).
+    status_every_s : float, default 1.0
+        Wall-clock period of the status message and file [s].
+    """
+
+    def __init__(self, source: Source, processors: Sequence[Processor], sinks: Sequence[Sink],
+                 *, state_dir: str | PathLike[str] | None = None, machine: str = "",
+                 status_every_s: float = 1.0) -> None:
+        self.source = source
+        self.processors = list(processors)
+        self.sinks = list(sinks)
+        self.state_dir = Path(state_dir) if state_dir is not None else None
+        if self.state_dir is not None:
+            self.state_dir.mkdir(parents=True, exist_ok=True)
+        self.machine = machine or getattr(source, "machine", "") or "machine"
+        self.status_every_s = status_every_s
+        self.tracker: CycleTracker | None = None
+        self.c = _Counters()
+        self.state = "starting"
+        self._seq = 0
+        self._last_status = -1e9
+        self._stop = threading.Event()
+
+    # ------------------------------------------------------------------ messages
+    def _messages(self, results: list[Result], chunk: Chunk | None) -> list[dict[str, Any]]:
+        out = []
+        for r in results:
+            msg: dict[str, Any] = {"seq": self._seq, "kind": r.kind, "machine": self.machine,
+                                   "cycle": r.cycle}
+            if chunk is not None and len(chunk):
+                t_ns = int(chunk.time_ns[0]) + round(
+                    (r.cycle - chunk.first_cycle) * chunk.cycle_time_s * 1e9)
+                msg["time"] = _iso(t_ns)
+            msg.update(r.payload)
+            out.append(msg)
+            self._seq += 1
+            if r.kind == "hole":
+                self.c.holes += 1
+            elif r.kind == "alarm":
+                self.c.alarms += 1
+        self.c.messages += len(out)
+        return out
+
+    def _emit(self, results: list[Result], chunk: Chunk | None) -> None:
+        msgs = self._messages(results, chunk)
+        for s in self.sinks:
+            s.write(msgs, chunk)
+
+    # ------------------------------------------------------------------ one chunk
+    def process(self, chunk: Chunk) -> None:
+        """Run one source chunk through the pipeline (split at gaps, late rows counted)."""
+        t0 = time.perf_counter()
+        if self.tracker is None:
+            self.tracker = CycleTracker(modulus=int(getattr(self.source, "counter_modulus", 0)))
+        else:
+            self.tracker.modulus = int(getattr(self.source, "counter_modulus",
+                                               self.tracker.modulus))
+        upd = self.tracker.update(chunk.cycles)
+        keep = upd.keep
+        if upd.late:
+            sel = np.flatnonzero(keep)
+        for run in upd.runs:
+            if upd.late:
+                rows = sel[run.start:run.stop]
+                sub = Chunk(upd.cycles[run.start:run.stop], chunk.time_ns[rows],
+                            {c: v[rows] for c, v in chunk.signals.items()},
+                            events=chunk.events, cycle_time_s=chunk.cycle_time_s,
+                            machine=chunk.machine, received_ns=chunk.received_ns)
+            elif len(upd.runs) == 1 and upd.cycles.size == len(chunk):
+                sub = chunk
+                sub.cycles = upd.cycles
+            else:
+                sl = slice(run.start, run.stop)
+                cyc = upd.cycles[sl]
+                ev = chunk.events
+                if not ev.empty:
+                    ec = ev["cycle"].to_numpy(dtype=np.int64)
+                    ev = ev[(ec >= cyc[0]) & (ec <= cyc[-1])]
+                sub = Chunk(cyc, chunk.time_ns[sl], {c: v[sl] for c, v in chunk.signals.items()},
+                            events=ev, cycle_time_s=chunk.cycle_time_s, machine=chunk.machine,
+                            received_ns=chunk.received_ns)
+            results: list[Result] = []
+            if run.gap_before is not None:
+                results += self._gap(run.gap_before)
+            for p in self.processors:
+                results += p.process(sub)
+            self._emit(results, sub)
+            self.c.cycles += len(sub)
+            self.c.last_cycle = sub.last_cycle
+            if getattr(self.source, "live", False):  # device clock vs edge clock
+                self.c.age_s = (time.time_ns() - int(sub.time_ns[-1])) / 1e9
+        self.c.chunks += 1
+        if chunk.received_ns:
+            self.c.lag_s = (time.time_ns() - chunk.received_ns) / 1e9
+        self.c.busy_s += time.perf_counter() - t0
+        self._maybe_status()
+
+    def _gap(self, gap: CounterGap) -> list[Result]:
+        out = [Result("gap", gap.before_cycle, {
+            "after_cycle": gap.after_cycle, "before_cycle": gap.before_cycle,
+            "missing_cycles": gap.missing,
+            "missing_s": gap.missing * getattr(self.source, "cycle_time_s", 0.002)})]
+        for p in self.processors:
+            out += p.gap(gap)
+        return out
+
+    # ------------------------------------------------------------------ status
+    def status(self) -> dict[str, Any]:
+        """The runtime status (what ``status.json`` and the ``status`` message hold)."""
+        c = self.c
+        wall = max(time.monotonic() - c.started_wall, 1e-9)
+        now = time.monotonic()
+        c.recent = [(t, n) for t, n in c.recent if now - t <= 5.0] + [(now, c.cycles)]
+        t_a, n_a = c.recent[0]
+        recent_rate = (c.cycles - n_a) / (now - t_a) if now - t_a > 0.2 else float("nan")
+        ct = float(getattr(self.source, "cycle_time_s", 0.002))
+        tr = self.tracker
+        issues: list[str] = list(getattr(self.source, "issues", []))[-10:]
+        for p in self.processors:
+            issues += list(getattr(p, "issues", []))[-5:]
+        gaps = tr.gaps if tr is not None else []
+        return {
+            "machine": self.machine, "state": self.state, "updated": _iso(time.time_ns()),
+            "cycles": c.cycles, "chunks": c.chunks, "messages": c.messages,
+            "last_cycle": c.last_cycle,
+            "cycles_per_s": c.cycles / wall, "cycles_per_s_recent": recent_rate,
+            "cycles_per_busy_s": c.cycles / c.busy_s if c.busy_s > 0 else float("nan"),
+            "machine_rate_cycles_per_s": 1.0 / ct,
+            "lag_s": c.lag_s, "data_age_s": c.age_s,
+            "holes": c.holes, "alarms": c.alarms,
+            "gaps": len(gaps), "missing_cycles": tr.missing_cycles if tr else 0,
+            "last_gaps": [[g.after_cycle, g.before_cycle] for g in gaps[-5:]],
+            "wraps": tr.wraps if tr else 0, "late_rows": tr.late if tr else 0,
+            "sinks": {s.name: s.status() for s in self.sinks},
+            "issues": issues,
+        }
+
+    def _maybe_status(self, *, force: bool = False) -> None:
+        now = time.monotonic()
+        if not force and now - self._last_status < self.status_every_s:
+            return
+        self._last_status = now
+        st = self.status()
+        if self.state_dir is not None:
+            tmp = self.state_dir / (STATUS_FILE + ".tmp")
+            tmp.write_text(json.dumps(st, indent=1, default=str, allow_nan=True),
+                           encoding="utf-8")
+            os.replace(tmp, self.state_dir / STATUS_FILE)
+        self._emit([Result("status", self.c.last_cycle or 0,
+                           {k: v for k, v in st.items() if k not in ("machine",)})], None)
+        if self._on_status is not None:
+            self._on_status(st)
+
+    _on_status: Callable[[dict[str, Any]], None] | None = None
+
+    # ------------------------------------------------------------------ loop
+    def stop(self) -> None:
+        """Ask :meth:`run` to finish after the current chunk (thread-safe)."""
+        self._stop.set()
+
+    def run(self, *, max_cycles: int | None = None,
+            on_status: Callable[[dict[str, Any]], None] | None = None,
+            close: bool = True) -> dict[str, Any]:
+        """Process the source until it ends, :meth:`stop` is called or ``max_cycles``.
+
+        Parameters
+        ----------
+        max_cycles : int, optional
+            Stop after this many cycles.
+        on_status : callable, optional
+            Called with each status dict (e.g. a live display).
+        close : bool, default True
+            Finish the processors and close the sinks and the source at the end.
+
+        Returns
+        -------
+        dict
+            The final status.
+        """
+        self._on_status = on_status
+        self.state = "running"
+        try:
+            for chunk in self.source.chunks():
+                if len(chunk):
+                    self.process(chunk)
+                if self._stop.is_set() or (max_cycles is not None
+                                           and self.c.cycles >= max_cycles):
+                    break
+            else:
+                pass
+        finally:
+            if close:
+                self.finish()
+        return self.status()
+
+    def finish(self) -> None:
+        """Flush the processors (held-back samples, open holes), final status, close sinks."""
+        results: list[Result] = []
+        for p in self.processors:
+            results += p.finish()
+        self._emit(results, None)
+        self.state = "finished"
+        self._maybe_status(force=True)
+        for s in self.sinks:
+            s.close()
+        self.source.close()
+
+
+def _iso(t_ns: int) -> str:
+    sec, ns = divmod(int(t_ns), 1_000_000_000)
+    return time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(sec)) + f".{ns // 1000:06d}Z"
+
+
+def read_status(state_dir: str | PathLike[str]) -> dict[str, Any]:
+    """The last ``status.json`` written by a runtime into ``state_dir``.
+
+    Raises
+    ------
+    FileNotFoundError
+        If no runtime has written a status there.
+    """
+    p = Path(state_dir) / STATUS_FILE
+    if not p.exists():
+        raise FileNotFoundError(f"no {STATUS_FILE} in {state_dir}: start `cnctwin edge run "
+                                f"--out {state_dir}` first")
+    doc: dict[str, Any] = json.loads(p.read_text(encoding="utf-8"))
+    return doc

@@ -1,0 +1,340 @@
+"""Sinks of the edge runtime: MQTT with store-and-forward, the store, a JSON lines file.
+
+Messages are dicts built by the runtime (``seq``, ``kind``, ``machine``, ``cycle``,
+``time``, then the result's values with units in the key names); see docs/edge.md.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from os import PathLike
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+import orjson
+import pandas as pd
+
+from cnctwin.edge.forward import ForwardQueue
+from cnctwin.edge.pipeline import Chunk
+from cnctwin.exceptions import ConfigError
+from cnctwin.recording import Recording, RecordingMeta, find_gaps
+
+__all__ = ["JsonLinesSink", "MqttSink", "StoreSink", "dumps"]
+
+
+def dumps(message: dict[str, Any]) -> bytes:
+    """One message as compact JSON bytes (NaN becomes null)."""
+    return orjson.dumps(message, option=orjson.OPT_SERIALIZE_NUMPY)
+
+
+class JsonLinesSink:
+    """Append every message as one JSON line to ``path``.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file (appended to; created with its directory).
+    kinds : set of str, optional
+        Only these message kinds (default all).
+    """
+
+    name = "jsonl"
+
+    def __init__(self, path: str | PathLike[str], *, kinds: set[str] | None = None) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.kinds = kinds
+        self._f: IO[bytes] = self.path.open("ab")
+        self.written = 0
+
+    def write(self, messages: list[dict[str, Any]], chunk: Chunk | None) -> None:
+        lines = [dumps(m) + b"\n" for m in messages
+                 if self.kinds is None or m["kind"] in self.kinds]
+        if lines:
+            self._f.write(b"".join(lines))
+            self._f.flush()
+            self.written += len(lines)
+
+    def status(self) -> dict[str, Any]:
+        return {"path": str(self.path), "written": self.written}
+
+    def close(self) -> None:
+        self._f.close()
+
+
+class MqttSink:
+    """Publish messages to ``<topic_prefix>/<machine>/<kind>`` with store-and-forward.
+
+    Every message goes through a :class:`~cnctwin.edge.forward.ForwardQueue` on disk and is
+    removed when the broker acknowledged it (QoS 1). While the broker is unreachable the queue
+    grows (bounded; the oldest are dropped and counted); the sink retries the connection every
+    ``retry_s`` and then sends the backlog oldest first. A lost connection discards the client
+    (and its in-flight messages, which are still in the queue) and a new one is made, so only
+    the queue decides what is sent and in which order.
+
+    Parameters
+    ----------
+    host, port : str, int
+        Broker.
+    state_dir : str or path-like
+        Directory of the queue file ``outbox.sqlite``.
+    machine : str
+        Machine name in the topics.
+    topic_prefix : str, default 'cnctwin'
+        First topic level.
+    max_queue_messages : int, default 200000
+        Queue bound (at ~20 messages/s about 2.8 h of backlog).
+    retry_s : float, default 2.0
+        Seconds between connection attempts [s].
+    max_inflight : int, default 100
+        Messages published but not yet acknowledged.
+    username, password : str, optional
+        Broker credentials.
+    """
+
+    name = "mqtt"
+
+    def __init__(self, host: str, port: int = 1883, *, state_dir: str | PathLike[str],
+                 machine: str, topic_prefix: str = "cnctwin",
+                 max_queue_messages: int = 200_000, retry_s: float = 2.0,
+                 max_inflight: int = 100, username: str | None = None,
+                 password: str | None = None) -> None:
+        from cnctwin.iotools.mqtt import _paho
+
+        self._mqtt = _paho()
+        self.host, self.port = host, int(port)
+        self.machine = machine or "machine"
+        self.topic_prefix = topic_prefix.rstrip("/")
+        self.retry_s = retry_s
+        self.max_inflight = max_inflight
+        self.username, self.password = username, password
+        self.queue = ForwardQueue(Path(state_dir) / "outbox.sqlite",
+                                  max_messages=max_queue_messages)
+        self._client: Any = None
+        self._connected = threading.Event()
+        self._lost = threading.Event()
+        self._lock = threading.Lock()
+        self._acked: list[int] = []
+        self._inflight: dict[int, int] = {}  # mid -> queue id
+        self._last_id = 0
+        self._last_attempt = -1e9
+        self.connects = 0
+        self.disconnects = 0
+        self.last_error = ""
+
+    def topic(self, kind: str) -> str:
+        """Topic of a message kind."""
+        return f"{self.topic_prefix}/{self.machine}/{kind}"
+
+    # ---------------------------------------------------------------- connection
+    def _on_connect(self, client: Any, userdata: Any, flags: Any, rc: Any,
+                    properties: Any = None) -> None:
+        if getattr(rc, "is_failure", False):
+            self.last_error = f"broker refused: {rc}"
+            self._lost.set()
+            return
+        self._connected.set()
+
+    def _on_disconnect(self, client: Any, userdata: Any, *args: Any) -> None:
+        self._connected.clear()
+        self._lost.set()
+
+    def _on_publish(self, client: Any, userdata: Any, mid: int, *args: Any) -> None:
+        with self._lock:
+            self._acked.append(mid)
+
+    def _drop_client(self) -> None:
+        c = self._client
+        self._client = None
+        self._connected.clear()
+        self._lost.clear()
+        with self._lock:
+            self._inflight.clear()
+            self._acked.clear()
+        self._last_id = 0  # re-send from the oldest queued message
+        if c is not None:
+            self.disconnects += 1
+            with contextlib.suppress(Exception):  # the connection is already gone
+                c.disconnect()
+            c.loop_stop()
+
+    def _connect(self) -> None:
+        now = time.monotonic()
+        if now - self._last_attempt < self.retry_s:
+            return
+        self._last_attempt = now
+        m = self._mqtt
+        c = m.Client(callback_api_version=m.CallbackAPIVersion.VERSION2)
+        if self.username:
+            c.username_pw_set(self.username, self.password)
+        c.on_connect = self._on_connect
+        c.on_disconnect = self._on_disconnect
+        c.on_publish = self._on_publish
+        c.max_inflight_messages_set(self.max_inflight)
+        c.reconnect_delay_set(min_delay=3600, max_delay=3600)  # we reconnect ourselves
+        try:
+            c.connect(self.host, self.port, keepalive=30)
+        except OSError as exc:
+            self.last_error = f"cannot connect to {self.host}:{self.port}: {exc}"
+            return
+        c.loop_start()
+        self._client = c
+        self.connects += 1
+
+    @property
+    def connected(self) -> bool:
+        """Connected to the broker (CONNACK received, not lost since)."""
+        return self._connected.is_set() and not self._lost.is_set()
+
+    # ---------------------------------------------------------------- sending
+    def pump(self) -> None:
+        """Connect if needed, remove acknowledged messages, send the next ones in order."""
+        if self._client is not None and self._lost.is_set():
+            self._drop_client()
+        if self._client is None:
+            self._connect()
+            return
+        if not self._connected.is_set():
+            if time.monotonic() - self._last_attempt > max(self.retry_s, 5.0):
+                self.last_error = "no CONNACK"
+                self._drop_client()
+            return
+        ids: list[int] = []
+        with self._lock:
+            early: list[int] = []
+            for mid in self._acked:
+                if mid in self._inflight:
+                    ids.append(self._inflight.pop(mid))
+                else:  # the ack beat the map entry: keep it for the next pump
+                    early.append(mid)
+            self._acked = early[-1000:]
+        self.queue.remove(ids)
+        room = self.max_inflight - len(self._inflight)
+        if room <= 0:
+            return
+        for qid, topic, payload in self.queue.peek(room, after_id=self._last_id):
+            info = self._client.publish(topic, payload, qos=1)
+            if info.rc != 0:
+                self.last_error = f"publish failed (rc {info.rc})"
+                self._lost.set()
+                return
+            with self._lock:
+                self._inflight[info.mid] = qid
+            self._last_id = qid
+
+    def write(self, messages: list[dict[str, Any]], chunk: Chunk | None) -> None:
+        self.queue.put_many([(self.topic(m["kind"]), dumps(m)) for m in messages])
+        self.pump()
+
+    def flush(self, *, timeout_s: float = 10.0) -> bool:
+        """Send until the queue is empty or ``timeout_s`` passed; True if empty."""
+        deadline = time.monotonic() + timeout_s
+        while len(self.queue) and time.monotonic() < deadline:
+            self.pump()
+            time.sleep(0.01)
+        return len(self.queue) == 0
+
+    def status(self) -> dict[str, Any]:
+        return {"broker": f"{self.host}:{self.port}", "connected": self.connected,
+                "queued": len(self.queue), "dropped_oldest": self.queue.dropped,
+                "sent": self.queue.sent, "connects": self.connects,
+                "disconnects": self.disconnects, "last_error": self.last_error,
+                "topic": self.topic("<kind>")}
+
+    def close(self, *, timeout_s: float = 5.0) -> None:
+        """Try to send the backlog for ``timeout_s``; what is left stays on disk."""
+        self.flush(timeout_s=timeout_s)
+        self._drop_client()
+        self.queue.close()
+
+
+class StoreSink:
+    """Append derived per-cycle values and hole rows to a :mod:`cnctwin.store`.
+
+    Every ``block_cycles`` cycles one recording is ingested with id
+    ``edge-<machine>-<first cycle>`` and ``source_format='edge'``: HF columns are the derived
+    values (``CUT_TORQUE|SP1`` [Nm], ``ANOMALY_SCORE|SP1`` [-]) on the cycles processed, and
+    ``meta.attrs`` holds the ``holes`` rows and ``alarms`` completed in that block.
+
+    Parameters
+    ----------
+    url : str or path-like
+        Store (:func:`cnctwin.store.open`).
+    machine : str
+        Machine name of the recordings.
+    block_cycles : int, default 30000
+        Cycles per stored block (60 s at 2 ms).
+    """
+
+    name = "store"
+
+    def __init__(self, url: str | PathLike[str], *, machine: str,
+                 block_cycles: int = 30_000) -> None:
+        import cnctwin.store
+
+        if block_cycles < 1:
+            raise ConfigError(f"block_cycles must be >= 1, not {block_cycles}")
+        self.store = cnctwin.store.open(url)
+        self.machine = machine or "machine"
+        self.block_cycles = block_cycles
+        self._cyc: list[np.ndarray] = []
+        self._t: list[np.ndarray] = []
+        self._cols: dict[str, list[np.ndarray]] = {}
+        self._n = 0
+        self._holes: list[dict[str, Any]] = []
+        self._alarms: list[dict[str, Any]] = []
+        self.blocks: list[str] = []
+        self._cycle_time_s = 0.002
+
+    def write(self, messages: list[dict[str, Any]], chunk: Chunk | None) -> None:
+        for m in messages:
+            if m["kind"] == "hole":
+                self._holes.append(m)
+            elif m["kind"] == "alarm":
+                self._alarms.append(m)
+        if chunk is not None and len(chunk) and chunk.derived:
+            self._cycle_time_s = chunk.cycle_time_s
+            k0 = self._n
+            self._cyc.append(chunk.cycles)
+            self._t.append(chunk.time_ns)
+            for c, v in chunk.derived.items():
+                if c not in self._cols:
+                    self._cols[c] = [np.full(k0, np.nan)] if k0 else []
+                self._cols[c].append(v)
+            self._n += len(chunk)
+            for parts in self._cols.values():  # a column missing in this chunk
+                if sum(p.size for p in parts) < self._n:
+                    parts.append(np.full(self._n - sum(p.size for p in parts), np.nan))
+            if self._n >= self.block_cycles:
+                self._ingest()
+
+    def _ingest(self) -> None:
+        if not self._n and not self._holes:
+            return
+        cyc = np.concatenate(self._cyc) if self._cyc else np.empty(0, dtype=np.int64)
+        t = np.concatenate(self._t) if self._t else np.empty(0, dtype=np.int64)
+        data = {c: np.concatenate(p) for c, p in self._cols.items()}
+        hf = pd.DataFrame(data, index=pd.Index(cyc, name="cycle"))
+        hf.insert(0, "time", pd.to_datetime(t, unit="ns", utc=True))
+        meta = RecordingMeta(machine=self.machine, cycle_time_s=self._cycle_time_s,
+                             source_format="edge", gaps=find_gaps(cyc),
+                             units={c: ("Nm" if c.startswith("CUT_TORQUE") else "-")
+                                    for c in data},
+                             attrs={"holes": self._holes, "alarms": self._alarms})
+        first = int(cyc[0]) if cyc.size else int(self._holes[0]["cycle"])
+        rid = f"edge-{''.join(ch if ch.isalnum() or ch in '._-' else '_' for ch in self.machine)}" \
+              f"-{first}"
+        self.blocks.append(self.store.ingest(Recording(hf, meta=meta), recording_id=rid))
+        self._cyc, self._t, self._cols, self._n = [], [], {}, 0
+        self._holes, self._alarms = [], []
+
+    def status(self) -> dict[str, Any]:
+        return {"store": str(self.store.url), "blocks": len(self.blocks),
+                "pending_cycles": self._n}
+
+    def close(self) -> None:
+        self._ingest()
+        self.store.close()

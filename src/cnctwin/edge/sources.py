@@ -1,0 +1,235 @@
+"""Sources of the edge runtime: replay of a recording file, live Databus over MQTT.
+
+Both yield :class:`~cnctwin.edge.pipeline.Chunk` objects in arrival order with the *raw*
+cycle counter; the runtime (:class:`~cnctwin.edge.runtime.EdgeRuntime`) unwraps it, splits
+chunks at gaps and sets late rows aside (:class:`~cnctwin.edge.cycles.CycleTracker`).
+``counter_modulus`` says whether the counter can wrap (``2**31`` for a raw SINUMERIK CYCLE, 0
+for a counter that is already unwrapped, like a Recording's index).
+"""
+
+from __future__ import annotations
+
+import time
+import urllib.parse
+from collections.abc import Iterator
+from dataclasses import dataclass
+from os import PathLike
+
+import numpy as np
+import pandas as pd
+
+from cnctwin.edge.pipeline import Chunk
+from cnctwin.exceptions import ConfigError
+from cnctwin.recording import CYCLE_COUNTER_MODULUS, Recording
+
+__all__ = ["DatabusSource", "MqttUrl", "ReplaySource", "parse_mqtt_url"]
+
+
+@dataclass(frozen=True)
+class MqttUrl:
+    """A parsed ``mqtt://[user[:password]@]host[:port][/topic]`` address."""
+
+    host: str
+    port: int
+    topic: str
+    username: str | None = None
+    password: str | None = None
+
+
+def parse_mqtt_url(url: str, *, default_topic: str = "") -> MqttUrl:
+    """Split an ``mqtt://`` URL; the path (without the leading ``/``) is the topic.
+
+    Raises
+    ------
+    ConfigError
+        For another scheme or a missing host.
+    """
+    u = urllib.parse.urlparse(url)
+    if u.scheme not in ("mqtt", "tcp"):
+        raise ConfigError(f"{url!r} is not an mqtt://host:port/topic URL")
+    if not u.hostname:
+        raise ConfigError(f"{url!r} has no host (mqtt://host:port/topic)")
+    topic = urllib.parse.unquote(u.path[1:]) if u.path.startswith("/") else u.path
+    return MqttUrl(u.hostname, u.port or 1883, topic or default_topic,
+                   urllib.parse.unquote(u.username) if u.username else None,
+                   urllib.parse.unquote(u.password) if u.password else None)
+
+
+def _events_between(events: pd.DataFrame, lo: int, hi: int) -> pd.DataFrame:
+    if events.empty:
+        return events
+    c = events["cycle"].to_numpy(dtype=np.int64)
+    return events.iloc[int(np.searchsorted(c, lo)):int(np.searchsorted(c, hi, side="right"))]
+
+
+class ReplaySource:
+    """Replay a recording (any file :func:`cnctwin.read_recording` opens) in chunks of cycles.
+
+    Parameters
+    ----------
+    recording : Recording or path
+        The recording or its file.
+    chunk_cycles : int, default 50
+        Cycles per chunk (50 cycles = 100 ms at 2 ms).
+    speed : float or None, default None
+        Pace: ``1`` = real time, ``N`` = N times real time on the cycle clock, ``None`` or
+        ``0`` = as fast as possible.
+    columns : list of str, optional
+        Only these HF columns (default all).
+
+    Attributes
+    ----------
+    scheduled_ns : int
+        Wall-clock time at which the last chunk was due (for the lag).
+    """
+
+    counter_modulus = 0
+    live = False
+
+    def __init__(self, recording: Recording | str | PathLike[str], *, chunk_cycles: int = 50,
+                 speed: float | None = None, columns: list[str] | None = None) -> None:
+        if chunk_cycles < 1:
+            raise ConfigError(f"chunk_cycles must be >= 1, not {chunk_cycles}")
+        if speed is not None and speed < 0:
+            raise ConfigError(f"speed must be >= 0 (0 = as fast as possible), not {speed}")
+        if not isinstance(recording, Recording):
+            from cnctwin import read_recording
+
+            recording = read_recording(recording)
+        self.recording = recording
+        self.chunk_cycles = int(chunk_cycles)
+        self.speed = speed or None
+        self.machine = recording.meta.machine
+        self.cycle_time_s = recording.meta.cycle_time_s
+        self.issues: list[str] = list(recording.meta.issues)
+        cols = recording.columns if columns is None else [c for c in columns
+                                                          if recording.has(c)]
+        self._cols = cols
+        self.scheduled_ns = 0
+
+    def chunks(self) -> Iterator[Chunk]:
+        """Chunks of ``chunk_cycles`` rows (a chunk can contain a recorded gap)."""
+        rec = self.recording
+        cyc = rec.cycles
+        t_ns = rec.hf["time"].to_numpy(dtype="datetime64[ns]").view(np.int64)
+        data = {c: rec.hf[c].to_numpy(dtype=np.float64) for c in self._cols}
+        ev = rec.events.sort_values("cycle", kind="stable") if not rec.events.empty \
+            else rec.events
+        start_wall = time.perf_counter_ns()
+        first = int(cyc[0]) if cyc.size else 0
+        step_ns = self.cycle_time_s * 1e9
+        k = self.chunk_cycles
+        for lo in range(0, cyc.size, k):
+            hi = min(lo + k, cyc.size)
+            if self.speed:
+                due = start_wall + int((int(cyc[hi - 1]) + 1 - first) * step_ns / self.speed)
+                wait = due - time.perf_counter_ns()
+                if wait > 0:
+                    time.sleep(wait / 1e9)
+                self.scheduled_ns = time.time_ns() - max(time.perf_counter_ns() - due, 0)
+            else:
+                self.scheduled_ns = time.time_ns()
+            yield Chunk(cyc[lo:hi], t_ns[lo:hi], {c: v[lo:hi] for c, v in data.items()},
+                        events=_events_between(ev, int(cyc[lo]), int(cyc[hi - 1])),
+                        cycle_time_s=self.cycle_time_s, machine=self.machine,
+                        received_ns=self.scheduled_ns)
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+class DatabusSource:
+    """Live Industrial Edge Databus values over MQTT, in chunks of arrival time.
+
+    Uses :class:`cnctwin.iotools.mqtt.MqttRecorder` (metadata topic first, then the data
+    topics it announces). Each poll window becomes one chunk: one row per cycle in which values
+    arrived. If a datapoint is mapped to the column ``CYCLE`` (the SINUMERIK counter), it is the
+    cycle base (it can wrap at 2**31); otherwise the cycle is ``floor(ts / cycle_time_s)`` as
+    :class:`~cnctwin.iotools.databus.DatabusDecoder` builds it.
+
+    Parameters
+    ----------
+    host, port : str, int
+        Broker.
+    metadata_topic : str
+        Connector metadata topic (``ie/m/j/simatic/v1/<instance>/dp``).
+    name_map : dict, optional
+        Datapoint name -> column (``{"Spindle_Current": "CURRENT|SP1"}``).
+    window_s : float, default 0.1
+        Poll window [s] (arrival time per chunk).
+    idle_timeout_s : float or None, default None
+        Stop when no value arrived for this long [s] (None: run until closed).
+    cycle_time_s : float, default 0.002
+        Cycle time [s].
+    username, password : str, optional
+        Broker credentials.
+    machine : str, optional
+        Machine name (default the metadata's ``applicationName``).
+    """
+
+    def __init__(self, host: str, port: int = 1883, *, metadata_topic: str,
+                 name_map: dict[str, str] | None = None, window_s: float = 0.1,
+                 idle_timeout_s: float | None = None, cycle_time_s: float = 0.002,
+                 username: str | None = None, password: str | None = None,
+                 machine: str = "", ready_timeout_s: float = 30.0) -> None:
+        from cnctwin.iotools.mqtt import MqttRecorder
+
+        self.recorder = MqttRecorder(host, port, metadata_topic=metadata_topic,
+                                     name_map=name_map, cycle_time_s=cycle_time_s,
+                                     username=username, password=password)
+        self.window_s = window_s
+        self.idle_timeout_s = idle_timeout_s
+        self.cycle_time_s = cycle_time_s
+        self.machine = machine
+        self.ready_timeout_s = ready_timeout_s
+        self.issues: list[str] = []
+        self.counter_modulus = 0
+        self.live = True
+        self._started = False
+        self._closed = False
+
+    def start(self) -> DatabusSource:
+        """Connect, subscribe and wait for the metadata (bounded by ``ready_timeout_s``)."""
+        if not self._started:
+            self.recorder.start()
+            self.recorder.wait_ready(timeout_s=self.ready_timeout_s)
+            self._started = True
+        return self
+
+    def chunks(self) -> Iterator[Chunk]:
+        """One chunk per poll window with values."""
+        self.start()
+        last_value = time.monotonic()
+        while not self._closed:
+            rec = self.recorder.collect(duration_s=self.window_s)
+            self.issues.extend(rec.meta.issues)
+            if rec.n_cycles == 0:
+                if self.idle_timeout_s is not None and \
+                        time.monotonic() - last_value > self.idle_timeout_s:
+                    return
+                continue
+            last_value = time.monotonic()
+            if not self.machine:
+                self.machine = rec.meta.machine
+            hf = rec.hf
+            if "CYCLE" in hf.columns:
+                raw = hf["CYCLE"].to_numpy(dtype=np.float64)
+                ok = np.isfinite(raw)
+                if not ok.all():
+                    self.issues.append(f"{int((~ok).sum())} rows without a CYCLE value "
+                                       "skipped (the counter is the time base)")
+                hf = hf[ok]
+                cycles = raw[ok].astype(np.int64)
+                self.counter_modulus = CYCLE_COUNTER_MODULUS
+            else:
+                cycles = hf.index.to_numpy(dtype=np.int64)
+            t_ns = hf["time"].to_numpy(dtype="datetime64[ns]").view(np.int64)
+            sig = {c: hf[c].to_numpy(dtype=np.float64) for c in hf.columns
+                   if c not in ("time", "CYCLE")}
+            yield Chunk(cycles, t_ns, sig, cycle_time_s=self.cycle_time_s,
+                        machine=self.machine, received_ns=time.time_ns())
+
+    def close(self) -> None:
+        """Disconnect."""
+        self._closed = True
+        self.recorder.stop()
