@@ -128,8 +128,9 @@ class HoleProcessor:
     The HF columns a hole row needs are kept in a buffer that starts where the previous hole
     ended (the tool back above the surface). Each time the Z axis has moved up since the last
     check, :func:`~cnctwin.usecases.holes.hole_record` runs on the buffer; a hole is emitted
-    once it is complete: a later hole follows it in the buffer, or its tool has been out of the
-    material for ``settle_s`` (peck drilling: the next peck re-enters within that time). Rows
+    once it is complete: the tool is out of the material and the X/Y setpoint has left the
+    hole's position (next hole), or the tool has been out for ``settle_s`` (peck drilling: the
+    next peck re-enters at the same X/Y within that time), or a later hole follows it. Rows
     equal those of the batch :func:`~cnctwin.usecases.holes.hole_records` on the whole
     recording (the test checks it) because the buffer holds the hole with its approach.
 
@@ -269,9 +270,9 @@ class HoleProcessor:
             row = rows.iloc[k]
             ext_cycle = int(row["end_cycle"]) + round(
                 (float(row["extraction_s"]) - float(row["end_s"])) / self._cycle_time_s)
-            done = final or k < len(rows) - 1 or (
-                ext_cycle < last_cycle
-                and (last_cycle - ext_cycle) * self._cycle_time_s >= self.settle_s)
+            done = final or k < len(rows) - 1 or (ext_cycle < last_cycle and (
+                (last_cycle - ext_cycle) * self._cycle_time_s >= self.settle_s
+                or self._moved_away(rec, ext_cycle, row)))
             if not done:
                 break
             out.append(Result("hole", int(row["end_cycle"]),
@@ -286,6 +287,18 @@ class HoleProcessor:
         if cut_at is not None and not final:
             self._drop_before(cut_at)
         return out
+
+    def _moved_away(self, rec: Recording, cycle: int, row: pd.Series) -> bool:
+        """The X/Y setpoint left the hole's position after the tool came out (next hole)."""
+        i0 = int(np.searchsorted(rec.cycles, cycle))
+        for axis, key in zip(self.xy_axes, ("x_mm", "y_mm"), strict=True):
+            col = f"DES_POS|{axis}"
+            ref = float(row[key])
+            if rec.has(col) and math.isfinite(ref):
+                v = rec.hf[col].to_numpy(dtype=np.float64)[i0:]
+                if v.size and np.nanmax(np.abs(v - ref)) > 0.01:
+                    return True
+        return False
 
     def _drop_before(self, cycle: int) -> None:
         parts: list[Chunk] = []

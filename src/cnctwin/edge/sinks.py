@@ -282,7 +282,10 @@ class StoreSink:
         self.block_cycles = block_cycles
         self._cyc: list[np.ndarray] = []
         self._t: list[np.ndarray] = []
-        self._cols: dict[str, list[np.ndarray]] = {}
+        self._der: list[dict[str, np.ndarray]] = []
+        self._tq_cyc: list[np.ndarray] = []
+        self._tq_val: list[np.ndarray] = []
+        self._tq_column = "CUT_TORQUE|SP1"
         self._n = 0
         self._holes: list[dict[str, Any]] = []
         self._alarms: list[dict[str, Any]] = []
@@ -295,40 +298,66 @@ class StoreSink:
                 self._holes.append(m)
             elif m["kind"] == "alarm":
                 self._alarms.append(m)
-        if chunk is not None and len(chunk) and chunk.derived:
+            elif m["kind"] == "torque":
+                c0 = int(m["first_cycle"])
+                self._tq_cyc.append(np.arange(c0, c0 + int(m["n"]), dtype=np.int64))
+                self._tq_val.append(np.asarray(m["torque_nm"], dtype=np.float64))
+        if chunk is not None and len(chunk):
             self._cycle_time_s = chunk.cycle_time_s
-            k0 = self._n
             self._cyc.append(chunk.cycles)
             self._t.append(chunk.time_ns)
-            for c, v in chunk.derived.items():
-                if c not in self._cols:
-                    self._cols[c] = [np.full(k0, np.nan)] if k0 else []
-                self._cols[c].append(v)
+            self._der.append({c: v for c, v in chunk.derived.items()
+                              if not c.startswith("CUT_TORQUE")})
             self._n += len(chunk)
-            for parts in self._cols.values():  # a column missing in this chunk
-                if sum(p.size for p in parts) < self._n:
-                    parts.append(np.full(self._n - sum(p.size for p in parts), np.nan))
             if self._n >= self.block_cycles:
-                self._ingest()
+                self._ingest(final=False)
 
-    def _ingest(self) -> None:
+    def _ingest(self, *, final: bool) -> None:
         if not self._n and not self._holes:
             return
         cyc = np.concatenate(self._cyc) if self._cyc else np.empty(0, dtype=np.int64)
         t = np.concatenate(self._t) if self._t else np.empty(0, dtype=np.int64)
-        data = {c: np.concatenate(p) for c, p in self._cols.items()}
-        hf = pd.DataFrame(data, index=pd.Index(cyc, name="cycle"))
-        hf.insert(0, "time", pd.to_datetime(t, unit="ns", utc=True))
+        cols = sorted({c for d in self._der for c in d})
+        data = {c: np.concatenate([d.get(c, np.full(len(k), np.nan))
+                                   for d, k in zip(self._der, self._cyc, strict=True)])
+                for c in cols}
+        tq_c = np.concatenate(self._tq_cyc) if self._tq_cyc else np.empty(0, dtype=np.int64)
+        tq_v = np.concatenate(self._tq_val) if self._tq_val else np.empty(0)
+        # the torque of the newest cycle comes with the next chunk: store a block only up to
+        # the newest torque value and carry the rest (no NaN at block ends)
+        n_block = cyc.size
+        if tq_c.size and not final:
+            n_block = int(np.searchsorted(cyc, tq_c[-1], side="right"))
+        rest = slice(n_block, None)
+        blk = slice(0, n_block)
+        if tq_c.size:
+            pos = np.searchsorted(tq_c, cyc[blk])
+            pos_ok = pos < tq_c.size
+            tq = np.full(n_block, np.nan)
+            hit = pos_ok.copy()
+            hit[pos_ok] = tq_c[pos[pos_ok]] == cyc[blk][pos_ok]
+            tq[hit] = tq_v[pos[hit]]
+            data[self._tq_column] = np.concatenate([tq, np.empty(0)])
+        block = {c: v[blk] for c, v in data.items()}
+        hf = pd.DataFrame(block, index=pd.Index(cyc[blk], name="cycle"))
+        hf.insert(0, "time", pd.to_datetime(t[blk], unit="ns", utc=True))
         meta = RecordingMeta(machine=self.machine, cycle_time_s=self._cycle_time_s,
-                             source_format="edge", gaps=find_gaps(cyc),
+                             source_format="edge", gaps=find_gaps(cyc[blk]),
                              units={c: ("Nm" if c.startswith("CUT_TORQUE") else "-")
-                                    for c in data},
+                                    for c in block},
                              attrs={"holes": self._holes, "alarms": self._alarms})
         first = int(cyc[0]) if cyc.size else int(self._holes[0]["cycle"])
-        rid = f"edge-{''.join(ch if ch.isalnum() or ch in '._-' else '_' for ch in self.machine)}" \
-              f"-{first}"
-        self.blocks.append(self.store.ingest(Recording(hf, meta=meta), recording_id=rid))
-        self._cyc, self._t, self._cols, self._n = [], [], {}, 0
+        safe = "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in self.machine)
+        self.blocks.append(self.store.ingest(Recording(hf, meta=meta),
+                                             recording_id=f"edge-{safe}-{first}"))
+        keep_tq = tq_c > (cyc[n_block - 1] if n_block else -1)
+        self._cyc = [cyc[rest]] if cyc[rest].size else []
+        self._t = [t[rest]] if cyc[rest].size else []
+        self._der = [{c: v[rest] for c, v in data.items() if c != self._tq_column}] \
+            if cyc[rest].size else []
+        self._tq_cyc = [tq_c[keep_tq]] if keep_tq.any() else []
+        self._tq_val = [tq_v[keep_tq]] if keep_tq.any() else []
+        self._n = int(cyc[rest].size)
         self._holes, self._alarms = [], []
 
     def status(self) -> dict[str, Any]:
@@ -336,5 +365,5 @@ class StoreSink:
                 "pending_cycles": self._n}
 
     def close(self) -> None:
-        self._ingest()
+        self._ingest(final=True)
         self.store.close()
