@@ -51,7 +51,7 @@ def test_detector_conformance(cls: type[Detector]) -> None:
     one = np.array([twin.score_one(r) for r in df.iloc[2000:].to_dict("records")])
     np.testing.assert_array_equal(batch, one)  # batch == streaming, exactly
     assert batch.dtype == np.float64
-    assert isinstance(det.score_one(df.iloc[0].to_dict()), float)
+    assert isinstance(det.score_one({str(k): v for k, v in df.iloc[0].items()}), float)
     fresh = det.clone()
     assert repr(fresh) == repr(det)  # same parameters
     with pytest.raises(ConfigError, match="missing"):

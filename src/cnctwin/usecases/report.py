@@ -93,7 +93,8 @@ def _wear_part(ctx: DemoContext, sec: Any) -> None:
     v = validate_wear(holes, truth, camera=cam, n_measured=5)
     sec.text(
         f"Tool-wear run of thesis §5.1 (AISI 1045, 20 mm holes, 2400 rpm, 400 mm/min, sets of 6 "
-        f"with 30 s pauses), shortened to {n} holes with the thesis wear curve compressed so "
+        f"with {res.truth['gap_between_sets_s']:g} s pauses), shortened to {n} holes with the "
+        "thesis wear curve compressed so "
         "the whole tool life (0 to ~277 µm) is seen; the wear curve is hidden from the "
         "analysis, which reads only the recording. The full 2676-hole run is validated by "
         "scripts/validate_wear_full.py (docs/validation-usecases.md)."

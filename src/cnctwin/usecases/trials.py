@@ -207,8 +207,8 @@ def fault_trial(
     n_holes, teach_holes : int
         Holes of the run and of the teach-in.
     gap_between_sets_s : float, optional
-        Pause between sets [s]; default: the scenario's (the tool cools between sets as in the
-        full run, so the teach-in sets see the same heating pattern as the scored ones).
+        Pause between sets [s]; default: the scenario's (as in the full run, so the teach-in
+        sets see the same heating pattern as the scored ones).
     max_delay_s : float, default 2
         Alarm window after the onset [s].
     envelope_threshold : float, default 3
