@@ -56,13 +56,14 @@ class ForwardQueue:
         self._db.execute("PRAGMA synchronous=NORMAL")
         self._db.executescript(_SCHEMA)
         self._len = int(self._db.execute("SELECT count(*) FROM outbox").fetchone()[0])
+        self._counts = {str(k): int(v) for k, v in
+                        self._db.execute("SELECT name, value FROM counters").fetchall()}
 
     def __len__(self) -> int:
         return self._len
 
     def _counter(self, name: str) -> int:
-        return int(self._db.execute("SELECT value FROM counters WHERE name = ?",
-                                    (name,)).fetchone()[0])
+        return self._counts[name]
 
     @property
     def dropped(self) -> int:
@@ -101,6 +102,8 @@ class ForwardQueue:
         except BaseException:
             db.execute("ROLLBACK")
             raise
+        self._counts["dropped"] += drop
+        self._counts["enqueued"] += len(items)
         return drop
 
     def peek(self, n: int, *, after_id: int = 0) -> list[tuple[int, str, bytes]]:
@@ -123,6 +126,7 @@ class ForwardQueue:
         except BaseException:
             db.execute("ROLLBACK")
             raise
+        self._counts["sent"] += n
         self._len = int(self._db.execute("SELECT count(*) FROM outbox").fetchone()[0])
 
     def close(self) -> None:

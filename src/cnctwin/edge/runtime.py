@@ -83,6 +83,7 @@ class EdgeRuntime:
         self._seq = 0
         self._last_status = -1e9
         self._stop = threading.Event()
+        self.final_status: dict[str, Any] | None = None
 
     # ------------------------------------------------------------------ messages
     def _messages(self, results: list[Result], chunk: Chunk | None) -> list[dict[str, Any]]:
@@ -254,7 +255,7 @@ class EdgeRuntime:
         finally:
             if close:
                 self.finish()
-        return self.status()
+        return self.final_status if self.final_status is not None else self.status()
 
     def finish(self) -> None:
         """Flush the processors (held-back samples, open holes), final status, close sinks."""
@@ -264,6 +265,7 @@ class EdgeRuntime:
         self._emit(results, None)
         self.state = "finished"
         self._maybe_status(force=True)
+        self.final_status = self.status()
         for s in self.sinks:
             s.close()
         self.source.close()

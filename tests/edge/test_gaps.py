@@ -1,0 +1,79 @@
+"""Gaps, wraps and late data on the CYCLE time base (data-formats.md §1.2: the counter runs
+0..2147483647 and wraps; a real file had a gap of 3860 cycles)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from cnctwin.edge import CycleTracker, EdgeRuntime, ReplaySource, TorqueProcessor
+from cnctwin.recording import Recording
+from cnctwin.spindle import SpindleModel
+
+M = 2**31
+
+
+def test_tracker_wrap_gap_late() -> None:
+    tr = CycleTracker()
+    a = tr.update([M - 3, M - 2, M - 1])
+    assert a.cycles.tolist() == [M - 3, M - 2, M - 1] and a.runs[0].gap_before is None
+    b = tr.update([0, 1, 5, 6, 4, 7])  # wrap, then a jump of 3 missing, then a late row
+    assert b.wraps == 1 and tr.wraps == 1
+    assert b.cycles.tolist() == [M, M + 1, M + 5, M + 6, M + 7]
+    assert b.late == 1 and b.keep.tolist() == [True, True, True, True, False, True]
+    assert [(r.start, r.stop) for r in b.runs] == [(0, 2), (2, 5)]
+    gap = b.runs[1].gap_before
+    assert gap is not None and (gap.after_cycle, gap.before_cycle, gap.missing) == (
+        M + 1, M + 5, 3)
+    c = tr.update([7, 8])  # 7 repeated across chunks: late, 8 continues
+    assert c.late == 1 and c.cycles.tolist() == [M + 8] and c.runs[0].gap_before is None
+    assert tr.missing_cycles == 3 and tr.late == 2
+
+
+class _Mem:
+    name = "memory"
+
+    def __init__(self) -> None:
+        self.messages: list[dict[str, Any]] = []
+
+    def write(self, messages: list[dict[str, Any]], chunk: Any) -> None:
+        self.messages.extend(messages)
+
+    def status(self) -> dict[str, Any]:
+        return {}
+
+    def close(self) -> None:
+        pass
+
+
+def test_runtime_flags_gap_and_never_invents(wear_recording: Recording,
+                                             spindle_model: SpindleModel) -> None:
+    rec = wear_recording
+    # drop 3860 cycles in the middle (the real C4A file's gap) and 1 cycle further on
+    c = rec.cycles
+    drop = ((c >= c[1000]) & (c < c[1000] + 3860)) | (c == c[5500])
+    hf = rec.hf[~drop]
+    gapped = Recording(hf.copy(), events=rec.events, meta=rec.meta.copy())
+    mem = _Mem()
+    st = EdgeRuntime(ReplaySource(gapped, chunk_cycles=64), [TorqueProcessor(spindle_model)],
+                     [mem]).run()
+    gaps = [m for m in mem.messages if m["kind"] == "gap"]
+    assert [(g["after_cycle"], g["missing_cycles"]) for g in gaps] == [
+        (int(c[999]), 3860), (int(c[5499]), 1)]
+    assert st["gaps"] == 2 and st["missing_cycles"] == 3861
+    tq = [m for m in mem.messages if m["kind"] == "torque"]
+    cyc = np.concatenate([np.arange(m["first_cycle"], m["first_cycle"] + m["n"]) for m in tq])
+    tau = np.concatenate([m["torque_nm"] for m in tq])
+    assert np.array_equal(cyc, gapped.cycles)  # only received cycles, none invented
+    # per contiguous segment the batch estimate (no derivative across a gap)
+    i = gapped.hf["CURRENT|SP1"].to_numpy()
+    n = gapped.hf["CMD_SPEED|SP1"].to_numpy()
+    cuts = np.flatnonzero(np.diff(gapped.cycles) != 1) + 1
+    ref = np.concatenate([spindle_model.cutting_torque(ii, nn)
+                          for ii, nn in zip(np.split(i, cuts), np.split(n, cuts), strict=True)])
+    np.testing.assert_array_equal(tau, ref)
+    # each torque message covers consecutive cycles only
+    for m in tq:
+        assert not any(g["after_cycle"] < m["first_cycle"] + m["n"] - 1
+                       and g["before_cycle"] > m["first_cycle"] for g in gaps)

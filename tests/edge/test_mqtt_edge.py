@@ -1,0 +1,140 @@
+"""Live MQTT: Databus messages in, results out, and store-and-forward across a broker restart.
+
+A private mosquitto on a free loopback port (conftest.Broker). Databus payloads are built as
+in tests/iotools (documented structure, data-formats.md §2): metadata on the metadata topic
+(retained), bulk data messages with one value per datapoint and cycle.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from cnctwin.edge import DatabusSource, EdgeRuntime, MqttSink, TorqueProcessor
+from cnctwin.spindle import SpindleModel
+from tests.edge.conftest import Broker, Collector, publisher
+
+pytestmark = pytest.mark.mqtt
+META = "ie/m/j/simatic/v1/nck1/dp"
+DATA = "ie/d/j/simatic/v1/nck1/dp/r/NCK/hf"
+
+
+def _metadata() -> dict[str, Any]:
+    return {"seq": 1, "hashVersion": 7, "applicationName": "mill-7", "connections": [
+        {"name": "NCK", "type": "sinumerik", "dataPoints": [
+            {"name": "hf", "topic": DATA, "publishType": "bulk", "dataPointDefinitions": [
+                {"name": "Cycle", "id": "1", "dataType": "DInt"},
+                {"name": "Spindle_Current", "id": "2", "dataType": "LReal"},
+                {"name": "Spindle_Speed", "id": "3", "dataType": "LReal"}]}]}]}
+
+
+def _bulk(seq: int, cycles: np.ndarray, t0: pd.Timestamp, i: np.ndarray,
+          n: np.ndarray) -> bytes:
+    vals = []
+    for k, c in enumerate(cycles):
+        ts = (t0 + pd.Timedelta(milliseconds=2 * k)).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
+        vals += [{"id": "1", "qc": 3, "ts": ts, "val": int(c)},
+                 {"id": "2", "qc": 3, "ts": ts, "val": float(i[k])},
+                 {"id": "3", "qc": 3, "ts": ts, "val": float(n[k])}]
+    return json.dumps({"seq": seq, "vals": vals}).encode()
+
+
+def test_databus_in_results_out_with_wrap(broker: Broker, tmp_path: Path) -> None:
+    model = SpindleModel(1.04, 8.42e-5, 0.35, j_kgm2=0.002)
+    rng = np.random.default_rng(3)
+    n_cyc = 600
+    raw = (np.arange(n_cyc) + 2**31 - 250) % 2**31  # the counter wraps after 250 cycles
+    speed = np.linspace(2000.0, 2400.0, n_cyc)
+    current = 3.0 + 0.2 * rng.standard_normal(n_cyc)
+    out = Collector(broker.port)
+    pub = publisher(broker.port)
+    pub.publish(META, json.dumps(_metadata()).encode(), qos=1,
+                retain=True).wait_for_publish(timeout=5)
+    src = DatabusSource("127.0.0.1", broker.port, metadata_topic=META,
+                        name_map={"Cycle": "CYCLE", "Spindle_Current": "CURRENT|SP1",
+                                  "Spindle_Speed": "CMD_SPEED|SP1"},
+                        window_s=0.05, idle_timeout_s=1.5)
+    src.start()
+    sink = MqttSink("127.0.0.1", broker.port, state_dir=tmp_path / "state",
+                    machine="mill-7")
+    rt = EdgeRuntime(src, [TorqueProcessor(model)], [sink], state_dir=tmp_path)
+    th = threading.Thread(target=rt.run, daemon=True)
+    th.start()
+    t0 = pd.Timestamp("2025-03-01T10:00:00Z")
+    try:
+        for s, k in enumerate(range(0, n_cyc, 100)):
+            sl = slice(k, k + 100)
+            pub.publish(DATA, _bulk(s + 1, raw[sl], t0 + pd.Timedelta(milliseconds=2 * k),
+                                    current[sl], speed[sl]), qos=1).wait_for_publish(timeout=5)
+        th.join(timeout=30)
+        assert not th.is_alive()
+        assert out.wait(lambda: sum(m["n"] for m in out.of_kind("torque")) >= n_cyc)
+    finally:
+        pub.loop_stop()
+        pub.disconnect()
+        out.close()
+    tq = sorted(out.of_kind("torque"), key=lambda m: m["seq"])
+    cyc = np.concatenate([np.arange(m["first_cycle"], m["first_cycle"] + m["n"]) for m in tq])
+    tau = np.concatenate([m["torque_nm"] for m in tq])
+    assert np.array_equal(cyc, np.arange(n_cyc) + 2**31 - 250)  # unwrapped, continuous
+    np.testing.assert_array_equal(tau, model.cutting_torque(current, speed))  # batch Eq. 4.4
+    assert all(t == "cnctwin/mill-7/torque" for t, m in out.messages if m["kind"] == "torque")
+    assert tq[0]["units"]["torque_nm"] == "Nm"
+    status = json.loads((tmp_path / "status.json").read_text())
+    assert status["wraps"] == 1 and status["gaps"] == 0 and status["cycles"] == n_cyc
+
+
+def _msgs(start: int, n: int) -> list[dict[str, Any]]:
+    return [{"seq": s, "kind": "torque", "machine": "m1", "cycle": s, "first_cycle": s,
+             "n": 1, "torque_nm": [float(s)]} for s in range(start, start + n)]
+
+
+def test_store_and_forward_across_broker_restart(broker: Broker, tmp_path: Path) -> None:
+    sink = MqttSink("127.0.0.1", broker.port, state_dir=tmp_path, machine="m1", retry_s=0.2,
+                    max_queue_messages=50)
+    rx = Collector(broker.port)
+    sink.write(_msgs(0, 10), None)
+    assert sink.flush(timeout_s=10)
+    assert rx.wait(lambda: len(rx.of_kind("torque")) >= 10)
+    rx.close()
+    broker.stop()
+    deadline = time.monotonic() + 10
+    while sink.connected and time.monotonic() < deadline:  # the loss is noticed
+        sink.pump()
+        time.sleep(0.05)
+    assert not sink.connected
+    sink.write(_msgs(10, 70), None)  # broker down: 70 messages, bound 50
+    for _ in range(5):
+        sink.pump()
+    st = sink.status()
+    assert st["queued"] == 50 and st["dropped_oldest"] == 20  # counted, not silent
+    broker.start()  # same port
+    rx2 = Collector(broker.port)
+    try:
+        assert sink.flush(timeout_s=20)
+        assert rx2.wait(lambda: len(rx2.of_kind("torque")) >= 50)
+        seqs = [m["seq"] for m in rx2.of_kind("torque")]
+        assert sink.queue.sent == 60
+    finally:
+        rx2.close()
+        sink.close(timeout_s=1)
+    # the 50 newest, oldest first, each once (20..29 were dropped by the bound)
+    assert seqs == list(range(30, 80))
+
+
+def test_queue_survives_restart(tmp_path: Path) -> None:
+    from cnctwin.edge import ForwardQueue
+
+    q = ForwardQueue(tmp_path / "outbox.sqlite", max_messages=3)
+    q.put_many([("t", b"a"), ("t", b"b"), ("t", b"c"), ("t", b"d")])
+    q.close()
+    q2 = ForwardQueue(tmp_path / "outbox.sqlite", max_messages=3)
+    assert [p for _, _, p in q2.peek(10)] == [b"b", b"c", b"d"] and q2.dropped == 1
+    q2.close()
