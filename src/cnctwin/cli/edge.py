@@ -1,0 +1,192 @@
+"""Edge subcommands: ``edge run`` (the streaming runtime) and ``edge status``.
+
+Examples::
+
+    cnctwin edge run --source run1.json --model spindle.json --out state/ --speed 10
+    cnctwin edge run --source mqtt://ie-databus:1883/ie/m/j/simatic/v1/nck1/dp \\
+        --name-map map.json --model spindle.json --out /var/lib/cnctwin \\
+        --publish mqtt://broker:1883/cnctwin
+    cnctwin edge status /var/lib/cnctwin
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+from pathlib import Path
+from typing import Any
+
+from cnctwin.exceptions import ConfigError
+
+__all__ = ["register"]
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add ``edge run`` and ``edge status`` to ``sub``."""
+    p = sub.add_parser("edge", help="streaming runtime: live Databus/MQTT or a replayed "
+                       "recording in, cutting torque, holes and alarms out",
+                       description="The edge runtime (docs/edge.md).")
+    esub = p.add_subparsers(dest="edge_command", metavar="ACTION")
+    r = esub.add_parser("run", help="run the runtime next to a machine or on a file",
+                        description="Source -> torque, holes, anomalies -> JSON lines in OUT, "
+                        "optional MQTT publish (store-and-forward) and store.")
+    r.add_argument("--source", required=True, metavar="URL|FILE",
+                   help="mqtt://host:port/<databus metadata topic> or a recording file")
+    r.add_argument("--model", required=True, type=Path, metavar="FILE",
+                   help="calibrated spindle model (.json/.toml, cnctwin.edge.save_spindle_model)")
+    r.add_argument("--out", required=True, type=Path, metavar="DIR",
+                   help="state directory: results.jsonl, status.json, outbox.sqlite")
+    r.add_argument("--publish", metavar="URL",
+                   help="mqtt://host:port/<topic prefix> for results (default prefix cnctwin)")
+    r.add_argument("--store", metavar="URL", help="also append results to this store")
+    r.add_argument("--speed", type=float, default=0.0,
+                   help="replay pace: 1 = real time, N = N x, 0 = as fast as possible")
+    r.add_argument("--chunk-cycles", type=int, default=50, help="cycles per chunk (replay)")
+    r.add_argument("--machine", default="", help="machine name in topics and the store")
+    r.add_argument("--name-map", type=Path, metavar="FILE",
+                   help="JSON {datapoint name: column} for the Databus (CURRENT|SP1, "
+                   "CMD_SPEED|SP1, DES_POS|Z1, ..., CYCLE)")
+    r.add_argument("--no-holes", action="store_true", help="skip the per-hole record")
+    r.add_argument("--no-anomaly", action="store_true", help="skip the anomaly detector")
+    r.add_argument("--learn-s", type=float, default=10.0,
+                   help="teach-in time of the anomaly detector [s]")
+    r.add_argument("--max-queue", type=int, default=200_000,
+                   help="store-and-forward bound [messages]")
+    r.add_argument("--idle-timeout-s", type=float, default=None,
+                   help="live source: stop after this long without data [s]")
+    r.add_argument("--quiet", action="store_true", help="no live summary")
+    r.set_defaults(func=_run)
+    s = esub.add_parser("status", help="show the status a runtime wrote into its state dir")
+    s.add_argument("dir", type=Path, metavar="DIR", help="the --out directory of `edge run`")
+    s.add_argument("--json", action="store_true", help="print the raw status.json")
+    s.set_defaults(func=_status)
+    p.set_defaults(func=lambda a: (p.print_help(), 0)[1])
+
+
+def _fmt(v: Any, spec: str = ".3g") -> str:
+    if isinstance(v, float):
+        return "-" if math.isnan(v) else format(v, spec)
+    return str(v)
+
+
+def status_table(st: dict[str, Any]) -> Any:
+    """A rich table of a status dict."""
+    from rich.table import Table
+
+    t = Table(title=f"cnctwin edge - {st.get('machine', '')} ({st.get('state', '')})",
+              show_header=False)
+    rate = st.get("cycles_per_s_recent")
+    if not isinstance(rate, float) or math.isnan(rate):
+        rate = st.get("cycles_per_s", float("nan"))
+    need = st.get("machine_rate_cycles_per_s", 500.0)
+    rows = [
+        ("cycles", f"{st.get('cycles', 0)} (last {st.get('last_cycle')})"),
+        ("cycles/s", f"{_fmt(rate, '.0f')} (machine needs {_fmt(need, '.0f')}; "
+                     f"busy {_fmt(st.get('cycles_per_busy_s', float('nan')), '.0f')}/s)"),
+        ("lag", f"{_fmt(st.get('lag_s', float('nan')))} s; data age "
+                f"{_fmt(st.get('data_age_s', float('nan')))} s"),
+        ("holes", str(st.get("holes", 0))),
+        ("alarms", str(st.get("alarms", 0))),
+        ("gaps", f"{st.get('gaps', 0)} ({st.get('missing_cycles', 0)} cycles missing), "
+                 f"wraps {st.get('wraps', 0)}, late rows {st.get('late_rows', 0)}"),
+    ]
+    for name, s in (st.get("sinks") or {}).items():
+        if name == "mqtt":
+            rows.append(("mqtt", f"{s.get('broker')} {'up' if s.get('connected') else 'DOWN'}"
+                                 f", queued {s.get('queued')}, sent {s.get('sent')}, dropped "
+                                 f"oldest {s.get('dropped_oldest')}"))
+        elif name == "store":
+            rows.append(("store", f"{s.get('store')} blocks {s.get('blocks')}"))
+    for msg in (st.get("issues") or [])[-3:]:
+        rows.append(("issue", str(msg)[:120]))
+    for k, v in rows:
+        t.add_row(k, v)
+    t.caption = f"updated {st.get('updated', '')}"
+    return t
+
+
+def _build(args: argparse.Namespace) -> Any:
+    from cnctwin.edge import (
+        AnomalyProcessor,
+        DatabusSource,
+        EdgeRuntime,
+        HoleProcessor,
+        JsonLinesSink,
+        MqttSink,
+        ReplaySource,
+        StoreSink,
+        TorqueProcessor,
+        load_spindle_model,
+        parse_mqtt_url,
+    )
+
+    model = load_spindle_model(args.model)
+    src: Any
+    if args.source.startswith(("mqtt://", "tcp://")):
+        u = parse_mqtt_url(args.source)
+        if not u.topic:
+            raise ConfigError("give the Databus metadata topic: mqtt://host:port/<topic>")
+        name_map = json.loads(args.name_map.read_text()) if args.name_map else None
+        src = DatabusSource(u.host, u.port, metadata_topic=u.topic, name_map=name_map,
+                            username=u.username, password=u.password, machine=args.machine,
+                            idle_timeout_s=args.idle_timeout_s)
+    else:
+        src = ReplaySource(args.source, chunk_cycles=args.chunk_cycles, speed=args.speed)
+    machine = args.machine or src.machine or "machine"
+    procs: list[Any] = [TorqueProcessor(model)]
+    if not args.no_holes:
+        procs.append(HoleProcessor(model))
+    if not args.no_anomaly:
+        procs.append(AnomalyProcessor(model=model, learn_s=args.learn_s))
+    out: Path = args.out
+    sinks: list[Any] = [JsonLinesSink(out / "results.jsonl")]
+    if args.publish:
+        u = parse_mqtt_url(args.publish, default_topic="cnctwin")
+        sinks.append(MqttSink(u.host, u.port, state_dir=out, machine=machine,
+                              topic_prefix=u.topic, max_queue_messages=args.max_queue,
+                              username=u.username, password=u.password))
+    if args.store:
+        sinks.append(StoreSink(args.store, machine=machine))
+    return EdgeRuntime(src, procs, sinks, state_dir=out, machine=machine)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.live import Live
+
+    rt = _build(args)
+    old = signal.signal(signal.SIGTERM, lambda *a: rt.stop())
+    console = Console(stderr=True)
+    try:
+        if args.quiet:
+            final = rt.run()
+        else:
+            with Live(console=console, refresh_per_second=2, transient=False) as live:
+                final = rt.run(on_status=lambda st: live.update(status_table(st)))
+                live.update(status_table(final))
+    except KeyboardInterrupt:
+        rt.finish()
+        final = rt.final_status or rt.status()
+    finally:
+        signal.signal(signal.SIGTERM, old)
+    print(json.dumps({k: final[k] for k in ("cycles", "holes", "alarms", "gaps",
+                                            "missing_cycles", "late_rows", "wraps")}))
+    return 0
+
+
+def _status(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from cnctwin.edge import read_status
+
+    try:
+        st = read_status(args.dir)
+    except FileNotFoundError as exc:
+        raise ConfigError(str(exc)) from None
+    if args.json:
+        print(json.dumps(st, indent=1))
+    else:
+        Console().print(status_table(st))
+    return 0
