@@ -62,7 +62,11 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     s.add_argument("dir", type=Path, metavar="DIR", help="the --out directory of `edge run`")
     s.add_argument("--json", action="store_true", help="print the raw status.json")
     s.set_defaults(func=_status)
-    p.set_defaults(func=lambda a: (p.print_help(), 0)[1])
+    def _help(args: argparse.Namespace) -> int:
+        p.print_help()
+        return 0
+
+    p.set_defaults(func=_help)
 
 
 def _fmt(v: Any, spec: str = ".3g") -> str:
