@@ -347,7 +347,8 @@ def hole_record(
         Shortest feed travel counted as a plunge [mm].
     min_speed_rpm : float, default 10
         A plunge whose median |spindle speed| in the cut is lower is a positioning move, not a
-        hole: skipped with an entry in ``attrs["issues"]`` [rpm].
+        hole: skipped with an entry in ``attrs["issues"]`` (kept when the speed is unknown)
+        [rpm].
     store : bool, default True
         Also store the table in ``rec.meta.attrs["holes"]``.
 
@@ -464,8 +465,10 @@ def hole_record(
         sl = np.concatenate(parts)
         if sl.size == 0:
             sl = np.arange(cut_start, cut_end + 1)
-        n_med = float(np.nanmedian(np.abs(speed[sl]))) if sl.size else math.nan
-        if not n_med >= min_speed_rpm:
+        sp = np.abs(speed[sl])
+        sp = sp[np.isfinite(sp)]
+        n_med = float(np.median(sp)) if sp.size else math.nan
+        if n_med < min_speed_rpm:  # unknown speed (NaN): kept
             issues.append(f"plunge at cycle {int(cycles[first.feed_start])} with the spindle "
                           f"at {n_med:.3g} rpm (< min_speed_rpm {min_speed_rpm:g}) is not a "
                           "hole: skipped")
@@ -506,7 +509,8 @@ def hole_record(
             "bottom_z_mm": float(za[bottom]),
             "depth_mm": float(surface - za[bottom]),
             "feed_mm_min": float(first.feed_mm_s * 60.0),
-            "speed_rpm": float(np.nanmedian(speed[sl])),
+            "speed_rpm": (float(np.nanmedian(speed[sl])) if np.isfinite(speed[sl]).any()
+                          else math.nan),
             "current_mean_a": float(np.nanmean(current[sl])),
             "current_peak_a": float(np.nanmax(np.abs(current[sl]))),
             "current_first_a": float(np.nanmean(current[fw])),
