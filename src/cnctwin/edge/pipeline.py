@@ -26,6 +26,13 @@ from cnctwin.recording import CounterGap, Recording, RecordingMeta, empty_events
 
 __all__ = ["RESULT_KINDS", "Chunk", "Processor", "Result", "Sink", "Source"]
 
+_NO_EVENTS = empty_events()  # shared and never modified: building one costs ~3 ms
+
+
+def _no_events() -> pd.DataFrame:
+    return _NO_EVENTS
+
+
 RESULT_KINDS: dict[str, str] = {
     "torque": "cutting torque of a contiguous run of cycles (arrays, one value per cycle)",
     "hole_start": "a plunge of the drilling axis began (first downward Z motion)",
@@ -67,7 +74,7 @@ class Chunk:
     cycles: NDArray[np.int64]
     time_ns: NDArray[np.int64]
     signals: dict[str, NDArray[np.float64]]
-    events: pd.DataFrame = field(default_factory=empty_events)
+    events: pd.DataFrame = field(default_factory=_no_events)
     gap_before: CounterGap | None = None
     cycle_time_s: float = 0.002
     machine: str = ""

@@ -176,6 +176,8 @@ class HoleProcessor:
         self._origin_ns: int | None = None
         self._cycle_time_s = 0.002
         self._moved_up = False
+        self._rising = False
+        self._pending: int | None = None
         self._last_z: float | None = None
         self._in_plunge = False
         self._down_run = 0
@@ -211,6 +213,12 @@ class HoleProcessor:
         dz = np.diff(zz)
         self._last_z = float(z[-1]) if z.size else self._last_z
         if (dz > step).any():
+            self._rising = True
+        elif self._rising:  # a retract has finished: a hole may be complete
+            self._rising = False
+            self._moved_up = True
+        if self._pending is not None and (chunk.last_cycle >= self._pending
+                                          or self._xy_moved(chunk)):
             self._moved_up = True
         down = dz < -step
         up = dz > step
@@ -231,6 +239,7 @@ class HoleProcessor:
                 if self._up_run >= 5:
                     self._in_plunge = False
         if self._moved_up:
+            self._pending = None
             out += self._evaluate(final=False)
         self._trim()
         return out
@@ -273,7 +282,8 @@ class HoleProcessor:
             done = final or k < len(rows) - 1 or (ext_cycle < last_cycle and (
                 (last_cycle - ext_cycle) * self._cycle_time_s >= self.settle_s
                 or self._moved_away(rec, ext_cycle, row)))
-            if not done:
+            if not done:  # look again when X/Y moves or after settle_s
+                self._pending = last_cycle + round(self.settle_s / self._cycle_time_s)
                 break
             out.append(Result("hole", int(row["end_cycle"]),
                               {"hole": int(row["hole"]), "row": _row_payload(row),
@@ -287,6 +297,13 @@ class HoleProcessor:
         if cut_at is not None and not final:
             self._drop_before(cut_at)
         return out
+
+    def _xy_moved(self, chunk: Chunk) -> bool:
+        for axis in self.xy_axes:
+            v = chunk.signals.get(f"DES_POS|{axis}")
+            if v is not None and v.size and float(np.nanmax(v) - np.nanmin(v)) > 0.01:
+                return True
+        return False
 
     def _moved_away(self, rec: Recording, cycle: int, row: pd.Series) -> bool:
         """The X/Y setpoint left the hole's position after the tool came out (next hole)."""

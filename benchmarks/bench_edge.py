@@ -1,0 +1,166 @@
+"""Edge runtime throughput on one core, side by side with its physical need and its floor.
+
+Measures in one run, on the same simulated drilling recording (tool-wear run, thesis §5.1:
+20 mm CYCLE81 holes at 2400 rpm, 78 HF signals at 500 Hz), replayed as fast as possible in
+50-cycle chunks (100 ms of one machine):
+
+* floor: the bare ``StreamingTorqueEstimator.update`` over the same 50-cycle chunks (what
+  ``benchmarks/bench_estimator.py`` measures), no pipeline around it;
+* the runtime with the torque processor and the JSON lines sink;
+* the runtime with torque + per-hole record + anomaly detector (PhysicsResidualDetector,
+  one ``score_one`` per cycle) + JSON lines;
+* the same + MQTT publish through the store-and-forward queue to a private mosquitto
+  (skipped, and said so, without a mosquitto binary).
+
+Physical need: 500 cycles/s per machine (one sample per 2 ms position-control cycle).
+"machines per core" = cycles per CPU-second / 500. The process is pinned to one CPU.
+
+Run: ``.venv/bin/python benchmarks/bench_edge.py [--holes 12]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import shutil
+import socket
+import subprocess
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from cnctwin.edge import (
+    AnomalyProcessor,
+    EdgeRuntime,
+    HoleProcessor,
+    JsonLinesSink,
+    MqttSink,
+    ReplaySource,
+    TorqueProcessor,
+)
+from cnctwin.recording import Recording
+from cnctwin.spindle import SpindleModel, StreamingTorqueEstimator
+
+NEED = 500.0  # cycles/s per machine
+
+
+def _cpu_model() -> str:
+    try:
+        out = subprocess.run(["lscpu"], capture_output=True, text=True, check=False).stdout
+        for line in out.splitlines():
+            if line.startswith("Model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "?"
+
+
+def _measure(fn: Callable[[], Any], repeat: int) -> tuple[float, float]:
+    """Best (wall s, CPU s) over ``repeat`` runs."""
+    best_w, best_c = float("inf"), float("inf")
+    for _ in range(repeat):
+        c0, w0 = time.process_time(), time.perf_counter()
+        fn()
+        best_w = min(best_w, time.perf_counter() - w0)
+        best_c = min(best_c, time.process_time() - c0)
+    return best_w, best_c
+
+
+def _broker() -> tuple[subprocess.Popen[bytes], int] | None:
+    exe = shutil.which("mosquitto") or ("/usr/sbin/mosquitto"
+                                        if os.path.exists("/usr/sbin/mosquitto") else None)
+    if exe is None:
+        return None
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = int(s.getsockname()[1])
+    proc = subprocess.Popen([exe, "-p", str(port)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    for _ in range(100):
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=0.2):
+                return proc, port
+        except OSError:
+            time.sleep(0.05)
+    proc.terminate()
+    return None
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--holes", type=int, default=12)
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+    from cnctwin.sim import scenarios as sc
+
+    rec: Recording = sc.tool_wear_run(n_holes=args.holes, holes_per_set=6, dynamometer=False,
+                                      seed=0).recording
+    model = SpindleModel(1.04, 8.42e-5, 0.35, j_kgm2=0.0045)
+    n = rec.n_cycles
+    i = rec.hf["CURRENT|SP1"].to_numpy()
+    s = rec.hf["CMD_SPEED|SP1"].to_numpy()
+    tmp = Path(tempfile.mkdtemp(prefix="bench_edge_"))
+
+    def floor() -> None:
+        est = StreamingTorqueEstimator(model)
+        for k in range(0, n, 50):
+            est.update(i[k:k + 50], s[k:k + 50])
+        est.flush()
+
+    def runtime(full: bool, mqtt_port: int | None = None) -> Callable[[], Any]:
+        def run() -> dict[str, Any]:
+            d = Path(tempfile.mkdtemp(dir=tmp))
+            procs: list[Any] = [TorqueProcessor(model)]
+            if full:
+                procs += [HoleProcessor(model), AnomalyProcessor(model=model, learn_s=5.0)]
+            sinks: list[Any] = [JsonLinesSink(d / "results.jsonl")]
+            if mqtt_port is not None:
+                sinks.append(MqttSink("127.0.0.1", mqtt_port, state_dir=d, machine="bench"))
+            st = EdgeRuntime(ReplaySource(rec, chunk_cycles=50), procs, sinks,
+                             state_dir=d).run()
+            assert st["cycles"] == n
+            if full:
+                assert st["holes"] == args.holes, st["holes"]
+            return st
+        return run
+
+    rows: list[tuple[str, float, float]] = []
+    w, c = _measure(floor, args.repeat)
+    rows.append(("floor: StreamingTorqueEstimator.update, 50-cycle chunks", n / w, n / c))
+    w, c = _measure(runtime(False), args.repeat)
+    rows.append(("runtime: torque -> JSON lines", n / w, n / c))
+    w, c = _measure(runtime(True), args.repeat)
+    rows.append(("runtime: torque + holes + anomaly -> JSON lines", n / w, n / c))
+    br = _broker()
+    if br is not None:
+        proc, port = br
+        try:
+            w, c = _measure(runtime(True, port), args.repeat)
+            rows.append(("runtime: same + MQTT (store-and-forward queue, QoS 1)", n / w, n / c))
+        finally:
+            proc.terminate()
+            proc.wait(timeout=5)
+    else:
+        print("mosquitto not found: MQTT row skipped (apt-get install mosquitto)")
+    shutil.rmtree(tmp, ignore_errors=True)
+    load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
+    print(f"machine: {_cpu_model()}, {os.cpu_count()} vCPU, pinned to 1; load average "
+          f"{load[0]:.1f}/{load[1]:.1f}/{load[2]:.1f}; python {platform.python_version()}")
+    print(f"input: simulated tool-wear run, {args.holes} holes, {n} cycles "
+          f"({n / NEED:.1f} s of machine time), {len(rec.columns)} HF signals; "
+          f"need {NEED:.0f} cycles/s per machine; best of {args.repeat}")
+    print()
+    print("| path | cycles/s (wall) | cycles/s (CPU) | machines at 500 Hz per core (CPU) |")
+    print("|---|---|---|---|")
+    for name, rw, rc in rows:
+        print(f"| {name} | {rw:,.0f} | {rc:,.0f} | {rc / NEED:,.0f} |")
+    print(f"| physical need, one machine | {NEED:.0f} | {NEED:.0f} | 1 |")
+
+
+if __name__ == "__main__":
+    main()
