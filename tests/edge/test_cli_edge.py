@@ -1,0 +1,36 @@
+"""``cnctwin edge run`` on a simulated recording file and ``cnctwin edge status``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from cnctwin.cli import main
+from cnctwin.edge import save_spindle_model
+from cnctwin.spindle import SpindleModel
+from cnctwin.usecases.holes import hole_records
+
+
+def test_edge_run_and_status(tmp_path: Path, wear_run: dict[str, Any], wear_recording: Any,
+                             capsys: pytest.CaptureFixture[str]) -> None:
+    model = SpindleModel(1.01, 8.3e-5, 0.34, j_kgm2=0.0045)
+    mfile = save_spindle_model(model, tmp_path / "spindle.toml")
+    out = tmp_path / "state"
+    code = main(["edge", "run", "--source", str(wear_run["path"]), "--model", str(mfile),
+                 "--out", str(out), "--quiet", "--store", str(tmp_path / "store"),
+                 "--learn-s", "3"])
+    assert code == 0
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    batch = hole_records([wear_recording], model=model)
+    assert summary["holes"] == len(batch) == 3 and summary["gaps"] == 0
+    lines = [json.loads(x) for x in (out / "results.jsonl").read_text().splitlines()]
+    rows = [m["row"] for m in lines if m["kind"] == "hole"]
+    assert [r["torque_mean_nm"] for r in rows] == pytest.approx(
+        batch["torque_mean_nm"].tolist(), rel=1e-12)
+    assert main(["edge", "status", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "holes" in text and "finished" in text
+    assert main(["edge", "status", str(tmp_path / "nothing")]) == 2
