@@ -347,8 +347,8 @@ def hole_record(
         Shortest feed travel counted as a plunge [mm].
     min_speed_rpm : float, default 10
         A plunge whose median |spindle speed| in the cut is lower is a positioning move, not a
-        hole: skipped with an entry in ``attrs["issues"]`` (kept when the speed is unknown)
-        [rpm].
+        hole: skipped with an entry in ``attrs["issues"]``; so is a plunge without a spindle
+        speed signal (it cannot be told from a positioning move) [rpm].
     store : bool, default True
         Also store the table in ``rec.meta.attrs["holes"]``.
 
@@ -468,7 +468,7 @@ def hole_record(
         sp = np.abs(speed[sl])
         sp = sp[np.isfinite(sp)]
         n_med = float(np.median(sp)) if sp.size else math.nan
-        if n_med < min_speed_rpm:  # unknown speed (NaN): kept
+        if not n_med >= min_speed_rpm:  # NaN (no speed signal): cannot be told from a move
             issues.append(f"plunge at cycle {int(cycles[first.feed_start])} with the spindle "
                           f"at {n_med:.3g} rpm (< min_speed_rpm {min_speed_rpm:g}) is not a "
                           "hole: skipped")
