@@ -170,8 +170,7 @@ def _run(args: argparse.Namespace) -> int:
             with Live(console=console, refresh_per_second=2, transient=False) as live:
                 final = rt.run(on_status=lambda st: live.update(status_table(st)))
                 live.update(status_table(final))
-    except KeyboardInterrupt:
-        rt.finish()
+    except KeyboardInterrupt:  # run() has already finished the processors and sinks
         final = rt.final_status or rt.status()
     finally:
         signal.signal(signal.SIGTERM, old)
