@@ -50,6 +50,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    "CMD_SPEED|SP1, DES_POS|Z1, ..., CYCLE)")
     r.add_argument("--no-holes", action="store_true", help="skip the per-hole record")
     r.add_argument("--no-anomaly", action="store_true", help="skip the anomaly detector")
+    r.add_argument("--detector", choices=("physics", "tapping", "spectral"), default="physics",
+                   help="anomaly detector (cnctwin.usecases.anomaly): current against the twin, "
+                   "loose tap on extraction, or chatter band power")
     r.add_argument("--learn-s", type=float, default=10.0,
                    help="teach-in time of the anomaly detector [s]")
     r.add_argument("--max-queue", type=int, default=200_000,
@@ -143,7 +146,15 @@ def _build(args: argparse.Namespace) -> Any:
     if not args.no_holes:
         procs.append(HoleProcessor(model))
     if not args.no_anomaly:
-        procs.append(AnomalyProcessor(model=model, learn_s=args.learn_s))
+        from cnctwin.usecases.anomaly import (
+            PhysicsResidualDetector,
+            SpectralDetector,
+            TappingDetector,
+        )
+
+        det = {"physics": PhysicsResidualDetector, "tapping": TappingDetector,
+               "spectral": SpectralDetector}[args.detector]()
+        procs.append(AnomalyProcessor(det, model=model, learn_s=args.learn_s))
     out: Path = args.out
     sinks: list[Any] = [JsonLinesSink(out / "results.jsonl")]
     if args.publish:
