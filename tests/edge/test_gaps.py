@@ -77,3 +77,27 @@ def test_runtime_flags_gap_and_never_invents(wear_recording: Recording,
     for m in tq:
         assert not any(g["after_cycle"] < m["first_cycle"] + m["n"] - 1
                        and g["before_cycle"] > m["first_cycle"] for g in gaps)
+
+
+def test_real_capture4analysis_gap(c4a_file: Any, spindle_model: SpindleModel) -> None:
+    """The real C4A file (tests/data/PROVENANCE): its counter gap is flagged, not filled."""
+    import cnctwin
+    from cnctwin.edge import HoleProcessor
+
+    rec = cnctwin.read_recording(c4a_file)
+    mem = _Mem()
+    st = EdgeRuntime(ReplaySource(rec, chunk_cycles=50),
+                     [TorqueProcessor(spindle_model), HoleProcessor(spindle_model)],
+                     [mem]).run()
+    gaps = [(m["after_cycle"], m["before_cycle"]) for m in mem.messages if m["kind"] == "gap"]
+    assert gaps == [(g.after_cycle, g.before_cycle) for g in rec.meta.gaps] == [
+        (5559591, 5563451)]  # data-formats.md §1.2: one gap of 3860 ticks
+    assert st["cycles"] == rec.n_cycles == 3818 and st["holes"] == 0
+    tq = [m for m in mem.messages if m["kind"] == "torque"]
+    tau = np.concatenate([m["torque_nm"] for m in tq])
+    i = rec.hf["CURRENT|SP1"].to_numpy()
+    n = rec.hf["CMD_SPEED|SP1"].to_numpy()
+    cut = int(np.flatnonzero(np.diff(rec.cycles) != 1)[0]) + 1
+    ref = np.concatenate([spindle_model.cutting_torque(i[:cut], n[:cut]),
+                          spindle_model.cutting_torque(i[cut:], n[cut:])])
+    np.testing.assert_array_equal(tau, ref)
