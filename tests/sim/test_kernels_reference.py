@@ -12,6 +12,8 @@ current noise and 0.5 rpm speed noise of the model.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from cnctwin.sim._reference import servo_kernel_reference, spindle_kernel_reference
@@ -63,6 +65,48 @@ def test_servo_kernel_bit_identical_to_reference_chunked() -> None:
         np.testing.assert_array_equal(out_new, out_ref)
         np.testing.assert_array_equal(st_new.values, st_ref.values)
         np.testing.assert_array_equal(st_new.history, st_ref.history)
+
+
+def test_servo_kernel_bit_identical_to_reference_all_settings() -> None:
+    """Every NC/drive setting branch (FFW modes 0-4, jerk filter types 0/1/2/4, DRA as PT1 and
+    as dead time, DSC off, a tight current limit that clamps) on five axes run side by side:
+    the kernel steps up to three axes in one loop body (servo.py ``_drive_lanes``), which must
+    give the bits of the reference kernel that runs the axes one after another."""
+    import dataclasses
+
+    base = Machine.thesis_default().axes
+    settings: list[dict[str, Any]] = [
+        dict(ffw_mode=0, jerk_filter_type=0, dsc=False),
+        dict(ffw_mode=1, jerk_filter_type=1, jerk_time_s=0.01, dyn_match_time_s=0.004),
+        dict(ffw_mode=2, jerk_filter_type=4, dyn_match_time_s=0.006, current_limit_a=3.0),
+        dict(ffw_mode=3, jerk_filter_type=2, dyn_match_time_s=0.005),
+        dict(ffw_mode=4, jerk_filter_type=2, dyn_match_time_s=0.003, dsc=False),
+    ]
+    axes = [dataclasses.replace(ax, **kw) for ax, kw in zip(base, settings, strict=True)]
+    par = servo_parameters(axes)
+    des, force = _drilling_setpoints(4000)
+    des[3] = 10.0 * np.sin(np.arange(4000) * TC)  # rotary axes move too
+    des[4] = np.where(np.arange(4000) > 2000, 5.0, 0.0)
+    noise = np.random.default_rng(7).standard_normal(des.shape) * 0.01
+    st_new, st_ref = ServoState.new(5), ServoState.new(5)
+    for lo, hi in [(0, 1700), (1700, 4000)]:
+        args = (np.ascontiguousarray(des[:, lo:hi]), np.ascontiguousarray(force[:, lo:hi]),
+                np.ascontiguousarray(noise[:, lo:hi]), par)
+        out_new = np.empty((5, _N_OUT, hi - lo))
+        out_ref = np.empty((5, _N_OUT, hi - lo))
+        _servo_kernel(*args, st_new.values, st_new.history, out_new, TC, 16)
+        servo_kernel_reference(*args, st_ref.values, st_ref.history, out_ref, TC, 16)
+        for a, factor in enumerate(60.0 if not ax.rotary else 1.0 / 6.0 for ax in axes):
+            for i in (5, 7):  # VEL_FFW, CMD_SPEED: per second now, per minute in the reference
+                np.testing.assert_allclose(out_new[a, i] * factor, out_ref[a, i], rtol=3e-16,
+                                           atol=0.0)
+                out_new[a, i] = out_ref[a, i]
+        np.testing.assert_array_equal(out_new, out_ref)
+        np.testing.assert_array_equal(st_new.values, st_ref.values)
+        np.testing.assert_array_equal(st_new.history, st_ref.history)
+    # the 3 A current limit of axis 2 clamps the torque setpoint (TORQUE at the slide, N)
+    limit_n = 3.0 * axes[2].kt_nm_per_a / axes[2].motor_torque_per_load_force
+    assert np.max(np.abs(out_new[2, 9])) == limit_n
 
 
 def test_spindle_kernel_matches_reference() -> None:
