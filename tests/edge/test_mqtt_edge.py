@@ -138,3 +138,45 @@ def test_queue_survives_restart(tmp_path: Path) -> None:
     q2 = ForwardQueue(tmp_path / "outbox.sqlite", max_messages=3)
     assert [p for _, _, p in q2.peek(10)] == [b"b", b"c", b"d"] and q2.dropped == 1
     q2.close()
+
+
+def test_cli_live_databus(broker: Broker, tmp_path: Path) -> None:
+    from cnctwin.cli import main
+    from cnctwin.edge import save_spindle_model
+
+    model = SpindleModel(1.04, 8.42e-5, 0.35)
+    mfile = save_spindle_model(model, tmp_path / "spindle.json")
+    nmap = tmp_path / "map.json"
+    nmap.write_text(json.dumps({"Cycle": "CYCLE", "Spindle_Current": "CURRENT|SP1",
+                                "Spindle_Speed": "CMD_SPEED|SP1"}))
+    pub = publisher(broker.port)
+    rx = Collector(broker.port, "plant/#")
+    pub.publish(META, json.dumps(_metadata()).encode(), qos=1,
+                retain=True).wait_for_publish(timeout=5)
+    raw = np.arange(5000, 5200)
+    current = np.full(200, 3.0)
+    speed = np.full(200, 2400.0)
+    # retained, so the CLI gets it whenever its data subscription is in place (no sleep)
+    pub.publish(DATA, _bulk(1, raw, pd.Timestamp("2025-03-01T10:00:00Z"), current, speed),
+                qos=1, retain=True).wait_for_publish(timeout=5)
+    codes: list[int] = []
+    th = threading.Thread(target=lambda: codes.append(main([
+        "edge", "run", "--source", f"mqtt://127.0.0.1:{broker.port}/{META}",
+        "--name-map", str(nmap), "--model", str(mfile), "--out", str(tmp_path / "out"),
+        "--publish", f"mqtt://127.0.0.1:{broker.port}/plant", "--no-holes", "--no-anomaly",
+        "--idle-timeout-s", "1.5", "--quiet"])), daemon=True)
+    th.start()
+    try:
+        th.join(timeout=30)
+        assert not th.is_alive() and codes == [0]
+        assert rx.wait(lambda: sum(m["n"] for m in rx.of_kind("torque")) >= 200)
+        topics = {t for t, m in rx.messages if m.get("kind") == "torque"}
+    finally:
+        pub.loop_stop()
+        pub.disconnect()
+        rx.close()
+    assert topics == {"plant/mill-7/torque"}  # machine from the metadata's applicationName
+    tau = np.concatenate([m["torque_nm"] for m in sorted(rx.of_kind("torque"),
+                                                         key=lambda m: m["seq"])])
+    # thesis Eq. 4.4 by hand: 1.04 * 3.0 - 8.42e-5 * 2400 - 0.35 = 3.12 - 0.20208 - 0.35 = 2.56792 Nm
+    np.testing.assert_allclose(tau, 2.56792, rtol=1e-12)

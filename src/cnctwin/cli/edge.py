@@ -15,6 +15,7 @@ import argparse
 import json
 import math
 import signal
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -139,6 +140,9 @@ def _build(args: argparse.Namespace) -> Any:
         src = DatabusSource(u.host, u.port, metadata_topic=u.topic, name_map=name_map,
                             username=u.username, password=u.password, machine=args.machine,
                             idle_timeout_s=args.idle_timeout_s)
+        src.start()  # metadata first: its applicationName names the machine by default
+        if not src.machine:
+            src.machine = str((src.recorder.decoder.metadata or {}).get("applicationName", ""))
     else:
         src = ReplaySource(args.source, chunk_cycles=args.chunk_cycles, speed=args.speed)
     machine = args.machine or src.machine or "machine"
@@ -172,7 +176,8 @@ def _run(args: argparse.Namespace) -> int:
     from rich.live import Live
 
     rt = _build(args)
-    old = signal.signal(signal.SIGTERM, lambda *a: rt.stop())
+    main_thread = threading.current_thread() is threading.main_thread()
+    old = signal.signal(signal.SIGTERM, lambda *a: rt.stop()) if main_thread else None
     console = Console(stderr=True)
     try:
         if args.quiet:
@@ -184,7 +189,8 @@ def _run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:  # run() has already finished the processors and sinks
         final = rt.final_status or rt.status()
     finally:
-        signal.signal(signal.SIGTERM, old)
+        if main_thread:
+            signal.signal(signal.SIGTERM, old)
     print(json.dumps({k: final[k] for k in ("cycles", "holes", "alarms", "gaps",
                                             "missing_cycles", "late_rows", "wraps")}))
     return 0
