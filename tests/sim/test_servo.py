@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from cnctwin.exceptions import ConfigError
 from cnctwin.sim.machine import FeedAxis, Machine
-from cnctwin.sim.servo import ServoState, simulate_servo
+from cnctwin.sim.servo import N_KERNEL_OUTPUTS, ServoState, simulate_servo
 
 TC = 0.002
 FEED_MM_MIN = 400.0  # thesis feed (physics-and-performance.md §1.2, §3)
@@ -213,3 +213,19 @@ def test_shape_errors() -> None:
         simulate_servo(np.zeros((2, 10)), [_x_axis()])
     with pytest.raises(ConfigError, match="force_n"):
         simulate_servo(np.zeros((1, 10)), [_x_axis()], force_n=np.zeros((1, 5)))
+
+
+def test_output_buffer_gives_the_same_trace_as_views() -> None:
+    # simulate() reuses one output buffer between chunks (servo.py simulate_servo ``out``)
+    m = Machine.thesis_default()
+    des = _circle()
+    axes = [m.axis("X1"), m.axis("Y1")]
+    fresh = simulate_servo(des, axes, rng=np.random.default_rng(3))
+    buf = np.full((2, N_KERNEL_OUTPUTS, des.shape[1]), np.nan)
+    into = simulate_servo(des, axes, rng=np.random.default_rng(3), out=buf)
+    for code, arr in fresh.signals.items():
+        np.testing.assert_array_equal(into.signals[code], arr, err_msg=code)
+        if code != "DES_POS":
+            assert np.shares_memory(into.signals[code], buf)
+    with pytest.raises(ConfigError, match="out must be"):
+        simulate_servo(des, axes, out=np.empty((2, N_KERNEL_OUTPUTS, 10)))

@@ -111,6 +111,19 @@ def test_chunked_equals_one_shot_and_seed_reproducible() -> None:
     np.testing.assert_array_equal(one.current_a, again.current_a)
 
 
+def test_output_buffer_gives_the_same_trace_as_views() -> None:
+    # simulate() reuses one buffer (18 trace fields x cycles) between chunks
+    cmd = np.linspace(0, 6000, 2000)
+    fresh = simulate_spindle(cmd, 1.0, MOTOR, rng=np.random.default_rng(2))
+    buf = np.full((18, cmd.size), np.nan)
+    into = simulate_spindle(cmd, 1.0, MOTOR, rng=np.random.default_rng(2), out=buf)
+    for name in ("speed_rpm", "current_a", "torque_nm", "power_w", "voltage_v"):
+        np.testing.assert_array_equal(getattr(into, name), getattr(fresh, name))
+        assert np.shares_memory(getattr(into, name), buf)
+    with pytest.raises(ConfigError, match="out must be"):
+        simulate_spindle(cmd, 1.0, MOTOR, out=np.empty((cmd.size, 18)))
+
+
 def test_rigid_tapping_follows_position_command() -> None:
     n = 1500
     pos = np.cumsum(np.r_[np.linspace(0, 2.4, 100), np.full(n - 100, 2.4)])  # deg per cycle

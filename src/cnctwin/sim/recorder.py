@@ -78,6 +78,10 @@ class RecordingSink(Protocol):
     def close(self, meta: RecordingMeta) -> Recording | None:
         """Called at the end with the final metadata; returns a Recording if it keeps one."""
 
+    # Optional attribute ``keeps_chunks`` (bool, default True when absent): False promises that
+    # the sink holds no reference to a chunk's arrays after write() returns (it writes them
+    # out or copies them), so simulate() may reuse its output buffers for the next chunk.
+
 
 @dataclass
 class MemorySink:
@@ -86,6 +90,7 @@ class MemorySink:
     _columns: list[str] = field(default_factory=list)
     _chunks: list[RecordedChunk] = field(default_factory=list)
     _meta: RecordingMeta | None = None
+    keeps_chunks = True  # holds every chunk's arrays until close()
 
     def open(self, columns: list[str], meta: RecordingMeta) -> None:
         """Remember the column order."""
@@ -175,6 +180,8 @@ class ParquetChunkSink:
     HF rows and LF values leave memory chunk by chunk (LF rows are appended to ``lf.parquet``
     as they come); only the NC events (one row per block) are kept until :meth:`close`.
     """
+
+    keeps_chunks = False  # HF/LF arrays are written out in write(); simulate() reuses buffers
 
     def __init__(
         self,
@@ -390,6 +397,7 @@ class Capture4AnalysisSink:
         self.max_file_mb = max_file_mb
         self.zip = zip
         self.timestamp_every_cycles = timestamp_every_cycles
+        self.keeps_chunks = False  # rows are serialised in write()
         self._writer: Any = None
         self._columns: list[str] = []
         self._meta: RecordingMeta | None = None

@@ -71,6 +71,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "HISTORY_LENGTH",
+    "N_KERNEL_OUTPUTS",
     "SERVO_HF_CODES",
     "SERVO_LF_CODES",
     "ServoState",
@@ -111,6 +112,8 @@ _TRUTH_CODES: tuple[str, ...] = ("true_position", "friction_force", "motor_speed
 
 _OUT_CODES = (*SERVO_HF_CODES, *SERVO_LF_CODES, *_TRUTH_CODES)
 _N_OUT = len(_OUT_CODES)
+N_KERNEL_OUTPUTS = _N_OUT
+"""Rows per axis of the kernel's output buffer (``simulate_servo(out=...)``)."""
 
 # ---------------------------------------------------------------- parameter vector layout
 P_KV = 0  # position gain [1/s]
@@ -794,6 +797,7 @@ def simulate_servo(
     inner_steps: int = 16,
     state: ServoState | None = None,
     rng: np.random.Generator | None = None,
+    out: NDArray[np.float64] | None = None,
 ) -> ServoTrace:
     """Run the feed-axis control loops and mechanics for a chunk of position-control cycles.
 
@@ -815,6 +819,11 @@ def simulate_servo(
     rng : numpy.random.Generator, optional
         Source of the current measurement noise (``FeedAxis.current_noise_a``); ``None`` gives a
         noise-free run.
+    out : numpy.ndarray, optional
+        Buffer for the kernel's outputs, C-contiguous float64 of shape (n_axes, 20, n_cycles);
+        the trace's arrays are then views into it (``simulate`` reuses one buffer between
+        chunks when its sink does not keep them: no fresh 40 MB per 50 000-cycle chunk).
+        Default: a new array.
 
     Returns
     -------
@@ -900,7 +909,11 @@ def simulate_servo(
             f"state is for {st.values.shape[0]} axes, des_pos has {n_axes}; pass the state of "
             "the same machine"
         )
-    out = np.empty((n_axes, _N_OUT, n))
+    if out is None:
+        out = np.empty((n_axes, _N_OUT, n))
+    elif out.shape != (n_axes, _N_OUT, n) or out.dtype != np.float64 or not out.flags.c_contiguous:
+        raise ConfigError(f"out must be C-contiguous float64 of shape ({n_axes}, {_N_OUT}, {n}), "
+                          f"not {out.dtype} {out.shape}")
     _servo_kernel(des, force, noise, par, st.values, st.history, out, cycle_time_s, inner_steps)
     signals: dict[str, NDArray[np.float64]] = {"DES_POS": des}
     for i, code in enumerate(_OUT_CODES):

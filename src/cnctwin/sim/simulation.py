@@ -29,8 +29,8 @@ from cnctwin.exceptions import ConfigError
 from cnctwin.recording import EVENT_COLUMNS, LF_COLUMNS, Recording, RecordingMeta
 from cnctwin.sim.machine import Machine
 from cnctwin.sim.recorder import MemorySink, RecordedChunk, RecordingSink
-from cnctwin.sim.servo import ServoState, simulate_servo
-from cnctwin.sim.spindle import SpindleState, simulate_spindle
+from cnctwin.sim.servo import N_KERNEL_OUTPUTS, ServoState, simulate_servo
+from cnctwin.sim.spindle import _TRACE_FIELDS, SpindleState, simulate_spindle
 
 __all__ = [
     "RECORDED_CODES",
@@ -323,6 +323,11 @@ def simulate(
     in_memory = sink is None
     out_sink: RecordingSink = MemorySink() if sink is None else sink
     out_sink.open(columns, meta)
+    # a sink that is done with a chunk's arrays when write() returns (keeps_chunks False):
+    # the drive outputs go into two buffers reused chunk after chunk
+    reuse = not in_memory and not getattr(out_sink, "keeps_chunks", True)
+    servo_buf = np.empty(0)
+    spindle_buf = np.empty(0)
 
     lags = {ax.name: _expected_lag_s(ax, tc) for ax in machine.axes}
     lf_period = max(1, round(LF_PERIOD_S / tc))
@@ -381,13 +386,23 @@ def simulate(
             hook_truth = {}
 
         # ---- drives
+        sp_out = sv_out = None
+        if reuse:
+            if servo_buf.size < len(feed) * N_KERNEL_OUTPUTS * n:
+                servo_buf = np.empty(len(feed) * N_KERNEL_OUTPUTS * n)
+                spindle_buf = np.empty(len(_TRACE_FIELDS) * n)
+            sv_out = servo_buf[:len(feed) * N_KERNEL_OUTPUTS * n].reshape(
+                len(feed), N_KERNEL_OUTPUTS, n)
+            sp_out = spindle_buf[:len(_TRACE_FIELDS) * n].reshape(len(_TRACE_FIELDS), n)
         sp = simulate_spindle(
             speed_cmd, load, machine.spindle, cycle_time_s=tc, inner_steps=machine.inner_steps,
             state=spindle_state, rng=rng_spindle, position_cmd_deg=sp_pos_cmd, mode=sp_mode,
+            out=sp_out,
         )
         spindle_state = sp.state
         sv = simulate_servo(des, machine.axes, force_n=force, cycle_time_s=tc,
-                            inner_steps=machine.inner_steps, state=servo_state, rng=rng_servo)
+                            inner_steps=machine.inner_steps, state=servo_state, rng=rng_servo,
+                            out=sv_out)
         servo_state = sv.state
 
         # ---- HF columns

@@ -784,6 +784,7 @@ def simulate_spindle(
     rng: np.random.Generator | None = None,
     position_cmd_deg: ArrayLike | None = None,
     mode: ArrayLike | None = None,
+    out: NDArray[np.float64] | None = None,
 ) -> SpindleTrace:
     """Simulate the spindle drive, one output sample per position-control cycle.
 
@@ -808,6 +809,10 @@ def simulate_spindle(
     mode : array-like of int, optional
         0 = speed control, 1 = position control (follows ``position_cmd_deg``) per cycle;
         default all 0.
+    out : numpy.ndarray, optional
+        Buffer for the trace, C-contiguous float64 of shape (18, n_cycles), one row per trace
+        field; the trace's arrays are then views into it (``simulate`` reuses one buffer
+        between chunks when its sink does not keep them). Default: a new array.
 
     Returns
     -------
@@ -845,7 +850,14 @@ def simulate_spindle(
     st = (state if state is not None else SpindleState.initial(motor)).vector.copy()
     gen = rng if rng is not None else np.random.default_rng(0)
     noise = gen.standard_normal((n, 3))
-    out = np.empty((n, len(_TRACE_FIELDS)))
+    nf = len(_TRACE_FIELDS)
+    if out is None:
+        out = np.empty((nf, n))
+    elif out.shape != (nf, n) or out.dtype != np.float64 or not out.flags.c_contiguous:
+        raise ConfigError(f"simulate_spindle: out must be C-contiguous float64 of shape "
+                          f"({nf}, {n}), not {out.dtype} {out.shape}")
+    # the kernel writes out[k, field] into the transposed view: each field is one contiguous
+    # row, handed out without a copy
     _kernel(
         cmd,
         load,
@@ -856,7 +868,7 @@ def simulate_spindle(
         st,
         float(cycle_time_s),
         int(inner_steps),
-        out,
+        out.T,
     )
-    arrays = {f: out[:, i].copy() for i, f in enumerate(_TRACE_FIELDS)}
+    arrays = {f: out[i] for i, f in enumerate(_TRACE_FIELDS)}
     return SpindleTrace(**arrays, state=SpindleState(st))
