@@ -37,6 +37,7 @@ def _stream(n: int = 3000, seed: int = 0) -> pd.DataFrame:
             "progress": (np.arange(n) % 500) / 500.0,
             "z_error_mm": rng.normal(0, 1e-4, n),
             "speed_rpm": np.where((np.arange(n) // 250) % 2 == 0, 400.0, -400.0),
+            "hole": np.arange(n) // 1000,
         }
     )
 
@@ -84,10 +85,12 @@ def test_spectral_detects_injected_chatter_line() -> None:
     df = _stream(6000)
     t = np.arange(len(df)) / FS
     df.loc[4000:, "current_a"] += 0.3 * np.sin(2 * np.pi * 187.0 * t[4000:])  # chatter at 187 Hz
-    res = backtest(SpectralDetector(), df, time_s=t, learn_until_s=4.0,
-                   fault_onsets_s=[8.0])
+    det = SpectralDetector()
+    # the line stays: persistent (the speed reversals every 0.5 s restart the spectrum)
+    res = backtest(det, df, time_s=t, learn_until_s=4.0, fault_onsets_s=[8.0], persistent=True)
     assert res.misses == 0 and res.false_alarms == 0
-    assert res.delays_s[0] < 128 / FS + 0.05  # within one window
+    # within one window plus the persistence (2 more hops of 16 samples) and 50 ms
+    assert res.delays_s[0] < (128 + 2 * 16) / FS + 0.05
 
 
 def test_tapping_detector_sees_fluctuation_only_in_reverse() -> None:
@@ -111,3 +114,67 @@ def test_backtest_counts_false_alarms_per_hour() -> None:
     res = backtest(PhysicsResidualDetector(smoothing=1.0), df, time_s=t, learn_until_s=4.0)
     assert res.false_alarms == 1
     assert res.false_alarms_per_hour == pytest.approx(3600.0 / res.monitored_s)
+
+
+def _cuts(n_cuts: int, seed: int = 0, cut: int = 1500) -> pd.DataFrame:
+    """Cut-only stream as signal_stream(cutting_only=True) builds it: each drilling cut enters
+    at ~0.5 A, ramps to ~4.4 A in 0.3 s and stays (simulated tool-wear run, hole 3)."""
+    rng = np.random.default_rng(seed)
+    k = np.arange(cut)
+    one = 0.5 + 3.9 * np.clip(k / 150.0, 0.0, 1.0)
+    cur = np.concatenate([one + rng.normal(0, 0.05, cut) for _ in range(n_cuts)])
+    return pd.DataFrame({"current_a": cur, "speed_rpm": np.full(cur.size, 2400.0),
+                         "hole": np.repeat(np.arange(n_cuts), cut)})
+
+
+def test_spectral_does_not_alarm_on_the_step_between_joined_cuts() -> None:
+    # the cause of the chatter false alarms of the trials (docs/validation-usecases.md): a
+    # window across two joined cuts holds a 4 A step, broadband. With the segment key the
+    # window restarts per hole; without it the same stream alarms at the joins.
+    df = _cuts(20)
+    t = np.arange(len(df)) / FS
+    res = backtest(SpectralDetector(), df, time_s=t, learn_until_s=10 * 1500 / FS)
+    assert res.false_alarms == 0
+    plain = backtest(SpectralDetector(segment=None, persistence=1), df, time_s=t,
+                     learn_until_s=10 * 1500 / FS)
+    assert plain.false_alarms >= 1
+
+
+def test_spectral_notches_rotation_harmonics_and_their_aliases() -> None:
+    det = SpectralDetector(band_hz=(20.0, 250.0))
+    freqs = np.fft.rfftfreq(128, 1 / FS)
+    mask = det.line_mask(4800.0)  # 80 Hz rotation; nothing learned: every harmonic notched
+    # harmonics 80, 160, 240 Hz and aliases 500-320 = 180, 500-400 = 100, 500-480 = 20 Hz
+    for line in (80.0, 160.0, 240.0, 180.0, 100.0, 20.0):
+        assert not mask[np.argmin(np.abs(freqs - line))], line
+    assert mask[np.argmin(np.abs(freqs - 130.0))] and mask[np.argmin(np.abs(freqs - 210.0))]
+    # a forced line at the 3rd rotation harmonic (3000 rpm: 150 Hz) seen in the teach-in is a
+    # known line: its growth (x3, e.g. wear) is no alarm; chatter at 205 Hz, 5 Hz next to
+    # the 200 Hz harmonic absent from the teach-in, is found
+    df = _cuts(16)
+    df["speed_rpm"] = 3000.0  # 50 Hz rotation
+    t = np.arange(len(df)) / FS
+    line = np.sin(2 * np.pi * 150.0 * t)
+    forced = df.copy()
+    forced["current_a"] += np.where(t < 24.0, 0.1, 0.3) * line
+    res = backtest(SpectralDetector(), forced, time_s=t, learn_until_s=8 * 1500 / FS)
+    assert res.alarms_s == []
+    chatter = df.copy()
+    chatter["current_a"] += 0.1 * line
+    chatter.loc[12000:, "current_a"] += 0.3 * np.sin(2 * np.pi * 205.0 * t[12000:])
+    res = backtest(SpectralDetector(), chatter, time_s=t, learn_until_s=8 * 1500 / FS,
+                   fault_onsets_s=[24.0], persistent=True)
+    assert res.misses == 0 and res.false_alarms == 0
+
+
+def test_spectral_does_not_judge_speed_transients() -> None:
+    df = _cuts(12)
+    t = np.arange(len(df)) / FS
+    det = SpectralDetector()
+    det.learn_many(df.iloc[:9000])
+    run_up = df.iloc[9000:].copy()
+    # a 0 -> 6000 rpm run-up over each 3 s cut (2000 rpm/s, > 2 % change in every window)
+    run_up["speed_rpm"] = np.tile(np.linspace(0.0, 6000.0, 1500), len(run_up) // 1500)
+    run_up["current_a"] += np.random.default_rng(1).normal(0, 1.0, len(run_up))
+    assert np.all(det.score_many(run_up) == 0.0)
+    assert t.size == len(df)

@@ -81,10 +81,12 @@ class Detector:
     """Base class: one-sample learning and scoring, with batch helpers.
 
     Subclasses implement ``learn_one`` and ``score_one`` and list their input keys in
-    ``inputs``; ``_unit_test_params`` gives parameters for the conformance tests.
+    ``inputs`` (required) and ``optional_inputs`` (used when the data has them);
+    ``_unit_test_params`` gives parameters for the conformance tests.
     """
 
     inputs: tuple[str, ...] = ()
+    optional_inputs: tuple[str, ...] = ()
 
     def learn_one(self, x: Mapping[str, float]) -> None:
         """Update the detector with one good (normal) sample."""
@@ -96,16 +98,16 @@ class Detector:
 
     def learn_many(self, df: pd.DataFrame) -> None:
         """Learn every row of ``df`` in order (same as repeated ``learn_one``)."""
-        self._check_columns(df)
-        for row in df[list(self.inputs)].itertuples(index=False):
-            self.learn_one(dict(zip(self.inputs, row, strict=True)))
+        keys = self._keys(df)
+        for row in df[keys].itertuples(index=False):
+            self.learn_one(dict(zip(keys, row, strict=True)))
 
     def score_many(self, df: pd.DataFrame) -> NDArray[np.float64]:
         """Score every row of ``df`` in order (same as repeated ``score_one``)."""
-        self._check_columns(df)
+        keys = self._keys(df)
         out = np.empty(len(df))
-        for i, row in enumerate(df[list(self.inputs)].itertuples(index=False)):
-            out[i] = self.score_one(dict(zip(self.inputs, row, strict=True)))
+        for i, row in enumerate(df[keys].itertuples(index=False)):
+            out[i] = self.score_one(dict(zip(keys, row, strict=True)))
         return out
 
     def clone(self) -> Detector:
@@ -115,12 +117,14 @@ class Detector:
     def _params(self) -> dict[str, Any]:
         raise NotImplementedError
 
-    def _check_columns(self, df: pd.DataFrame) -> None:
+    def _keys(self, df: pd.DataFrame) -> list[str]:
+        """Required input columns (error if one is missing) and the optional ones present."""
         missing = [c for c in self.inputs if c not in df.columns]
         if missing:
             raise ConfigError(
                 f"{type(self).__name__} needs columns {list(self.inputs)}; missing {missing}"
             )
+        return [*self.inputs, *(c for c in self.optional_inputs if c in df.columns)]
 
     @classmethod
     def _unit_test_params(cls) -> dict[str, Any]:
@@ -282,7 +286,11 @@ class EnvelopeDetector(Detector):
 
 
 class SpectralDetector(Detector):
-    """Band power over a sliding window relative to the learned level (chatter detection).
+    """Chatter: the largest line in a band of a steady-cutting spectrum against the learned level.
+
+    Every ``hop`` samples the last ``window`` samples are detrended (least-squares line), Hann
+    tapered and transformed; the largest power in ``band_hz`` outside the notches of the known
+    lines is compared in dB with the level learned on good data at the same spindle speed.
 
     Parameters
     ----------
@@ -296,11 +304,49 @@ class SpectralDetector(Detector):
         Window length [samples].
     hop : int, default 16
         The spectrum is recomputed every ``hop`` samples; scores in between repeat it.
+    threshold_db : float, default 10
+        Rise of the band line over the learned level that counts as normal [dB].
+    speed : str or None, default 'speed_rpm'
+        Optional key of the spindle speed [rpm]. When present: the known spindle-rotation
+        lines are notched out, windows during a speed change are not judged, and the level is
+        learned per speed class. ``None`` or a missing/NaN value: none of these.
+    segment : str or None, default 'hole'
+        Optional key of a segment number (the hole of :func:`signal_stream`). When it changes
+        the window restarts: a spectrum never spans two cuts (the cut-only stream joins the end
+        of one hole, ~4 A, to the entry of the next, ~0.5 A; that step is broadband).
+    max_harmonic : int, default 6
+        Rotation harmonics ``k · n/60``, k = 1..max_harmonic, candidates for a notch, with
+        their aliases folded about ``fs/2`` (see ``line_db``). This covers tooth passing
+        (``z · n/60``, z <= max_harmonic teeth) and the stator frequency ``p · n/60`` of a
+        motor with p <= max_harmonic pole pairs (:mod:`cnctwin.spindle`).
+    notch_hz : float, optional
+        Half width of each notch [Hz]; default 1.5 bins, ``1.5 fs_hz / window`` (a forced line
+        between two bins leaks into the neighbours; at 1 bin a rising 150 Hz tooth-passing
+        line still alarms in the test).
+    speed_tolerance : float, default 0.02
+        Windows whose speed range exceeds this fraction of the mean speed (and 5 rpm) are speed
+        transients (run-up, reversal, speed change) and are neither learned nor scored.
+    persistence : int, default 3
+        The score is the smallest of the last ``persistence`` spectra: an alarm needs that many
+        consecutive spectra above the threshold, ``(persistence - 1) · hop`` samples of delay.
+    speed_step_rpm : float, default 100
+        Width of the speed classes of the learned level [rpm]; an unlearned class uses the
+        level over all speeds.
+    line_db : float, default 6
+        A rotation harmonic is a known line (notched) if it stands this much above the band
+        median of the mean spectrum learned at that speed [dB]: forced lines present in the
+        teach-in may grow (wear) without an alarm, while chatter next to a harmonic that the
+        teach-in did not show stays visible.
 
     Notes
     -----
-    Score = 10·log10(max band power / learned mean of that quantity) − ``threshold_db``.
-    The mean of the window is removed before the Hann-windowed FFT.
+    Raw score of a spectrum: ``10·log10(P_max) - L(n) - threshold_db`` with ``L(n)`` the mean
+    of the learned ``10·log10(P_max)`` in the speed class of ``n``. Score = min of the last
+    ``persistence`` raw scores (fewer after a restart: min with 0). No evidence (window not
+    full, speed transient, NaN in the window, nothing learned) scores 0. Chatter is a
+    self-excited vibration near, not at, a structural mode, distinct from the forced lines
+    at the tooth-passing harmonics (Altintas, *Manufacturing Automation*, 2nd ed., ch. 3.4),
+    hence the notches.
     """
 
     def __init__(
@@ -312,52 +358,152 @@ class SpectralDetector(Detector):
         window: int = 128,
         hop: int = 16,
         threshold_db: float = 10.0,
+        speed: str | None = "speed_rpm",
+        segment: str | None = "hole",
+        max_harmonic: int = 6,
+        notch_hz: float | None = None,
+        speed_tolerance: float = 0.02,
+        persistence: int = 3,
+        speed_step_rpm: float = 100.0,
+        line_db: float = 6.0,
     ) -> None:
         if not 0 <= band_hz[0] < band_hz[1] <= fs_hz / 2:
             raise ConfigError(f"band_hz must lie in [0, {fs_hz / 2}] Hz, got {band_hz}")
         if window < 8 or hop < 1:
             raise ConfigError("window must be >= 8 samples and hop >= 1")
+        if persistence < 1 or max_harmonic < 0 or speed_step_rpm <= 0:
+            raise ConfigError(
+                "persistence must be >= 1, max_harmonic >= 0 and speed_step_rpm > 0; got "
+                f"{persistence}, {max_harmonic}, {speed_step_rpm}"
+            )
         self.signal = signal
         self.fs_hz = fs_hz
         self.band_hz = band_hz
         self.window = window
         self.hop = hop
         self.threshold_db = threshold_db
+        self.speed = speed
+        self.segment = segment
+        self.max_harmonic = max_harmonic
+        self.notch_hz = notch_hz
+        self.speed_tolerance = speed_tolerance
+        self.persistence = persistence
+        self.speed_step_rpm = speed_step_rpm
+        self.line_db = line_db
         self.inputs = (signal,)
-        freqs = np.fft.rfftfreq(window, 1.0 / fs_hz)
-        self._band = (freqs >= band_hz[0]) & (freqs <= band_hz[1])
+        self.optional_inputs = tuple(k for k in (speed, segment) if k is not None)
+        self._freqs = np.fft.rfftfreq(window, 1.0 / fs_hz)
+        self._band = (self._freqs >= band_hz[0]) & (self._freqs <= band_hz[1])
+        self._notch = 1.5 * fs_hz / window if notch_hz is None else notch_hz
         self._taper = np.hanning(window)
+        self._ramp = np.arange(window) - (window - 1) / 2.0
+        self._ramp_ss = float(self._ramp @ self._ramp)
         self._buf: deque[float] = deque(maxlen=window)
+        self._spd: deque[float] = deque(maxlen=window)
+        self._seg: float | None = None
         self._count = 0
         self._last = 0.0
-        self._level = _Welford()
+        self._hist: deque[float] = deque(maxlen=persistence)
+        self._level: dict[int | None, _Welford] = {}
+        self._spec = np.zeros(self._freqs.size)
+        self._spec_sum: dict[int, list[Any]] = {}
+        self._all = _Welford()
 
     def _params(self) -> dict[str, Any]:
         return {"signal": self.signal, "fs_hz": self.fs_hz, "band_hz": self.band_hz,
-                "window": self.window, "hop": self.hop, "threshold_db": self.threshold_db}
+                "window": self.window, "hop": self.hop, "threshold_db": self.threshold_db,
+                "speed": self.speed, "segment": self.segment,
+                "max_harmonic": self.max_harmonic, "notch_hz": self.notch_hz,
+                "speed_tolerance": self.speed_tolerance, "persistence": self.persistence,
+                "speed_step_rpm": self.speed_step_rpm, "line_db": self.line_db}
 
-    def _power(self, x: Mapping[str, float]) -> float | None:
+    def line_mask(self, speed_rpm: float) -> NDArray[np.bool_]:
+        """Bins of the band searched at this spindle speed [-].
+
+        Notched out: the rotation harmonics ``k · n/60`` (k = 1..max_harmonic, aliases folded
+        about ``fs/2``) that stand ``line_db`` above the median of the band in the mean
+        spectrum learned at this speed class; all of them if the class was not learned.
+        """
+        mask = self._band.copy()
+        if not math.isfinite(speed_rpm) or speed_rpm == 0.0:
+            return mask
+        learned = self._spec_sum.get(round(speed_rpm / self.speed_step_rpm))
+        mean = None
+        if learned is not None:
+            mean = learned[0] / learned[1]
+            floor = float(np.median(mean[self._band]))
+        f_rot = abs(speed_rpm) / 60.0
+        for k in range(1, self.max_harmonic + 1):
+            f = math.fmod(k * f_rot, self.fs_hz)
+            f = self.fs_hz - f if f > self.fs_hz / 2 else f  # aliased line
+            near = np.abs(self._freqs - f) <= self._notch
+            if mean is not None and not (
+                near.any() and float(mean[near].max()) > floor * 10 ** (self.line_db / 10)
+            ):
+                continue  # no such line in the teach-in
+            mask &= ~near
+        return mask
+
+    def _spectrum(self, x: Mapping[str, float]) -> tuple[float, int | None] | bool | None:
+        """(dB, speed class) of a new spectrum; None between hops; False: no evidence."""
+        if self.segment is not None and self.segment in x:
+            seg = float(x[self.segment])
+            if self._seg is not None and seg != self._seg:
+                self._buf.clear()
+                self._spd.clear()
+                self._hist.clear()
+            self._seg = seg
         self._buf.append(float(x[self.signal]))
+        self._spd.append(float(x[self.speed]) if self.speed and self.speed in x else math.nan)
         self._count += 1
-        if len(self._buf) < self.window or self._count % self.hop:
+        if self._count % self.hop:
             return None
+        if len(self._buf) < self.window:
+            return False
         w = np.asarray(self._buf)
-        spec = np.abs(np.fft.rfft((w - w.mean()) * self._taper)) ** 2
-        return float(spec[self._band].max())
+        n = np.asarray(self._spd)
+        cls: int | None = None
+        n_mean = math.nan
+        if np.all(np.isfinite(n)):
+            n_mean = float(n.mean())
+            if float(n.max() - n.min()) > max(self.speed_tolerance * abs(n_mean), 5.0):
+                return False  # speed transient: run-up, reversal, speed change
+            cls = round(n_mean / self.speed_step_rpm)
+        w = w - w.mean()
+        w = w - (self._ramp @ w / self._ramp_ss) * self._ramp
+        spec = np.abs(np.fft.rfft(w * self._taper)) ** 2
+        if not np.all(np.isfinite(spec)):
+            return False
+        self._spec = spec
+        mask = self.line_mask(n_mean)
+        if not mask.any():
+            return False
+        return 10.0 * math.log10(max(float(spec[mask].max()), 1e-300)), cls
 
     def learn_one(self, x: Mapping[str, float]) -> None:
-        p = self._power(x)
-        if p is not None:
-            self._level.update(p)
+        s = self._spectrum(x)
+        if isinstance(s, tuple):
+            self._level.setdefault(s[1], _Welford()).update(s[0])
+            self._all.update(s[0])
+            if s[1] is not None:
+                acc = self._spec_sum.setdefault(s[1], [np.zeros_like(self._spec), 0])
+                acc[0] = acc[0] + self._spec
+                acc[1] += 1
 
     def score_one(self, x: Mapping[str, float]) -> float:
-        p = self._power(x)
-        if p is not None:
-            ref = self._level.mean if self._level.n else float("nan")
-            self._last = (
-                10.0 * math.log10(max(p, 1e-300) / ref) - self.threshold_db
-                if ref > 0 and math.isfinite(ref) else 0.0
-            )
+        s = self._spectrum(x)
+        if s is None:
+            return self._last
+        if s is False or not self._all.n:
+            self._hist.clear()
+            self._last = 0.0
+            return 0.0
+        assert isinstance(s, tuple)
+        lev = self._level.get(s[1])
+        ref = lev.mean if lev is not None and lev.n >= 5 else self._all.mean
+        self._hist.append(s[0] - ref - self.threshold_db)
+        low = min(self._hist)
+        self._last = low if len(self._hist) == self.persistence else min(low, 0.0)
         return self._last
 
     @classmethod
