@@ -475,6 +475,7 @@ def _servo_kernel(
         ridx_a[a] = int(st[a, S_RING])
     cin = np.zeros((n_axes, _N_CIN))
     before = np.zeros((n_axes, _N_STATE))  # state at the start of the cycle (settle check)
+    same_in = np.zeros(n_axes, np.bool_)
     frozen = np.zeros(n_axes, np.bool_)
     fz = np.zeros((n_axes, 5))  # settled: setpoint, force, iq, LF speed, LF utilisation
     active = np.zeros(n_axes, np.int64)
@@ -512,15 +513,19 @@ def _servo_kernel(
                     out[a, 16, k] = temp
                     continue
                 frozen[a] = False
-            st[a, S_X] = dst[a, D_X]
-            st[a, S_W] = dst[a, D_W]
-            st[a, S_INT] = dst[a, D_INT]
-            st[a, S_TACT] = dst[a, D_TACT]
-            st[a, S_TSET] = dst[a, D_TSET]
-            st[a, S_FRIC] = dst[a, D_FRIC]
-            st[a, S_XQ] = dst[a, D_XQ]
-            for i in range(_N_STATE):
-                before[a, i] = st[a, i]
+            # same inputs as the previous cycle: keep the state at the start of this cycle for
+            # the settle check (a moving or loaded axis almost never gets here)
+            same_in[a] = k > 0 and xd == des[a, k - 1] and fext == force[a, k - 1]
+            if same_in[a]:
+                for i in range(_N_STATE):
+                    before[a, i] = st[a, i]
+                before[a, S_X] = dst[a, D_X]
+                before[a, S_W] = dst[a, D_W]
+                before[a, S_INT] = dst[a, D_INT]
+                before[a, S_TACT] = dst[a, D_TACT]
+                before[a, S_TSET] = dst[a, D_TSET]
+                before[a, S_FRIC] = dst[a, D_FRIC]
+                before[a, S_XQ] = dst[a, D_XQ]
             xf1 = st[a, S_XF1]
             xf2 = st[a, S_XF2]
             mode = mode_a[a]
@@ -646,7 +651,7 @@ def _servo_kernel(
             out[a, 18, k] = dst[a, D_FRIC]
             out[a, 19, k] = w
             # ---- settled? same inputs as the previous cycle and the state did not move
-            if k == 0 or des[a, k] != des[a, k - 1] or force[a, k] != force[a, k - 1]:
+            if not same_in[a]:
                 continue
             if (dst[a, D_X] != before[a, S_X] or w != before[a, S_W]
                     or dst[a, D_INT] != before[a, S_INT] or tact != before[a, S_TACT]
