@@ -154,13 +154,13 @@ def test_spectral_notches_rotation_harmonics_and_their_aliases() -> None:
     df = _cuts(16)
     df["speed_rpm"] = 3000.0  # 50 Hz rotation
     t = np.arange(len(df)) / FS
-    line = np.sin(2 * np.pi * 150.0 * t)
+    tone = np.sin(2 * np.pi * 150.0 * t)
     forced = df.copy()
-    forced["current_a"] += np.where(t < 24.0, 0.1, 0.3) * line
+    forced["current_a"] += np.where(t < 24.0, 0.1, 0.3) * tone
     res = backtest(SpectralDetector(), forced, time_s=t, learn_until_s=8 * 1500 / FS)
     assert res.alarms_s == []
     chatter = df.copy()
-    chatter["current_a"] += 0.1 * line
+    chatter["current_a"] += 0.1 * tone
     chatter.loc[12000:, "current_a"] += 0.3 * np.sin(2 * np.pi * 205.0 * t[12000:])
     res = backtest(SpectralDetector(), chatter, time_s=t, learn_until_s=8 * 1500 / FS,
                    fault_onsets_s=[24.0], persistent=True)
