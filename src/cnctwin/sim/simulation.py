@@ -493,9 +493,13 @@ def _spindle_columns(
     """Spindle HF columns. Speed mode: no position loop (CTRL_DIFF/CONT_DEV/VEL_FFW zero)."""
     enc = np.mod(sp.position_deg, 360.0)
     pos_mode = mode == 1
-    des = np.where(pos_mode, np.mod(pos_cmd, 360.0), enc)
-    diff = np.where(pos_mode, (des - enc + 180.0) % 360.0 - 180.0, 0.0)
     zeros = np.zeros_like(speed_cmd)
+    if pos_mode.any():
+        des = np.where(pos_mode, np.mod(pos_cmd, 360.0), enc)
+        diff = np.where(pos_mode, (des - enc + 180.0) % 360.0 - 180.0, 0.0)
+        vel_ffw = np.where(pos_mode, speed_cmd, 0.0)
+    else:  # speed control throughout: the same values without the selects
+        des, diff, vel_ffw = enc, zeros, zeros
     return {
         f"DES_POS|{name}": des,
         f"ENC_POS|{name}": enc,
@@ -503,7 +507,7 @@ def _spindle_columns(
         f"CTRL_DIFF|{name}": diff,
         f"CTRL_DIFF2|{name}": diff,
         f"CONT_DEV|{name}": zeros,
-        f"VEL_FFW|{name}": np.where(pos_mode, speed_cmd, 0.0),
+        f"VEL_FFW|{name}": vel_ffw,
         f"TORQUE_FFW|{name}": zeros,
         f"CMD_SPEED|{name}": speed_cmd.copy(),
         f"CURRENT|{name}": sp.current_a,
