@@ -14,7 +14,12 @@ import pytest
 
 from cnctwin.sim.faults import LooseTool, loose_tool_signature
 from cnctwin.usecases.figures import plot_loose_tap
-from cnctwin.usecases.trials import fault_trial, loose_tap_trial, summarize_trials
+from cnctwin.usecases.trials import (
+    fault_free_run,
+    fault_trial,
+    loose_tap_trial,
+    summarize_trials,
+)
 
 pytestmark = pytest.mark.slow
 
@@ -62,7 +67,7 @@ def test_loose_tap_detected_at_hidden_hole() -> None:
     ("kind", "max_delay_s"),
     # measured (docs/validation-usecases.md): breakage 0.002 s (the broken drill drops the
     # current below the envelope within a sample), hardness change 0.23-0.25 s (EWMA of 20 ms
-    # plus the hole entry), chatter 0.13-0.28 s (128-sample spectral window)
+    # plus the hole entry), chatter 0.26-0.33 s (128-sample window, 3 spectra in a row)
     [("breakage", 0.05), ("hardness", 0.5), ("chatter", 0.5)],
 )
 def test_drilling_faults_at_hidden_times(kind: str, max_delay_s: float) -> None:
@@ -72,8 +77,9 @@ def test_drilling_faults_at_hidden_times(kind: str, max_delay_s: float) -> None:
     row = summarize_trials(trials).iloc[0]
     assert row["misses"] == 0 and row["detected"] == 4
     assert row["delay_max_s"] < max_delay_s
-    # false alarms before the onset: measured 0 (breakage, hardness), 1 in 4 chatter runs
-    assert row["false_alarms"] <= 1
+    # false alarms before the onset: measured 0 for every kind over 8 seeds (chatter: 3 in 8
+    # before the spectral detector restarted its window per hole)
+    assert row["false_alarms"] == 0
 
 
 def test_fault_free_drilling_runs_raise_no_alarm() -> None:
@@ -81,3 +87,12 @@ def test_fault_free_drilling_runs_raise_no_alarm() -> None:
     row = summarize_trials(trials).iloc[0]
     assert row["with_fault"] == 0
     assert row["false_alarms"] == 0  # measured 0 in 4 x 6 scored holes (0.025 h)
+
+
+def test_chatter_detector_fault_free_drilling_has_no_false_alarm() -> None:
+    # 108 scored fault-free holes (~0.09 h of cutting): the spectral detector restarts per hole,
+    # so the step between joined cuts (the 3 false alarms of the 8-seed trials before) is gone.
+    # The 300-hole run of docs/validation-usecases.md: 0 alarms in 0.37 h (95 % bound 8 /h).
+    res = fault_free_run(11, n_holes=120)
+    assert res["spectral"].false_alarms == 0
+    assert res["spectral"].healthy_s > 300.0

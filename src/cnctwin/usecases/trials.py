@@ -38,6 +38,7 @@ from cnctwin.usecases.anomaly import (
 __all__ = [
     "FAULT_KINDS",
     "Trial",
+    "fault_free_run",
     "fault_trial",
     "loose_tap_trial",
     "summarize_trials",
@@ -263,6 +264,42 @@ def fault_trial(
                   persistent=True)
     return Trial("drilling_no_fault" if kind == "none" else kind, seed, hidden,
                  onsets[0] if onsets else None, repr(det), bt, data, learn_until, res)
+
+
+def fault_free_run(
+    seed: int,
+    *,
+    n_holes: int = 120,
+    teach_holes: int = 12,
+    envelope_threshold: float = 3.0,
+) -> dict[str, BacktestResult]:
+    """Long fault-free drilling run scored by the drilling detectors of :func:`fault_trial`.
+
+    The false-alarm rate of a detector needs fault-free time: over ``T`` hours without an
+    alarm the rate is below ``3 / T`` per hour with 95 % confidence (Poisson, zero events).
+    The run (tool-wear scenario, its sets and pauses) is taught on the first ``teach_holes``
+    holes like :func:`fault_trial` and scored on the rest.
+
+    Returns
+    -------
+    dict of str to BacktestResult
+        ``envelope`` (breakage / hardness detector) and ``spectral`` (chatter detector).
+    """
+    from cnctwin.sim.scenarios import tool_wear_run
+    from cnctwin.usecases.holes import hole_record
+
+    res = tool_wear_run(n_holes=n_holes, seed=seed, dynamometer=False)
+    rec = res.recordings[0]
+    data = signal_stream([rec], hole_record(rec), cutting_only=True)
+    learn_until = float(data.loc[data["hole"] == teach_holes, "time_s"].iloc[0]) - 1e-6
+    out = {}
+    for name, det, thr in (
+        ("envelope", EnvelopeDetector(smoothing=10.0), envelope_threshold),
+        ("spectral", SpectralDetector(fs_hz=rec.fs_hz, band_hz=(100.0, 240.0)), 0.0),
+    ):
+        out[name] = backtest(det, data, time_s=data["time_s"], learn_until_s=learn_until,
+                             threshold=thr)
+    return out
 
 
 def summarize_trials(trials: list[Trial]) -> pd.DataFrame:
