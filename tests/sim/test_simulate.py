@@ -174,6 +174,27 @@ def test_parquet_sink_round_trip(tmp_path: Path, square: Recording) -> None:
                                   square.lf.reset_index(drop=True), check_dtype=False)
 
 
+def test_parquet_sink_stores_incompressible_columns_uncompressed(tmp_path: Path) -> None:
+    # recorder.py ParquetChunkSink Notes: codecs learned from the first (fully compressed) file
+    import pyarrow.parquet as pq
+
+    sink = ParquetChunkSink(tmp_path / "run")
+    simulate(SQUARE, seed=3, sink=sink, chunk_cycles=1000)
+
+    def codecs(path: Path) -> dict[str, str]:
+        rg = pq.read_metadata(path).row_group(0)
+        return {rg.column(i).path_in_schema: rg.column(i).compression
+                for i in range(rg.num_columns)}
+
+    first, second = codecs(sink.files[0]), codecs(sink.files[1])
+    assert set(first.values()) == {"LZ4_RAW"} or set(first.values()) == {"LZ4"}
+    # float32 current noise does not compress; a constant column (C1 never moves) does
+    assert second["CURRENT|X1"] == "UNCOMPRESSED"
+    assert second["TORQUE_FFW|C1"] == first["TORQUE_FFW|C1"] != "UNCOMPRESSED"
+    rg = pq.read_metadata(sink.files[1]).row_group(0)
+    assert "DELTA_BINARY_PACKED" in rg.column(0).encodings
+
+
 @pytest.mark.parametrize("file_format", ["parquet", "arrow"])
 def test_parquet_sink_float64_option(tmp_path: Path, square: Recording, file_format: str) -> None:
     sink = ParquetChunkSink(tmp_path / "run", float32_codes=(), file_format=file_format)

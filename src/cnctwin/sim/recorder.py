@@ -138,6 +138,14 @@ encoder resolution for the servo identification)."""
 
 _CHUNK_FORMAT_VERSION = 2
 
+_INCOMPRESSIBLE_RATIO = 0.85
+"""A Parquet HF column compressed to more than this fraction of its size is written
+uncompressed (noise-like float32 drive values, the spindle angle): saves the codec's time."""
+
+_PROBE_EVERY_FILES = 10
+"""Every this many HF files one is written fully compressed to re-learn the per-column codecs
+(a column's compressibility changes, e.g. the spindle angle once the spindle turns)."""
+
 _WRITE_BATCH_ROWS = 65_536
 """Parquet ``write_batch_size``: rows encoded per batch (pyarrow default 1024); one batch per
 50 000-cycle column cuts the writer's per-batch overhead (-10 % of the HF write)."""
@@ -167,16 +175,19 @@ class ParquetChunkSink:
 
     Notes
     -----
-    HF columns are written PLAIN (no dictionary), data pages v2, with min/max statistics only
-    for ``cycle``: the noisy float columns defeat the dictionary, whose hashing made the writer
-    as costly as the whole servo model, and the constant columns of idle axes compress to a
-    few bytes anyway. The ``time`` column is not stored: the reader computes it from the
-    cycle counter and the time anchor in ``meta.json`` exactly as the simulator does
-    (:func:`cnctwin.recording.cycles_to_time`). Measured on one 50 000-cycle chunk of a
-    drilling run (one core, CPU time, median of 12; BENCHMARKS.md "Simulator"): float64 with
-    ``time``, pages v1: 37 ms and 196 B/cycle; float32 drive values, no ``time``, pages v2:
-    30 ms and 108 B/cycle (~0.6 GB for the wear run); Arrow IPC (Feather v2, lz4,
-    ``file_format='arrow'``): 19 ms and 106 B/cycle.
+    HF columns are written PLAIN (no dictionary), REQUIRED (non-nullable: no definition
+    levels), data pages v2, one write batch per chunk, with min/max statistics only for
+    ``cycle`` (delta-encoded): the noisy float columns defeat the dictionary, whose hashing made
+    the writer as costly as the whole servo model, and the constant columns of idle axes
+    compress to a few bytes anyway. Columns the codec shrinks by less than 15 % (the float32
+    current noise, the spindle angle) are stored uncompressed, learned from the first file and
+    re-learned every 10th file, which is written fully compressed. The ``time`` column is not
+    stored: the reader computes it from the cycle counter and the time anchor in ``meta.json``
+    exactly as the simulator does (:func:`cnctwin.recording.cycles_to_time`). Measured on
+    50 000-cycle chunks of a drilling run (HF + LF, one core, CPU time; BENCHMARKS.md
+    "Simulator", ``bench_sim.py --writer``): before (float64 with ``time``, pages v1) 37 ms and
+    196 B/cycle; now ~21 ms and ~103 B/cycle (~0.6 GB for the 3.5 h wear run); Arrow IPC
+    (Feather v2, lz4, ``file_format='arrow'``) about the same time and size.
     HF rows and LF values leave memory chunk by chunk (LF rows are appended to ``lf.parquet``
     as they come); only the NC events (one row per block) are kept until :meth:`close`.
     """
@@ -202,6 +213,7 @@ class ParquetChunkSink:
         self._f32: set[str] = set()
         self._lf_writer: Any = None
         self._schema: Any = None
+        self._codecs: dict[str, str] | None = None
         self._events: list[pd.DataFrame] = []
         self._meta: RecordingMeta | None = None
         self._last_cycle: int | None = None
@@ -214,6 +226,7 @@ class ParquetChunkSink:
         self._f32 = {c for c in self._columns if c.split("|", 1)[0] in self.float32_codes}
         self._meta = meta
         self._schema = None
+        self._codecs = None
 
     def write(self, chunk: RecordedChunk) -> None:
         """Write the chunk's HF rows to the next file and append its LF rows."""
@@ -244,10 +257,15 @@ class ParquetChunkSink:
             pf.write_feather(table, path, compression=_ipc_codec(self.compression),
                              compression_level=1 if self.compression == "zstd" else None)
         else:
-            pq.write_table(table, path, compression=self.compression,
+            probe = self._codecs is None or len(self.files) % _PROBE_EVERY_FILES == 0
+            codecs: str | dict[str, str] = self.compression if probe else self._codecs or {}
+            pq.write_table(table, path, compression=codecs,
                            compression_level=1 if self.compression == "zstd" else None,
                            use_dictionary=False, write_statistics=["cycle"],
+                           column_encoding={"cycle": "DELTA_BINARY_PACKED"},
                            data_page_version="2.0", write_batch_size=_WRITE_BATCH_ROWS)
+            if probe and self.compression not in ("none", "uncompressed"):
+                self._codecs = _codecs_from(path, self.compression)
         self.files.append(path)
         if len(chunk.lf):
             self._write_lf(chunk.lf)
@@ -296,6 +314,20 @@ class ParquetChunkSink:
         (self.directory / "meta.json").write_text(json.dumps(doc, indent=1), encoding="utf-8")
         self._events = []
         return None
+
+
+def _codecs_from(path: Path, compression: str) -> dict[str, str]:
+    """Per-column codec from a file written with ``compression`` everywhere: columns the codec
+    shrinks by less than :data:`_INCOMPRESSIBLE_RATIO` are stored uncompressed from now on."""
+    import pyarrow.parquet as pq
+
+    rg = pq.read_metadata(path).row_group(0)
+    codecs = {}
+    for i in range(rg.num_columns):
+        col = rg.column(i)
+        ratio = col.total_compressed_size / max(col.total_uncompressed_size, 1)
+        codecs[col.path_in_schema] = "none" if ratio > _INCOMPRESSIBLE_RATIO else compression
+    return codecs
 
 
 def _ipc_codec(compression: str) -> str:
