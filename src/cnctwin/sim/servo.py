@@ -347,6 +347,52 @@ def _drive_lanes(
 
 
 @njit(cache=True)
+def _hold_settled(
+    out: NDArray[np.float64], noise: NDArray[np.float64], st: NDArray[np.float64],
+    par: NDArray[np.float64], a: int, k0: int, k1: int, iq: float, v_lf: float, util: float,
+    a_lf: float, tc: float,
+) -> None:
+    """Cycles k0..k1-1 of a settled axis (inputs as at cycle k0 - 1, a bitwise fixed point of
+    its dynamic state): outputs held, only current noise, motor temperature and LF filters move.
+    The same operations per cycle as the full computation, with the state in registers."""
+    if k1 <= k0:
+        return
+    rph = par[a, P_RPH]
+    tamb = par[a, P_TAMB]
+    rth = par[a, P_RTH]
+    cth = par[a, P_CTH]
+    temp = st[a, S_TEMP]
+    lf_speed = st[a, S_LF_SPEED]
+    lf_iabs = st[a, S_LF_IABS]
+    lf_iq = st[a, S_LF_IQ]
+    lf_util = st[a, S_LF_UTIL]
+    iq_abs = abs(iq)
+    for k in range(k0, k1):
+        temp += tc * (rph * iq * iq - (temp - tamb) / rth) / cth
+        lf_speed += a_lf * (v_lf - lf_speed)
+        lf_iabs += a_lf * (iq_abs - lf_iabs)
+        lf_iq += a_lf * (iq - lf_iq)
+        lf_util += a_lf * (util - lf_util)
+        out[a, 8, k] = iq + noise[a, k]
+        out[a, 12, k] = lf_speed
+        out[a, 13, k] = lf_iabs
+        out[a, 14, k] = lf_iq
+        out[a, 15, k] = lf_util
+        out[a, 16, k] = temp
+    for i in range(_N_OUT):
+        if i == 8 or 12 <= i <= 16:
+            continue
+        v = out[a, i, k0 - 1]
+        for k in range(k0, k1):
+            out[a, i, k] = v
+    st[a, S_TEMP] = temp
+    st[a, S_LF_SPEED] = lf_speed
+    st[a, S_LF_IABS] = lf_iabs
+    st[a, S_LF_IQ] = lf_iq
+    st[a, S_LF_UTIL] = lf_util
+
+
+@njit(cache=True)
 def _drive_constants(par: NDArray[np.float64], h: float) -> NDArray[np.float64]:
     """Per-axis constants of the 125 us drive loops (columns ``C_*``)."""
     n_axes = par.shape[0]
@@ -477,42 +523,22 @@ def _servo_kernel(
     before = np.zeros((n_axes, _N_STATE))  # state at the start of the cycle (settle check)
     same_in = np.zeros(n_axes, np.bool_)
     frozen = np.zeros(n_axes, np.bool_)
-    fz = np.zeros((n_axes, 5))  # settled: setpoint, force, iq, LF speed, LF utilisation
+    fz_end = np.zeros(n_axes, np.int64)  # first cycle after a settled stretch
     active = np.zeros(n_axes, np.int64)
     for k in range(n):
         # ---- NC part of every axis; settled axes only advance noise, temperature, LF
         na = 0
         for a in range(n_axes):
+            if frozen[a]:
+                if k < fz_end[a]:
+                    continue  # settled cycle, already written by _hold_settled
+                frozen[a] = False  # the inputs changed (settled stretches end at a change)
             ridx = ridx_a[a] + 1
             if ridx == nring:
                 ridx = 0
             ridx_a[a] = ridx
             xd = des[a, k]
             fext = force[a, k]
-            if frozen[a]:
-                if xd == fz[a, 0] and fext == fz[a, 1]:
-                    # settled: the dynamic state is a bitwise fixed point (Notes of
-                    # simulate_servo)
-                    fz_iq = fz[a, 2]
-                    a_lf = a_lf_a[a]
-                    temp = st[a, S_TEMP]
-                    temp += tc * (par[a, P_RPH] * fz_iq * fz_iq
-                                  - (temp - par[a, P_TAMB]) / par[a, P_RTH]) / par[a, P_CTH]
-                    st[a, S_TEMP] = temp
-                    st[a, S_LF_SPEED] += a_lf * (fz[a, 3] - st[a, S_LF_SPEED])
-                    st[a, S_LF_IABS] += a_lf * (abs(fz_iq) - st[a, S_LF_IABS])
-                    st[a, S_LF_IQ] += a_lf * (fz_iq - st[a, S_LF_IQ])
-                    st[a, S_LF_UTIL] += a_lf * (fz[a, 4] - st[a, S_LF_UTIL])
-                    for i in range(_N_OUT):
-                        out[a, i, k] = out[a, i, k - 1]
-                    out[a, 8, k] = fz_iq + noise[a, k]
-                    out[a, 12, k] = st[a, S_LF_SPEED]
-                    out[a, 13, k] = st[a, S_LF_IABS]
-                    out[a, 14, k] = st[a, S_LF_IQ]
-                    out[a, 15, k] = st[a, S_LF_UTIL]
-                    out[a, 16, k] = temp
-                    continue
-                frozen[a] = False
             # same inputs as the previous cycle: keep the state at the start of this cycle for
             # the settle check (a moving or loaded axis almost never gets here)
             same_in[a] = k > 0 and xd == des[a, k - 1] and fext == force[a, k - 1]
@@ -671,11 +697,14 @@ def _servo_kernel(
                             break
             if ok:
                 frozen[a] = True
-                fz[a, 0] = des[a, k]
-                fz[a, 1] = force[a, k]
-                fz[a, 2] = iq
-                fz[a, 3] = v_lf
-                fz[a, 4] = util
+                # the following cycles with the same inputs, written in one tight loop; the
+                # cycle loop skips them and resumes at the first cycle whose inputs differ
+                k1 = k + 1
+                while k1 < n and des[a, k1] == des[a, k] and force[a, k1] == force[a, k]:
+                    k1 += 1
+                _hold_settled(out, noise, st, par, a, k + 1, k1, iq, v_lf, util, a_lf, tc)
+                fz_end[a] = k1
+                ridx_a[a] = (ridx_a[a] + (k1 - k - 1)) % nring  # the skipped cycles' advance
     for a in range(n_axes):
         st[a, S_X] = dst[a, D_X]
         st[a, S_W] = dst[a, D_W]
@@ -858,7 +887,7 @@ def simulate_servo(
     mechanics, encoder latch) bitwise unchanged, with the same setpoint and force as the cycle
     before and uniform history buffers, the following cycles with the same inputs are that same
     fixed point, so only the current noise, the motor temperature and the LF filters are
-    advanced. The output is bit-identical to the full computation
+    advanced (in one tight loop over the whole stretch of unchanged inputs). The output is bit-identical to the full computation
     (``tests/sim/test_kernels_reference.py``); an axis that has never moved (C1/B1 in drilling)
     costs ~1/20 of a moving one. An axis hunting by one encoder increment at standstill (the
     limit cycle of integral action on a quantised encoder) is not a fixed point and keeps being
