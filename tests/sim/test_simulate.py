@@ -195,6 +195,16 @@ def test_parquet_sink_stores_incompressible_columns_uncompressed(tmp_path: Path)
     assert "DELTA_BINARY_PACKED" in rg.column(0).encodings
 
 
+@pytest.mark.parametrize("compression", ["zstd", "snappy", "none"])
+def test_parquet_sink_codecs_round_trip(tmp_path: Path, square: Recording,
+                                        compression: str) -> None:
+    # learned per-column codecs with every codec (zstd level 1 only on compressed columns)
+    sink = ParquetChunkSink(tmp_path / "run", compression=compression, float32_codes=())
+    simulate(SQUARE, seed=3, sink=sink, chunk_cycles=1000)
+    pd.testing.assert_frame_equal(read_parquet_chunks(tmp_path / "run").hf, square.hf,
+                                  check_freq=False)
+
+
 @pytest.mark.parametrize("file_format", ["parquet", "arrow"])
 def test_parquet_sink_float64_option(tmp_path: Path, square: Recording, file_format: str) -> None:
     sink = ParquetChunkSink(tmp_path / "run", float32_codes=(), file_format=file_format)

@@ -259,8 +259,11 @@ class ParquetChunkSink:
         else:
             probe = self._codecs is None or len(self.files) % _PROBE_EVERY_FILES == 0
             codecs: str | dict[str, str] = self.compression if probe else self._codecs or {}
-            pq.write_table(table, path, compression=codecs,
-                           compression_level=1 if self.compression == "zstd" else None,
+            level: int | dict[str, int] | None = None
+            if self.compression == "zstd":  # level 1; uncompressed columns take no level
+                level = 1 if isinstance(codecs, str) else {
+                    c: 1 for c, codec in codecs.items() if codec == "zstd"}
+            pq.write_table(table, path, compression=codecs, compression_level=level,
                            use_dictionary=False, write_statistics=["cycle"],
                            column_encoding={"cycle": "DELTA_BINARY_PACKED"},
                            data_page_version="2.0", write_batch_size=_WRITE_BATCH_ROWS)
