@@ -6,6 +6,10 @@ Kept unchanged (commit 2390685 of ``servo.py`` and ``spindle.py``) so that
   output (bit-identical for the servo, within float rounding for the spindle), and
 * ``benchmarks/bench_sim.py`` measures the speed-up against them in the same run.
 
+The position-control setpoint of the spindle (SPOS move to the nearest turn, fine
+interpolation over the cycle) is a physics correction of session 2 made after the speed work;
+both kernels call the same :func:`cnctwin.sim.spindle._position_setpoint` for it.
+
 Not part of the public API; do not use in new code.
 """
 
@@ -16,6 +20,8 @@ import math
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
+
+from cnctwin.sim.spindle import _position_setpoint
 
 __all__ = ["servo_kernel_reference", "spindle_kernel_reference"]
 
@@ -422,20 +428,22 @@ def spindle_kernel_reference(  # pragma: no cover - compiled
     for k in range(n):
         m = mode[k]
         ff_w = 0.0
+        pc0 = 0.0
+        dpc = 0.0
         if m == 1:
-            if state[12] > 0.5:
-                ff_w = (pos_cmd_deg[k] - state[11]) / cycle_time_s * math.pi / 180.0
-            state[11] = pos_cmd_deg[k]
-            state[12] = 1.0
+            pc0, pc1 = _position_setpoint(state, pos_cmd_deg[k], th * 180.0 / math.pi,
+                                          cycle_time_s, pv[44], pv[45])
+            dpc = (pc1 - pc0) / inner_steps
+            ff_w = (pc1 - pc0) / cycle_time_s * math.pi / 180.0
         else:
             state[12] = 0.0
         w_cmd = speed_cmd_rpm[k] / rpm
         tau_load = load_nm[k] + pv[41] * noise[k, 2]
         # magnet flux at rotor temperature (Kt drift) - constant within a cycle
         psi_t = psi0 * (1.0 + pv[2] * (tr - pv[3]))
-        for _ in range(inner_steps):
+        for i_in in range(inner_steps):
             if m == 1:
-                pos_err = pos_cmd_deg[k] - th * 180.0 / math.pi
+                pos_err = pc0 + dpc * i_in - th * 180.0 / math.pi
                 w_ref = ff_w + kv * pos_err * math.pi / 180.0
             else:
                 w_ref = w_cmd

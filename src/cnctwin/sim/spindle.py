@@ -124,6 +124,11 @@ class SpindleMotor:
     position_ctrl_kv_per_s : float
         Spindle position-loop gain in rigid tapping (mode 1) [1/s]. [S] Kv <= 3 (m/min)/mm
         = 50 1/s for 840D sl spindles (physics-and-performance.md §1.2); 30
+    spos_speed_rpm : float
+        Largest speed of the move to the programmed angle when position control takes over
+        (SPOS, rigid tapping) [rpm]. [S] MD35300 SPIND_POSCTRL_VELO, default 500
+    spos_accel_rev_s2 : float
+        Acceleration of that move [rev/s^2]. [S] MD35210 GEAR_STEP_POSCTRL_ACCEL, default 30
     ambient_temperature_c : float
         Ambient / coolant temperature [degC]. [E] 22
     stator_to_ambient_k_per_w : float
@@ -190,6 +195,8 @@ class SpindleMotor:
     speed_ctrl_kp_nm_s_per_rad: float = 2.4
     speed_ctrl_ti_s: float = 0.02
     position_ctrl_kv_per_s: float = 30.0
+    spos_speed_rpm: float = 500.0
+    spos_accel_rev_s2: float = 30.0
     ambient_temperature_c: float = 22.0
     stator_to_ambient_k_per_w: float = 0.04
     rotor_to_stator_k_per_w: float = 0.06
@@ -229,7 +236,7 @@ class SpindleMotor:
 
 
 # ----------------------------------------------------------------------------- state and trace
-_N_STATE = 14
+_N_STATE = 17
 # state vector layout (float64):
 _S_OMEGA, _S_THETA, _S_INTEG, _S_ID, _S_IQ, _S_TSTATOR, _S_TROTOR = 0, 1, 2, 3, 4, 5, 6
 _S_LF_SPEED, _S_LF_IABS, _S_LF_IQ, _S_LF_UTIL, _S_PREV_POSCMD, _S_HAVE_POSCMD, _S_CYCLE = (
@@ -241,6 +248,9 @@ _S_LF_SPEED, _S_LF_IABS, _S_LF_IQ, _S_LF_UTIL, _S_PREV_POSCMD, _S_HAVE_POSCMD, _
     12,
     13,
 )
+# position control: offset of the setpoint from the programmed angle [deg], its rate [deg/s]
+# and its target (a whole number of turns) while the SPOS move runs
+_S_POS_OFFSET, _S_POS_OFFSET_RATE, _S_POS_OFFSET_TARGET = 14, 15, 16
 
 
 @dataclass(frozen=True)
@@ -252,7 +262,9 @@ class SpindleState:
     vector : numpy.ndarray
         Internal state: speed [rad/s], angle [rad], speed-PI integrator [Nm], id, iq [A peak],
         stator and rotor temperature [degC], the four LF smoothing filters, the previous
-        position command [deg] and its validity flag, and the number of cycles simulated.
+        position setpoint [deg] and its validity flag, the number of cycles simulated, and
+        the offset of the position setpoint from the programmed angle with its rate and target
+        (the SPOS move when position control takes over).
     """
 
     vector: NDArray[np.float64]
@@ -452,8 +464,10 @@ _P_NAMES: tuple[str, ...] = (
     "noise_t",
     "tau_lf",
     "roll_r",
+    "spos_v",
+    "spos_a",
 )
-assert len(_P_NAMES) == 44
+assert len(_P_NAMES) == 46
 
 
 def _param_vector(motor: SpindleMotor) -> NDArray[np.float64]:
@@ -471,6 +485,8 @@ def _param_vector(motor: SpindleMotor) -> NDArray[np.float64]:
         "q_inductance_h",
         "current_loop_time_constant_s",
         "speed_ctrl_ti_s",
+        "spos_speed_rpm",
+        "spos_accel_rev_s2",
         "lf_smoothing_time_s",
         "stator_heat_capacity_j_per_k",
         "rotor_heat_capacity_j_per_k",
@@ -525,6 +541,8 @@ def _param_vector(motor: SpindleMotor) -> NDArray[np.float64]:
         "noise_t": motor.torque_noise_nm,
         "tau_lf": motor.lf_smoothing_time_s,
         "roll_r": motor.viscous_rolloff_ratio,
+        "spos_v": motor.spos_speed_rpm * 6.0,
+        "spos_a": motor.spos_accel_rev_s2 * 360.0,
     }
     return np.array([v[n] for n in _P_NAMES], dtype=np.float64)
 
@@ -591,6 +609,46 @@ def _friction_taylor(
 
 
 @njit(cache=True)
+def _position_setpoint(
+    state: NDArray[np.float64], cmd_deg: float, th_deg: float, cycle_time_s: float,
+    spos_v: float, spos_a: float,
+) -> tuple[float, float]:  # pragma: no cover - compiled
+    """Position setpoint at the start and the end of a cycle in position control [deg].
+
+    When position control takes over (SPOS, rigid tapping) the NC takes the actual angle as
+    the setpoint and moves it to the programmed angle modulo 360 (the nearest turn) with a
+    trapezoidal profile (``spos_v`` [deg/s], ``spos_a`` [deg/s^2]; MD35300/MD35210): the
+    setpoint is ``cmd + offset`` with the offset running to a whole number of turns. The drive
+    interpolates the setpoint linearly over the cycle (fine interpolation), so the position
+    loop sees no 500 Hz staircase.
+    """
+    if state[12] > 0.5:
+        start = state[11]
+    else:
+        state[14] = th_deg - cmd_deg
+        state[15] = 0.0
+        state[16] = 360.0 * round(state[14] / 360.0)
+        start = th_deg
+    rem = state[16] - state[14]
+    if rem != 0.0 or state[15] != 0.0:
+        dv = spos_a * cycle_time_s
+        want = math.copysign(min(spos_v, math.sqrt(2.0 * spos_a * abs(rem))), rem)
+        v = state[15]
+        v = min(v + dv, want) if want > v else max(v - dv, want)
+        step = v * cycle_time_s
+        if abs(rem) <= abs(step) or (abs(rem) < 0.5 * dv * cycle_time_s and abs(v) <= dv):
+            state[14] = state[16]
+            state[15] = 0.0
+        else:
+            state[14] += step
+            state[15] = v
+    end = cmd_deg + state[14]
+    state[11] = end
+    state[12] = 1.0
+    return start, end
+
+
+@njit(cache=True)
 def _kernel(  # pragma: no cover - compiled
     speed_cmd_rpm: NDArray[np.float64],
     load_nm: NDArray[np.float64],
@@ -645,20 +703,22 @@ def _kernel(  # pragma: no cover - compiled
         f2h = 0.0
         m = mode[k]
         ff_w = 0.0
+        pc0 = 0.0
+        dpc = 0.0
         if m == 1:
-            if state[12] > 0.5:
-                ff_w = (pos_cmd_deg[k] - state[11]) / cycle_time_s * math.pi / 180.0
-            state[11] = pos_cmd_deg[k]
-            state[12] = 1.0
+            pc0, pc1 = _position_setpoint(state, pos_cmd_deg[k], th * 180.0 / math.pi,
+                                          cycle_time_s, pv[44], pv[45])
+            dpc = (pc1 - pc0) / inner_steps
+            ff_w = (pc1 - pc0) / cycle_time_s * math.pi / 180.0
         else:
             state[12] = 0.0
         w_cmd = speed_cmd_rpm[k] / rpm
         tau_load = load_nm[k] + pv[41] * noise[k, 2]
         # magnet flux at rotor temperature (Kt drift) - constant within a cycle
         psi_t = psi0 * (1.0 + pv[2] * (tr - pv[3]))
-        for _ in range(inner_steps):
+        for i_in in range(inner_steps):
             if m == 1:
-                pos_err = pos_cmd_deg[k] - th * 180.0 / math.pi
+                pos_err = pc0 + dpc * i_in - th * 180.0 / math.pi
                 w_ref = ff_w + kv * pos_err * math.pi / 180.0
             else:
                 w_ref = w_cmd
