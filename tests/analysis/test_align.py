@@ -145,7 +145,7 @@ def test_single_pulse_drift_is_ill_posed_and_falls_back_to_lag_only() -> None:
 
 
 @pytest.fixture(scope="module")
-def cast_iron_hole() -> tuple[Recording, dict]:  # type: ignore[type-arg]
+def cast_iron_hole() -> tuple[Recording, dict]:
     """One simulated hole, thesis cut 2 (cast iron, 2400 rpm, 0.3 mm/rev, Fig. 3.6/4.5b)."""
     from cnctwin.sim import scenarios as sc
 
@@ -169,3 +169,20 @@ def test_align_external_on_a_one_hole_recording(cast_iron_hole) -> None:  # type
     lag_samples = ch.offset_s * rec.fs_hz
     assert abs(lag_samples - round(lag_samples)) > 1e-6  # sub-sample, not snapped to the grid
     assert "lag-only" in out2.meta.issues[-1]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_align_dynamometer_on_rigid_tapping(seed: int) -> None:
+    """Tapping (thesis Fig. 5.10 set-up): the dynamometer clock is recovered from the spindle
+    current although the reversals dominate it. Seen after the session-2 fix of the spindle's
+    position control: -1.7097/-1.7138/-1.7092 s for seeds 0/1/2 against the true -1.700 s; the
+    ~10 ms bias comes from the reversal inertia current J dOmega/dt that the dynamometer does not
+    see (it measures the cutting torque only). Tolerance 20 ms = 10 HF cycles; before the fix the
+    result was +0.91 s (wrong peak)."""
+    from cnctwin.sim import scenarios as sc
+    from cnctwin.twin import align_dynamometer
+
+    res = sc.loose_tap(seed=seed)
+    true_offset = res.truth["dynamometer"]["clock_offset_s"]
+    out = align_dynamometer(res.recording)
+    assert out.external["dynamometer"].offset_s == pytest.approx(true_offset, abs=0.02)
