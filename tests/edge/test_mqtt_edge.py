@@ -178,5 +178,5 @@ def test_cli_live_databus(broker: Broker, tmp_path: Path) -> None:
     assert topics == {"plant/mill-7/torque"}  # machine from the metadata's applicationName
     tau = np.concatenate([m["torque_nm"] for m in sorted(rx.of_kind("torque"),
                                                          key=lambda m: m["seq"])])
-    # thesis Eq. 4.4 by hand: 1.04 * 3.0 - 8.42e-5 * 2400 - 0.35 = 3.12 - 0.20208 - 0.35 = 2.56792 Nm
+    # thesis Eq. 4.4 by hand: 1.04 * 3.0 - 8.42e-5 * 2400 - 0.35 = 2.56792 Nm
     np.testing.assert_allclose(tau, 2.56792, rtol=1e-12)
