@@ -887,11 +887,11 @@ def simulate_servo(
     mechanics, encoder latch) bitwise unchanged, with the same setpoint and force as the cycle
     before and uniform history buffers, the following cycles with the same inputs are that same
     fixed point, so only the current noise, the motor temperature and the LF filters are
-    advanced (in one tight loop over the whole stretch of unchanged inputs). The output is bit-identical to the full computation
-    (``tests/sim/test_kernels_reference.py``); an axis that has never moved (C1/B1 in drilling)
-    costs ~1/20 of a moving one. An axis hunting by one encoder increment at standstill (the
-    limit cycle of integral action on a quantised encoder) is not a fixed point and keeps being
-    simulated.
+    advanced (in one tight loop over the whole stretch of unchanged inputs). The output is
+    bit-identical to the full computation (``tests/sim/test_kernels_reference.py``); an axis
+    that has never moved (C1/B1 in drilling) costs ~1/20 of a moving one. An axis hunting by one
+    encoder increment at standstill (the limit cycle of integral action on a quantised encoder)
+    is not a fixed point and keeps being simulated.
 
     The kernel runs cycle by cycle over all axes: first the NC part of every axis, then the
     125 us drive loops of the moving axes with up to three axes side by side in one loop body
