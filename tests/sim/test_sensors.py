@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cnctwin.exceptions import ConfigError
 from cnctwin.iotools.dynamometer import read_dynamometer_csv
 from cnctwin.iotools.thermal import read_thermal_camera_csv
 from cnctwin.sim.sensors import (
@@ -43,3 +44,30 @@ def test_thermal_camera_csv_roundtrip(tmp_path: Path) -> None:
     back = read_thermal_camera_csv(write_thermal_camera_csv(ch, tmp_path / "cam.csv"))
     np.testing.assert_allclose(back.data["temperature_c"].to_numpy(), [120.0, 180.0])
     np.testing.assert_allclose(back.data["hole"].to_numpy(), [0, 1])
+
+
+def test_format_csv_fixed_reads_back_within_half_a_digit() -> None:
+    """The fast dynamometer CSV formatter: every value read back within 0.5 units of its last
+    digit, NaN/inf kept, negative zero written without a sign."""
+    from cnctwin.sim.sensors import format_csv_fixed
+
+    rng = np.random.default_rng(0)
+    vals = np.column_stack([np.arange(500) * 1e-3 + 1234.5, rng.normal(0, 80, (500, 3)),
+                            rng.normal(0, 3, 500)])
+    vals[3, 1] = np.nan
+    vals[4, 2] = -np.inf
+    vals[5, 3] = -1e-9
+    dec = (6, 4, 4, 4, 5)
+    text = format_csv_fixed(vals, dec)
+    rows = text.splitlines()
+    assert len(rows) == 500 and text.endswith("\n")
+    back = np.array([[float(x) for x in r.split(",")] for r in rows])
+    fin = np.isfinite(vals)
+    assert np.array_equal(np.isnan(back), np.isnan(vals))
+    assert back[4, 2] == -np.inf
+    assert rows[5].split(",")[3] == "0.0000"
+    tol = 0.5 * 10.0 ** -np.array(dec, dtype=float) * (1 + 1e-9)
+    err = np.abs(back[fin] - vals[fin])
+    assert np.all(err <= np.broadcast_to(tol, vals.shape)[fin] + 1e-12)
+    with pytest.raises(ConfigError):
+        format_csv_fixed(vals, (6, 4))
