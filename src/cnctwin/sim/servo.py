@@ -424,6 +424,34 @@ def _drive_constants(par: NDArray[np.float64], h: float) -> NDArray[np.float64]:
     return cst
 
 
+@njit(cache=True, inline="always")
+def _drive_state_from(st: NDArray[np.float64], dst: NDArray[np.float64],
+                      a: int) -> None:  # pragma: no cover - compiled
+    """Load axis ``a``'s drive state (position, speed, integrator, torques, friction, encoder)
+    from its state-vector row into the compact per-step array ``dst``."""
+    dst[a, D_X] = st[a, S_X]
+    dst[a, D_W] = st[a, S_W]
+    dst[a, D_INT] = st[a, S_INT]
+    dst[a, D_TACT] = st[a, S_TACT]
+    dst[a, D_TSET] = st[a, S_TSET]
+    dst[a, D_FRIC] = st[a, S_FRIC]
+    dst[a, D_XQ] = st[a, S_XQ]
+
+
+@njit(cache=True, inline="always")
+def _drive_state_to(dst: NDArray[np.float64], target: NDArray[np.float64],
+                    a: int) -> None:  # pragma: no cover - compiled
+    """Write axis ``a``'s drive state from ``dst`` into row ``a`` of a state-vector array
+    (the continuation state, or the start-of-cycle snapshot of the settle check)."""
+    target[a, S_X] = dst[a, D_X]
+    target[a, S_W] = dst[a, D_W]
+    target[a, S_INT] = dst[a, D_INT]
+    target[a, S_TACT] = dst[a, D_TACT]
+    target[a, S_TSET] = dst[a, D_TSET]
+    target[a, S_FRIC] = dst[a, D_FRIC]
+    target[a, S_XQ] = dst[a, D_XQ]
+
+
 @njit(cache=True)
 def _servo_kernel(
     des: NDArray[np.float64],
@@ -511,13 +539,7 @@ def _servo_kernel(
     dst = np.zeros((n_axes, _N_DST))
     ridx_a = np.zeros(n_axes, np.int64)
     for a in range(n_axes):
-        dst[a, D_X] = st[a, S_X]
-        dst[a, D_W] = st[a, S_W]
-        dst[a, D_INT] = st[a, S_INT]
-        dst[a, D_TACT] = st[a, S_TACT]
-        dst[a, D_TSET] = st[a, S_TSET]
-        dst[a, D_FRIC] = st[a, S_FRIC]
-        dst[a, D_XQ] = st[a, S_XQ]
+        _drive_state_from(st, dst, a)
         ridx_a[a] = int(st[a, S_RING])
     cin = np.zeros((n_axes, _N_CIN))
     before = np.zeros((n_axes, _N_STATE))  # state at the start of the cycle (settle check)
@@ -545,13 +567,7 @@ def _servo_kernel(
             if same_in[a]:
                 for i in range(_N_STATE):
                     before[a, i] = st[a, i]
-                before[a, S_X] = dst[a, D_X]
-                before[a, S_W] = dst[a, D_W]
-                before[a, S_INT] = dst[a, D_INT]
-                before[a, S_TACT] = dst[a, D_TACT]
-                before[a, S_TSET] = dst[a, D_TSET]
-                before[a, S_FRIC] = dst[a, D_FRIC]
-                before[a, S_XQ] = dst[a, D_XQ]
+                _drive_state_to(dst, before, a)
             xf1 = st[a, S_XF1]
             xf2 = st[a, S_XF2]
             mode = mode_a[a]
@@ -706,13 +722,7 @@ def _servo_kernel(
                 fz_end[a] = k1
                 ridx_a[a] = (ridx_a[a] + (k1 - k - 1)) % nring  # the skipped cycles' advance
     for a in range(n_axes):
-        st[a, S_X] = dst[a, D_X]
-        st[a, S_W] = dst[a, D_W]
-        st[a, S_INT] = dst[a, D_INT]
-        st[a, S_TACT] = dst[a, D_TACT]
-        st[a, S_TSET] = dst[a, D_TSET]
-        st[a, S_FRIC] = dst[a, D_FRIC]
-        st[a, S_XQ] = dst[a, D_XQ]
+        _drive_state_to(dst, st, a)
         st[a, S_RING] = float(ridx_a[a])
 
 
