@@ -4,29 +4,13 @@ simulator's fault onset."""
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from cnctwin.edge import AnomalyProcessor, EdgeRuntime, ReplaySource
 from cnctwin.usecases.anomaly import TappingDetector, backtest, signal_stream
 from cnctwin.usecases.holes import hole_record
 
-
-class _Mem:
-    name = "memory"
-
-    def __init__(self) -> None:
-        self.messages: list[dict[str, Any]] = []
-
-    def write(self, messages: list[dict[str, Any]], chunk: Any) -> None:
-        self.messages.extend(messages)
-
-    def status(self) -> dict[str, Any]:
-        return {}
-
-    def close(self) -> None:
-        pass
+from ._memsink import MemorySink
 
 
 def test_loose_tap_alarm_live_equals_backtest_and_truth() -> None:
@@ -42,7 +26,7 @@ def test_loose_tap_alarm_live_equals_backtest_and_truth() -> None:
     onsets = [o for o in res.truth["fault_onsets_s"] if o is not None]
     batch = backtest(TappingDetector(), data, time_s=data["time_s"],
                      learn_until_s=learn_until_s, fault_onsets_s=onsets, persistent=True)
-    mem = _Mem()
+    mem = MemorySink()
     an = AnomalyProcessor(TappingDetector(), learn_s=learn_until_s)
     EdgeRuntime(ReplaySource(rec, chunk_cycles=50), [an], [mem]).run()
     alarms_s = [(m["cycle"] - int(rec.cycles[0])) * rec.meta.cycle_time_s

@@ -11,6 +11,8 @@ from cnctwin.edge import CycleTracker, EdgeRuntime, ReplaySource, TorqueProcesso
 from cnctwin.recording import Recording
 from cnctwin.spindle import SpindleModel
 
+from ._memsink import MemorySink
+
 M = 2**31
 
 
@@ -31,22 +33,6 @@ def test_tracker_wrap_gap_late() -> None:
     assert tr.missing_cycles == 3 and tr.late == 2
 
 
-class _Mem:
-    name = "memory"
-
-    def __init__(self) -> None:
-        self.messages: list[dict[str, Any]] = []
-
-    def write(self, messages: list[dict[str, Any]], chunk: Any) -> None:
-        self.messages.extend(messages)
-
-    def status(self) -> dict[str, Any]:
-        return {}
-
-    def close(self) -> None:
-        pass
-
-
 def test_runtime_flags_gap_and_never_invents(wear_recording: Recording,
                                              spindle_model: SpindleModel) -> None:
     rec = wear_recording
@@ -55,7 +41,7 @@ def test_runtime_flags_gap_and_never_invents(wear_recording: Recording,
     drop = ((c >= c[1000]) & (c < c[1000] + 3860)) | (c == c[5500])
     hf = rec.hf[~drop]
     gapped = Recording(hf.copy(), events=rec.events, meta=rec.meta.copy())
-    mem = _Mem()
+    mem = MemorySink()
     st = EdgeRuntime(ReplaySource(gapped, chunk_cycles=64), [TorqueProcessor(spindle_model)],
                      [mem]).run()
     gaps = [m for m in mem.messages if m["kind"] == "gap"]
@@ -85,7 +71,7 @@ def test_real_capture4analysis_gap(c4a_file: Any, spindle_model: SpindleModel) -
     from cnctwin.edge import HoleProcessor
 
     rec = cnctwin.read_recording(c4a_file)
-    mem = _Mem()
+    mem = MemorySink()
     st = EdgeRuntime(ReplaySource(rec, chunk_cycles=50),
                      [TorqueProcessor(spindle_model), HoleProcessor(spindle_model)],
                      [mem]).run()

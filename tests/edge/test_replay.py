@@ -34,24 +34,7 @@ from cnctwin.recording import Recording
 from cnctwin.spindle import SpindleModel
 from cnctwin.usecases.holes import hole_records
 
-
-class MemorySink:
-    name = "memory"
-
-    def __init__(self) -> None:
-        self.messages: list[dict[str, Any]] = []
-
-    def write(self, messages: list[dict[str, Any]], chunk: Any) -> None:
-        self.messages.extend(messages)
-
-    def status(self) -> dict[str, Any]:
-        return {"n": len(self.messages)}
-
-    def close(self) -> None:
-        pass
-
-    def kind(self, kind: str) -> list[dict[str, Any]]:
-        return [m for m in self.messages if m["kind"] == kind]
+from ._memsink import MemorySink
 
 
 def _torque(messages: list[dict[str, Any]]) -> tuple[np.ndarray, np.ndarray]:
