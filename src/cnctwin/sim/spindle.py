@@ -236,7 +236,7 @@ class SpindleMotor:
 
 
 # ----------------------------------------------------------------------------- state and trace
-_N_STATE = 17
+_N_STATE = 16
 # state vector layout (float64):
 _S_OMEGA, _S_THETA, _S_INTEG, _S_ID, _S_IQ, _S_TSTATOR, _S_TROTOR = 0, 1, 2, 3, 4, 5, 6
 _S_LF_SPEED, _S_LF_IABS, _S_LF_IQ, _S_LF_UTIL, _S_PREV_POSCMD, _S_HAVE_POSCMD, _S_CYCLE = (
@@ -248,9 +248,9 @@ _S_LF_SPEED, _S_LF_IABS, _S_LF_IQ, _S_LF_UTIL, _S_PREV_POSCMD, _S_HAVE_POSCMD, _
     12,
     13,
 )
-# position control: offset of the setpoint from the programmed angle [deg], its rate [deg/s]
-# and its target (a whole number of turns) while the SPOS move runs
-_S_POS_OFFSET, _S_POS_OFFSET_RATE, _S_POS_OFFSET_TARGET = 14, 15, 16
+# position control: offset of the setpoint from the programmed angle [deg] and its rate
+# [deg/s] while the SPOS move to the nearest whole turn runs
+_S_POS_OFFSET, _S_POS_OFFSET_RATE = 14, 15
 
 
 @dataclass(frozen=True)
@@ -263,8 +263,8 @@ class SpindleState:
         Internal state: speed [rad/s], angle [rad], speed-PI integrator [Nm], id, iq [A peak],
         stator and rotor temperature [degC], the four LF smoothing filters, the previous
         position setpoint [deg] and its validity flag, the number of cycles simulated, and
-        the offset of the position setpoint from the programmed angle with its rate and target
-        (the SPOS move when position control takes over).
+        the offset of the position setpoint from the programmed angle and its rate (the SPOS
+        move when position control takes over).
     """
 
     vector: NDArray[np.float64]
@@ -622,29 +622,30 @@ def _position_setpoint(
     interpolates the setpoint linearly over the cycle (fine interpolation), so the position
     loop sees no 500 Hz staircase.
     """
-    if state[12] > 0.5:
-        start = state[11]
+    if state[_S_HAVE_POSCMD] > 0.5:
+        start = state[_S_PREV_POSCMD]
     else:
-        state[14] = th_deg - cmd_deg
-        state[15] = 0.0
-        state[16] = 360.0 * round(state[14] / 360.0)
+        state[_S_POS_OFFSET] = th_deg - cmd_deg
+        state[_S_POS_OFFSET_RATE] = 0.0
         start = th_deg
-    rem = state[16] - state[14]
-    if rem != 0.0 or state[15] != 0.0:
+    # the offset runs monotonically to its nearest whole turn, so that turn is the target
+    target = 360.0 * round(state[_S_POS_OFFSET] / 360.0)
+    rem = target - state[_S_POS_OFFSET]
+    if rem != 0.0 or state[_S_POS_OFFSET_RATE] != 0.0:
         dv = spos_a * cycle_time_s
         want = math.copysign(min(spos_v, math.sqrt(2.0 * spos_a * abs(rem))), rem)
-        v = state[15]
+        v = state[_S_POS_OFFSET_RATE]
         v = min(v + dv, want) if want > v else max(v - dv, want)
         step = v * cycle_time_s
         if abs(rem) <= abs(step) or (abs(rem) < 0.5 * dv * cycle_time_s and abs(v) <= dv):
-            state[14] = state[16]
-            state[15] = 0.0
+            state[_S_POS_OFFSET] = target
+            state[_S_POS_OFFSET_RATE] = 0.0
         else:
-            state[14] += step
-            state[15] = v
-    end = cmd_deg + state[14]
-    state[11] = end
-    state[12] = 1.0
+            state[_S_POS_OFFSET] += step
+            state[_S_POS_OFFSET_RATE] = v
+    end = cmd_deg + state[_S_POS_OFFSET]
+    state[_S_PREV_POSCMD] = end
+    state[_S_HAVE_POSCMD] = 1.0
     return start, end
 
 
