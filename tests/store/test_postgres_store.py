@@ -44,8 +44,8 @@ def test_default_schema_and_create_false(pg_database: str) -> None:
         assert isinstance(st, PostgresStore) and st.schema == "cnctwin"
         n = st.sql("SELECT count(*) AS n FROM information_schema.tables "
                    "WHERE table_schema = 'cnctwin'")
-        # recordings, hf_run, hf_block, lf, events, external + view hf_long
-        assert int(n["n"].iloc[0]) == 7
+        # recordings, hf_run, hf_block, lf, events, external, holes + view hf_long
+        assert int(n["n"].iloc[0]) == 8
     with open_store(pg_database, create=False) as st:  # idempotent re-open
         assert st.recordings().empty
 

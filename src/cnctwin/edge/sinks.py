@@ -257,7 +257,10 @@ class StoreSink:
     Every ``block_cycles`` cycles one recording is ingested with id
     ``edge-<machine>-<first cycle>`` and ``source_format='edge'``: HF columns are the derived
     values (``CUT_TORQUE|SP1`` [Nm], ``ANOMALY_SCORE|SP1`` [-]) on the cycles processed, and
-    ``meta.attrs`` holds the ``holes`` rows and ``alarms`` completed in that block.
+    ``meta.attrs`` holds the ``holes`` rows and ``alarms`` completed in that block. The hole
+    rows also go to the store's hole table (:meth:`cnctwin.store.Store.append_holes`, under the
+    block's recording id), where ``store.holes(machine=...)`` finds them; a replay of the same
+    stream writes the same ids, so each hole is stored once.
 
     Parameters
     ----------
@@ -290,6 +293,7 @@ class StoreSink:
         self._holes: list[dict[str, Any]] = []
         self._alarms: list[dict[str, Any]] = []
         self.blocks: list[str] = []
+        self.holes_written = 0
         self._cycle_time_s = 0.002
 
     def write(self, messages: list[dict[str, Any]], chunk: Chunk | None) -> None:
@@ -348,8 +352,10 @@ class StoreSink:
                              attrs={"holes": self._holes, "alarms": self._alarms})
         first = int(cyc[0]) if cyc.size else int(self._holes[0]["cycle"])
         safe = "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in self.machine)
-        self.blocks.append(self.store.ingest(Recording(hf, meta=meta),
-                                             recording_id=f"edge-{safe}-{first}"))
+        rid = self.store.ingest(Recording(hf, meta=meta), recording_id=f"edge-{safe}-{first}")
+        self.blocks.append(rid)
+        if self._holes:
+            self.holes_written += self.store.append_holes(rid, [m["row"] for m in self._holes])
         keep_tq = tq_c > (cyc[n_block - 1] if n_block else -1)
         self._cyc = [cyc[rest]] if cyc[rest].size else []
         self._t = [t[rest]] if cyc[rest].size else []
@@ -362,7 +368,7 @@ class StoreSink:
 
     def status(self) -> dict[str, Any]:
         return {"store": str(self.store.url), "blocks": len(self.blocks),
-                "pending_cycles": self._n}
+                "pending_cycles": self._n, "holes": self.holes_written}
 
     def close(self) -> None:
         self._ingest(final=True)

@@ -42,12 +42,15 @@ from cnctwin.signals import parse_column
 
 __all__ = [
     "CATALOG_COLUMNS",
+    "HOLE_TABLE_COLUMNS",
     "Store",
     "TimeRun",
     "catalog_row",
     "default_recording_id",
     "external_channel",
     "external_meta",
+    "hole_rows",
+    "holes_frame",
     "meta_from_json",
     "meta_to_json",
     "normalize_events",
@@ -393,6 +396,135 @@ def resolve_columns(
     return list(out)
 
 
+# ---------------------------------------------------------------------------- hole table
+_HOLE_INT = ("hole", "set", "position_in_set", "start_cycle", "cut_start_cycle",
+             "cut_end_cycle", "end_cycle")
+_HOLE_FLOAT_A = ("start_s", "end_s", "extraction_s", "cut_duration_s", "x_mm", "y_mm",
+                 "surface_z_mm")
+_HOLE_FLOAT_B = (
+    "bottom_z_mm", "depth_mm", "feed_mm_min", "speed_rpm", "current_mean_a", "current_peak_a",
+    "current_first_a", "torque_first_nm", "torque_mean_nm", "energy_j", "thrust_proxy",
+    *(f"dev_{a}_{s}_mm" for a in "xyz" for s in ("mean", "maxabs", "rms")),
+)
+
+HOLE_TABLE_COLUMNS: dict[str, str] = {
+    **dict.fromkeys(_HOLE_INT, "int"),
+    "start_time": "time",
+    **dict.fromkeys(_HOLE_FLOAT_A, "float"),
+    "surface_source": "text",
+    **dict.fromkeys(_HOLE_FLOAT_B, "float"),
+    "tool": "int",
+    "cycle": "text",
+}
+"""Columns of the per-hole table and their storage kind (``int``, ``float``, ``text``,
+``time``): the columns of :func:`cnctwin.usecases.holes.hole_record` in its order (meanings
+and units in :data:`cnctwin.usecases.holes.HOLE_COLUMNS`). Both backends add ``recording_id``
+and ``machine`` in front, ``start_ns`` (exact ns of ``start_time``) and ``extra`` (JSON object
+of any further columns of the appended frame, so nothing is dropped). Key:
+``(recording_id, hole)``."""
+
+
+def _py(value: Any, kind: str) -> Any:
+    """One cell as the Python value stored for its column kind (None for missing)."""
+    if value is None or value is pd.NA or value is pd.NaT:
+        return None
+    if kind == "float":
+        f = float(value)
+        return None if np.isnan(f) else f
+    if isinstance(value, float) and np.isnan(value):
+        return None
+    if kind == "int":
+        return int(value)
+    if kind == "text":
+        return str(value)
+    return value
+
+
+def hole_rows(holes: pd.DataFrame | Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per-hole rows as the values both backends store (:data:`HOLE_TABLE_COLUMNS`).
+
+    Parameters
+    ----------
+    holes : pandas.DataFrame or sequence of dict
+        Rows of :func:`cnctwin.usecases.holes.hole_record` (or the ``row`` of the edge
+        runtime's ``hole`` messages, where ``start_time`` is ISO text).
+
+    Returns
+    -------
+    list of dict
+        Per row: every :data:`HOLE_TABLE_COLUMNS` entry (``None`` where missing, ``start_time``
+        as a UTC :class:`datetime.datetime` to the microsecond, which SQL timestamps hold),
+        ``start_ns`` (the exact ``start_time`` [ns since the epoch]) and ``extra`` (JSON text of
+        the other columns).
+
+    Raises
+    ------
+    ConfigError
+        If a row has no ``hole`` index, the same hole appears twice, or a value cannot be
+        converted to its column's kind (the message names the hole and the column).
+    """
+    frame = holes if isinstance(holes, pd.DataFrame) else pd.DataFrame(list(holes))
+    if "hole" not in frame.columns:
+        raise ConfigError(
+            f"the hole table needs a 'hole' column (hole_record output); got {list(frame.columns)}"
+        )
+    extra_cols = [c for c in frame.columns if c not in HOLE_TABLE_COLUMNS]
+    out: list[dict[str, Any]] = []
+    seen: set[int] = set()
+    for rec in frame.to_dict("records"):
+        row: dict[str, Any] = {}
+        for col, kind in HOLE_TABLE_COLUMNS.items():
+            v = rec.get(col)
+            try:
+                if kind == "time":
+                    v = None if v is None or pd.isna(v) else to_utc(v)
+                else:
+                    v = _py(v, kind)
+            except (TypeError, ValueError) as exc:
+                raise ConfigError(
+                    f"hole {rec.get('hole')!r}: column {col!r} value {v!r} is not {kind}: {exc}"
+                ) from exc
+            row[col] = v
+        if row["hole"] is None:
+            raise ConfigError(f"a hole row has no 'hole' index: {rec}")
+        if row["hole"] in seen:
+            raise ConfigError(f"hole {row['hole']} appears twice in the appended rows")
+        seen.add(row["hole"])
+        t = row["start_time"]
+        row["start_ns"] = int(t.value) if t is not None else None
+        row["start_time"] = t.floor("us").to_pydatetime() if t is not None else None
+        row["extra"] = json.dumps({c: rec[c] for c in extra_cols}, default=_jsonable)
+        out.append(row)
+    return out
+
+
+def holes_frame(rows: Sequence[Sequence[Any]], columns: Sequence[str]) -> pd.DataFrame:
+    """The result of :meth:`Store.holes` from stored rows (canonical dtypes, extras expanded).
+
+    ``rows`` hold ``recording_id, machine``, the :data:`HOLE_TABLE_COLUMNS` without
+    ``start_time``, then ``start_ns`` and ``extra`` (``columns`` names them).
+    """
+    raw = pd.DataFrame(list(rows), columns=list(columns))
+    out = pd.DataFrame({"recording_id": raw["recording_id"].astype(object),
+                        "machine": raw["machine"].astype(object)})
+    for col, kind in HOLE_TABLE_COLUMNS.items():
+        if kind == "time":
+            out[col] = pd.to_datetime(raw["start_ns"].astype("Int64"), unit="ns", utc=True)
+        elif kind == "int":
+            s = pd.array(raw[col].tolist(), dtype="Int64")
+            out[col] = s if col == "tool" or s.isna().any() else s.astype("int64")
+        elif kind == "float":
+            out[col] = pd.to_numeric(raw[col], errors="coerce").astype("float64")
+        else:  # inferred like hole_record's own frame (pandas' default string dtype)
+            out[col] = pd.Series(_text_or_none(raw[col]).tolist(), dtype=None)
+    extras = [json.loads(e) if e else {} for e in raw["extra"]]
+    for k in dict.fromkeys(k for e in extras for k in e):
+        out[k] = [e.get(k) for e in extras]
+    order = np.lexsort((out["hole"].to_numpy(), out["recording_id"].to_numpy(dtype=str),
+                        raw["start_ns"].fillna(np.iinfo(np.int64).max).to_numpy(dtype=np.int64)))
+    return out.iloc[order].reset_index(drop=True)
+
+
 # ---------------------------------------------------------------------------- the interface
 class Store(abc.ABC):
     """A store of recordings; see :func:`cnctwin.store.open`.
@@ -558,6 +690,68 @@ class Store(abc.ABC):
     @abc.abstractmethod
     def delete(self, recording_id: str) -> bool:
         """Remove a recording; returns whether it existed."""
+
+    @abc.abstractmethod
+    def append_holes(
+        self, recording_id: str, holes: pd.DataFrame | Sequence[dict[str, Any]]
+    ) -> int:
+        """Add per-hole rows of a stored recording to the hole table (idempotent).
+
+        Parameters
+        ----------
+        recording_id : str
+            The recording the holes were found in (must be stored; its machine is kept with
+            each row).
+        holes : pandas.DataFrame or sequence of dict
+            Rows of :func:`cnctwin.usecases.holes.hole_record` (columns
+            :data:`HOLE_TABLE_COLUMNS`; further columns are kept in ``extra``).
+
+        Returns
+        -------
+        int
+            Rows written.
+
+        Raises
+        ------
+        StoreError
+            If ``recording_id`` is not in the store.
+        ConfigError
+            If a row has no ``hole`` index or a value does not fit its column.
+
+        Notes
+        -----
+        The key is ``(recording_id, hole)``: appending a hole that is already stored replaces
+        its row, so re-sending the same holes (a restarted edge runtime) stores each once.
+        Deleting the recording deletes its holes; re-ingesting it keeps them.
+        """
+
+    @abc.abstractmethod
+    def holes(
+        self,
+        *,
+        recording_id: str | None = None,
+        machine: str | None = None,
+        start: pd.Timestamp | str | None = None,
+        end: pd.Timestamp | str | None = None,
+    ) -> pd.DataFrame:
+        """Per-hole rows from the hole table.
+
+        Parameters
+        ----------
+        recording_id : str, optional
+            Only holes of this recording.
+        machine : str, optional
+            Only this machine.
+        start, end : Timestamp or str, optional
+            Only holes whose ``start_time`` (cut start, UTC) is in ``[start, end]``.
+
+        Returns
+        -------
+        pandas.DataFrame
+            ``recording_id``, ``machine``, the :data:`HOLE_TABLE_COLUMNS` (``start_time`` UTC
+            with ns precision, ``tool`` nullable ``Int64``) and any extra columns; sorted by
+            ``start_time``, ``recording_id``, ``hole``.
+        """
 
     @abc.abstractmethod
     def close(self) -> None:

@@ -2,11 +2,16 @@
 
 Layout under ``root``::
 
-    catalog.duckdb                                         recordings + files tables
+    catalog.duckdb                                         recordings, files, holes tables
     hf/machine=<m>/day=<YYYY-MM-DD>/<recording_id>.parquet  wide HF table, one file per day
     lf/machine=<m>/<recording_id>.parquet                   LF values (long form)
     events/machine=<m>/<recording_id>.parquet               NC events
     external/machine=<m>/<recording_id>/<channel>.parquet   channels with their own clock
+
+The per-hole table ``holes`` (:meth:`DuckDBStore.append_holes`) lives in the catalog itself:
+``recording_id, machine``, the columns of :data:`~cnctwin.store.base.HOLE_TABLE_COLUMNS`
+(BIGINT / DOUBLE / VARCHAR / TIMESTAMPTZ), ``start_ns`` BIGINT (exact ns of ``start_time``) and
+``extra`` VARCHAR (JSON); primary key ``(recording_id, hole)``.
 
 An HF file holds columns ``recording_id``, ``cycle`` (int64), ``time`` (timestamp[ns, UTC]) and
 one float64 column per ``CODE|AXIS`` signal (the column metadata carry the unit). A recording
@@ -42,12 +47,15 @@ from cnctwin.exceptions import StoreError
 from cnctwin.recording import ExternalChannel, Recording
 from cnctwin.store.base import (
     CATALOG_COLUMNS,
+    HOLE_TABLE_COLUMNS,
     Store,
     catalog_row,
     check_recording_id,
     default_recording_id,
     external_channel,
     external_meta,
+    hole_rows,
+    holes_frame,
     meta_from_json,
     normalize_events,
     normalize_lf,
@@ -94,6 +102,15 @@ CREATE TABLE IF NOT EXISTS files (
     n_rows BIGINT NOT NULL
 );
 """
+
+_HOLE_SQL_TYPES = {"int": "BIGINT", "float": "DOUBLE", "text": "VARCHAR", "time": "TIMESTAMPTZ"}
+_HOLE_DB_COLUMNS = ("recording_id", "machine", *HOLE_TABLE_COLUMNS, "start_ns", "extra")
+_HOLES_SCHEMA = (
+    "CREATE TABLE IF NOT EXISTS holes (recording_id VARCHAR NOT NULL, machine VARCHAR NOT NULL, "
+    + ", ".join(f'"{c}" {_HOLE_SQL_TYPES[k]}' + (" NOT NULL" if c == "hole" else "")
+                for c, k in HOLE_TABLE_COLUMNS.items())
+    + ", start_ns BIGINT, extra VARCHAR NOT NULL, PRIMARY KEY (recording_id, hole))"
+)
 
 
 def _path_part(value: str) -> str:
@@ -179,6 +196,7 @@ class DuckDBStore(Store):
         _run(self._con, "SET TimeZone = 'UTC'")
         if not read_only:
             _run(self._con, _SCHEMA)
+            _run(self._con, _HOLES_SCHEMA)
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -322,9 +340,72 @@ class DuckDBStore(Store):
         existed = bool(n[0][0])
         _run(self.con, "DELETE FROM files WHERE recording_id = ?", [recording_id])
         _run(self.con, "DELETE FROM recordings WHERE recording_id = ?", [recording_id])
+        if self._has_holes_table():
+            _run(self.con, "DELETE FROM holes WHERE recording_id = ?", [recording_id])
         for rel in old:
             self._abs(rel).unlink(missing_ok=True)
         return existed
+
+    # ------------------------------------------------------------------ holes
+    def _has_holes_table(self) -> bool:
+        return bool(_run(self.con, "SELECT count(*) FROM information_schema.tables "
+                                   "WHERE table_name = 'holes'")[0][0])
+
+    def append_holes(
+        self, recording_id: str, holes: pd.DataFrame | Sequence[dict[str, Any]]
+    ) -> int:
+        rows = hole_rows(holes)
+        got = _run(self.con, "SELECT machine FROM recordings WHERE recording_id = ?",
+                   [recording_id])
+        if not got:
+            self._catalog_entry(recording_id)  # raises StoreError naming stored ids
+        machine = str(got[0][0])
+        if not rows:
+            return 0
+        con = self.con
+        cols = ", ".join(f'"{c}"' for c in _HOLE_DB_COLUMNS)
+        _run(con, "BEGIN TRANSACTION")
+        try:
+            _run(con, "DELETE FROM holes WHERE recording_id = ? AND hole IN "
+                      f"({', '.join('?' for _ in rows)})",
+                 [recording_id, *(r["hole"] for r in rows)])
+            con.executemany(
+                f"INSERT INTO holes ({cols}) VALUES ({', '.join('?' for _ in _HOLE_DB_COLUMNS)})",
+                [[recording_id, machine, *(r[c] for c in _HOLE_DB_COLUMNS[2:])] for r in rows],
+            )
+            _run(con, "COMMIT")
+        except BaseException:
+            _run(con, "ROLLBACK")
+            raise
+        return len(rows)
+
+    def holes(
+        self,
+        *,
+        recording_id: str | None = None,
+        machine: str | None = None,
+        start: pd.Timestamp | str | None = None,
+        end: pd.Timestamp | str | None = None,
+    ) -> pd.DataFrame:
+        clauses: list[str] = []
+        params: list[Any] = []
+        for col, val in (("recording_id", recording_id), ("machine", machine)):
+            if val is not None:
+                clauses.append(f"{col} = ?")
+                params.append(val)
+        t0, t1 = to_utc(start), to_utc(end)
+        if t0 is not None:
+            clauses.append("start_ns >= ?")
+            params.append(int(t0.value))
+        if t1 is not None:
+            clauses.append("start_ns <= ?")
+            params.append(int(t1.value))
+        where = ("WHERE " + " AND ".join(clauses)) if clauses else ""
+        cols = [c for c in _HOLE_DB_COLUMNS if c != "start_time"]
+        select = ", ".join(f'"{c}"' for c in cols)
+        rows = _run(self.con, f"SELECT {select} FROM holes {where}", params) \
+            if self._has_holes_table() else []
+        return holes_frame(rows, cols)
 
     # ------------------------------------------------------------------ read
     def recordings(
@@ -461,8 +542,8 @@ class DuckDBStore(Store):
             return self._df(query)
         except duckdb.Error as exc:
             raise StoreError(
-                f"SQL failed on {self.url}: {exc}. Tables/views: recordings, files, hf (wide), "
-                "hf_long (recording_id, cycle, time, signal, value), lf, events"
+                f"SQL failed on {self.url}: {exc}. Tables/views: recordings, files, holes, "
+                "hf (wide), hf_long (recording_id, cycle, time, signal, value), lf, events"
             ) from exc
 
     def _refresh_views(self) -> None:

@@ -13,6 +13,8 @@ Schema (in the schema named by the URL, default ``cnctwin``)::
     lf(recording_id, cycle, time, time_ns, signal, value, text)
     events(recording_id, seq, cycle, kind, channel, ..., call_stack_level)
     external(recording_id, name, data bytea)               a Parquet file per channel
+    holes(recording_id, machine, <HOLE_TABLE_COLUMNS>, start_ns, extra jsonb)
+             PRIMARY KEY (recording_id, hole)              per-hole rows (append_holes)
     VIEW hf_long(recording_id, cycle, time, signal, value) unnests the blocks
 
 Why blocks of arrays and not one row per value: a machine produces 500 Hz x ~70 signals =
@@ -54,6 +56,7 @@ from cnctwin.exceptions import ConfigError, StoreError
 from cnctwin.recording import ExternalChannel, Recording
 from cnctwin.store.base import (
     CATALOG_COLUMNS,
+    HOLE_TABLE_COLUMNS,
     Store,
     block_bounds,
     catalog_row,
@@ -61,6 +64,8 @@ from cnctwin.store.base import (
     default_recording_id,
     external_channel,
     external_meta,
+    hole_rows,
+    holes_frame,
     meta_from_json,
     normalize_events,
     normalize_lf,
@@ -164,6 +169,19 @@ FROM {s}.hf_block b
 JOIN {s}.recordings r USING (recording_id)
 CROSS JOIN LATERAL unnest(b.samples) WITH ORDINALITY AS u(value, i);
 """
+
+_HOLE_SQL_TYPES = {"int": "bigint", "float": "double precision", "text": "text",
+                   "time": "timestamptz"}
+_HOLE_DB_COLUMNS = ("recording_id", "machine", *HOLE_TABLE_COLUMNS, "start_ns", "extra")
+# no foreign key to recordings: ingest() replaces a recording by delete + insert, which would
+# cascade to its holes; delete() removes them explicitly instead
+_HOLES_DDL = (
+    "CREATE TABLE IF NOT EXISTS {s}.holes (recording_id text NOT NULL, machine text NOT NULL, "
+    + ", ".join(f'"{c}" {_HOLE_SQL_TYPES[k]}' + (" NOT NULL" if c == "hole" else "")
+                for c, k in HOLE_TABLE_COLUMNS.items())
+    + ", start_ns bigint, extra jsonb NOT NULL, PRIMARY KEY (recording_id, hole));"
+    " CREATE INDEX IF NOT EXISTS holes_machine_time ON {s}.holes (machine, start_ns);"
+)
 
 _EVENT_SQL_COLUMNS = (
     "cycle", "kind", "channel", "seek_offset", "gcode", "ipo_gcode", "selected_tool",
@@ -348,6 +366,10 @@ class PostgresStore(Store):
                     )
             except psycopg.Error:  # pragma: no cover - server built without lz4
                 pass
+        if create:  # the hole table came later than the schema: add it to older stores too
+            with self.conn.transaction():
+                self.conn.execute("SELECT pg_advisory_xact_lock(hashtext('cnctwin.ddl'))")
+                self.conn.execute(psql.SQL(_HOLES_DDL).format(s=s))
         self.conn.execute(
             psql.SQL("SET search_path TO {s}, public").format(s=s)
         )
@@ -464,11 +486,85 @@ class PostgresStore(Store):
         return rid
 
     def delete(self, recording_id: str) -> bool:
+        if self._has_holes_table():
+            self.conn.execute(
+                psql.SQL("DELETE FROM {} WHERE recording_id = %s").format(self._t("holes")),
+                [recording_id],
+            )
         cur = self.conn.execute(
             psql.SQL("DELETE FROM {} WHERE recording_id = %s").format(self._t("recordings")),
             [recording_id],
         )
         return cur.rowcount > 0
+
+    # ------------------------------------------------------------------ holes
+    def _has_holes_table(self) -> bool:
+        return self.conn.execute(
+            "SELECT 1 FROM information_schema.tables WHERE table_schema = %s "
+            "AND table_name = 'holes'", [self.schema]).fetchone() is not None
+
+    def append_holes(
+        self, recording_id: str, holes: pd.DataFrame | Sequence[dict[str, Any]]
+    ) -> int:
+        rows = hole_rows(holes)
+        got = self.conn.execute(
+            psql.SQL("SELECT machine FROM {} WHERE recording_id = %s").format(
+                self._t("recordings")), [recording_id]).fetchone()
+        if got is None:
+            self._meta_row(recording_id)  # raises StoreError naming stored ids
+            raise AssertionError("unreachable")  # pragma: no cover
+        machine = str(got[0])
+        if not rows:
+            return 0
+        cols = psql.SQL(", ").join(psql.Identifier(c) for c in _HOLE_DB_COLUMNS)
+        conn = self.conn
+        with conn.transaction():
+            conn.execute(
+                psql.SQL("DELETE FROM {} WHERE recording_id = %s AND hole = ANY(%s)").format(
+                    self._t("holes")), [recording_id, [r["hole"] for r in rows]])
+            with conn.cursor() as cur:
+                cur.executemany(
+                    psql.SQL("INSERT INTO {} ({}) VALUES ({})").format(
+                        self._t("holes"), cols,
+                        psql.SQL(", ").join(psql.Placeholder() for _ in _HOLE_DB_COLUMNS)),
+                    [[recording_id, machine, *(r[c] for c in _HOLE_DB_COLUMNS[2:])]
+                     for r in rows],
+                )
+        return len(rows)
+
+    def holes(
+        self,
+        *,
+        recording_id: str | None = None,
+        machine: str | None = None,
+        start: pd.Timestamp | str | None = None,
+        end: pd.Timestamp | str | None = None,
+    ) -> pd.DataFrame:
+        cols = [c for c in _HOLE_DB_COLUMNS if c != "start_time"]
+        if not self._has_holes_table():
+            return holes_frame([], cols)
+        clauses: list[psql.Composable] = []
+        params: list[Any] = []
+        for col, val in (("recording_id", recording_id), ("machine", machine)):
+            if val is not None:
+                clauses.append(psql.SQL("{} = %s").format(psql.Identifier(col)))
+                params.append(val)
+        t0, t1 = to_utc(start), to_utc(end)
+        if t0 is not None:
+            clauses.append(psql.SQL("start_ns >= %s"))
+            params.append(int(t0.value))
+        if t1 is not None:
+            clauses.append(psql.SQL("start_ns <= %s"))
+            params.append(int(t1.value))
+        where = (
+            psql.SQL("WHERE ") + psql.SQL(" AND ").join(clauses) if clauses else psql.SQL("")
+        )
+        select = psql.SQL(", ").join(
+            psql.SQL("extra::text") if c == "extra" else psql.Identifier(c) for c in cols)
+        rows = self.conn.execute(
+            psql.SQL("SELECT {} FROM {} {}").format(select, self._t("holes"), where), params
+        ).fetchall()
+        return holes_frame(rows, cols)
 
     # ------------------------------------------------------------------ read
     def recordings(
@@ -705,7 +801,7 @@ class PostgresStore(Store):
         except psycopg.Error as exc:
             raise StoreError(
                 f"SQL failed on {self.url} (schema {self.schema}): {exc}. Tables: recordings, "
-                "hf_run, hf_block, lf, events, external; view hf_long (recording_id, cycle, "
+                "hf_run, hf_block, lf, events, external, holes; view hf_long (recording_id, cycle, "
                 "time, signal, value)"
             ) from exc
 
