@@ -71,3 +71,30 @@ def test_format_csv_fixed_reads_back_within_half_a_digit() -> None:
     assert np.all(err <= np.broadcast_to(tol, vals.shape)[fin] + 1e-12)
     with pytest.raises(ConfigError):
         format_csv_fixed(vals, (6, 4))
+
+
+def test_dynamometer_csv_decimals_below_the_noise(tmp_path: Path) -> None:
+    """Digits of the dynamometer CSV: the quantisation step is <= 1/100 of the noise std (so it
+    adds <= noise/346 rms), and times k/fs are written exactly."""
+    from cnctwin.sim.sensors import dynamometer_csv_decimals
+
+    # defaults of Dynamometer: 1 kHz, 8 N force noise, 0.05 Nm torque noise
+    assert dynamometer_csv_decimals(fs_hz=1000.0, force_noise_n=8.0,
+                                    torque_noise_nm=0.05) == (3, 2, 2, 2, 4)
+    assert dynamometer_csv_decimals(fs_hz=2000.0)[0] == 4
+    assert dynamometer_csv_decimals(fs_hz=3000.0)[0] == 6  # 1/3 ms: 1 us rounding
+    # no noise figure or a noiseless sensor: 0.1 mN and 10 uNm
+    assert dynamometer_csv_decimals(fs_hz=None, force_noise_n=0.0)[1:] == (4, 4, 4, 5)
+    sensor = Dynamometer(clock_offset_s=0.3, clock_drift_ppm=-20.0)
+    t = np.arange(0, 3, 0.002)
+    ch = dynamometer_channel(t, 5.0 + np.sin(t), 900.0 + 50 * np.cos(t), sensor=sensor,
+                             rng=np.random.default_rng(4))
+    dec = dynamometer_csv_decimals(fs_hz=sensor.fs_hz, force_noise_n=sensor.force_noise_n,
+                                   torque_noise_nm=sensor.torque_noise_nm)
+    back = read_dynamometer_csv(write_dynamometer_csv(ch, tmp_path / "d.csv", decimals=dec))
+    np.testing.assert_array_equal(np.asarray(back.data.index), np.asarray(ch.data.index))
+    for col, d in zip(("fz_n", "mz_nm"), (dec[3], dec[4]), strict=True):
+        err = back.data[col].to_numpy() - ch.data[col].to_numpy()
+        assert np.abs(err).max() <= 0.5 * 10.0**-d * (1 + 1e-9)
+        noise = sensor.force_noise_n if col == "fz_n" else sensor.torque_noise_nm
+        assert err.std() < noise / 300.0

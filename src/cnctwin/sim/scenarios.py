@@ -83,10 +83,13 @@ from cnctwin.sim.programs import air_cut_sweep as air_cut_program
 from cnctwin.sim.programs import warm_up as warm_up_program
 from cnctwin.sim.recorder import Capture4AnalysisSink, ParquetChunkSink, RecordingSink
 from cnctwin.sim.sensors import (
+    DYNAMOMETER_COLUMNS,
+    DYNAMOMETER_CSV_HEADER,
     Dynamometer,
     ThermalCamera,
-    dynamometer_channel,
-    format_csv_fixed,
+    dynamometer_csv_decimals,
+    dynamometer_csv_rows,
+    dynamometer_samples,
     thermal_camera_channel,
     write_thermal_camera_csv,
 )
@@ -343,8 +346,6 @@ class _DynamometerDAQ:
     without gaps (the last true sample of a chunk is kept for the next one).
     """
 
-    _COLUMNS = ("fx_n", "fy_n", "fz_n", "mz_nm")
-
     def __init__(self, sensor: Dynamometer, rng: np.random.Generator, out: Path | None,
                  stem: str) -> None:
         self.sensor = sensor
@@ -355,7 +356,10 @@ class _DynamometerDAQ:
         self.channels: list[ExternalChannel] = []
         self.paths: list[Path] = []
         self._frames: list[pd.DataFrame] = []
-        self._fh: IO[str] | None = None
+        self._fh: IO[bytes] | None = None
+        self._decimals = dynamometer_csv_decimals(fs_hz=sensor.fs_hz,
+                                                  force_noise_n=sensor.force_noise_n,
+                                                  torque_noise_nm=sensor.torque_noise_nm)
         self._open = False
         self._last: tuple[float, NDArray[np.float64]] | None = None
         self._last_own = -math.inf
@@ -393,26 +397,28 @@ class _DynamometerDAQ:
         self._frames = []
         if self.out is not None:
             p = self.out / name
-            self._fh = p.open("w", encoding="utf-8")
-            self._fh.write("time_s,fx_n,fy_n,fz_n,mz_nm\n")
+            self._fh = p.open("wb")
+            self._fh.write(DYNAMOMETER_CSV_HEADER)
             self.paths.append(p)
 
     def _sample(self, t: NDArray[np.float64], v: NDArray[np.float64]) -> None:
         sensor = dataclasses.replace(self.sensor,
                                      clock_offset_s=self.sessions[-1]["clock_offset_s"])
-        ch = dynamometer_channel(t, v[3], v[2], fx_n=v[0], fy_n=v[1], sensor=sensor,
-                                 rng=self.rng)
-        d = ch.data[ch.data.index.to_numpy() > self._last_own + 1e-12]
-        if not len(d):
+        own, vals = dynamometer_samples(t, (v[0], v[1], v[2], v[3]), sensor=sensor,
+                                        rng=self.rng)
+        keep = own > self._last_own + 1e-12
+        if not keep.all():
+            own, vals = own[keep], vals[keep]
+        if not own.size:
             return
-        self._last_own = float(d.index[-1])
+        self._last_own = float(own[-1])
         if self._fh is not None:
-            arr = np.column_stack([d.index.to_numpy(), d[list(self._COLUMNS)].to_numpy()])
-            # fixed point below the noise (time 1 us, forces 1e-4 N, torque 1e-5 Nm): ~7x
-            # faster than np.savetxt, the largest cost of the long scenarios otherwise
-            self._fh.write(format_csv_fixed(arr, (6, 4, 4, 4, 5)))
+            # fixed point below the noise, straight to the binary file (session 3: no pandas,
+            # no str copy; the DAQ was 30 % of the wear run's time, benchmarks/bench_sim.py)
+            self._fh.write(dynamometer_csv_rows(own, vals, self._decimals).data)
         else:
-            self._frames.append(d[list(self._COLUMNS)])
+            self._frames.append(pd.DataFrame(vals, index=pd.Index(own, name="time_s"),
+                                             columns=list(DYNAMOMETER_COLUMNS)))
 
     def _close_session(self) -> None:
         if not self._open:

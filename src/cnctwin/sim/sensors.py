@@ -25,14 +25,26 @@ from cnctwin.exceptions import ConfigError
 from cnctwin.recording import ExternalChannel
 
 __all__ = [
+    "DYNAMOMETER_COLUMNS",
+    "DYNAMOMETER_CSV_HEADER",
     "Dynamometer",
     "ThermalCamera",
     "dynamometer_channel",
+    "dynamometer_csv_decimals",
+    "dynamometer_csv_rows",
+    "dynamometer_samples",
     "format_csv_fixed",
     "thermal_camera_channel",
     "write_dynamometer_csv",
     "write_thermal_camera_csv",
 ]
+
+
+DYNAMOMETER_COLUMNS: tuple[str, str, str, str] = ("fx_n", "fy_n", "fz_n", "mz_nm")
+"""Value columns of a dynamometer channel and its CSV file (after ``time_s``)."""
+
+DYNAMOMETER_CSV_HEADER: bytes = ("time_s," + ",".join(DYNAMOMETER_COLUMNS) + "\n").encode()
+"""Header line of the dynamometer CSV (what :func:`cnctwin.iotools.read_dynamometer_csv` reads)."""
 
 
 @dataclass(frozen=True)
@@ -132,6 +144,45 @@ def dynamometer_channel(
     s = sensor if sensor is not None else Dynamometer()
     g = rng if rng is not None else np.random.default_rng(0)
     t = np.asarray(time_s, dtype=np.float64)
+    own, values = dynamometer_samples(t, (fx_n, fy_n, fz_n, mz_nm), sensor=s, rng=g)
+    data = pd.DataFrame(values, index=pd.Index(own, name="time_s"),
+                        columns=list(DYNAMOMETER_COLUMNS))
+    return ExternalChannel(
+        name="dynamometer",
+        data=data,
+        units={"fx_n": "N", "fy_n": "N", "fz_n": "N", "mz_nm": "N*m"},
+        fs_hz=s.fs_hz,
+        source=source,
+    )
+
+
+def dynamometer_samples(
+    time_s: NDArray[np.float64],
+    true: tuple[ArrayLike | None, ArrayLike | None, ArrayLike | None, ArrayLike | None],
+    *,
+    sensor: Dynamometer,
+    rng: np.random.Generator,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The arrays behind :func:`dynamometer_channel` (no DataFrame: the long scenarios' DAQ).
+
+    Parameters
+    ----------
+    time_s : ndarray
+        Recording time of the true signals [s], at least two samples.
+    true : tuple
+        True ``fx_n, fy_n, fz_n`` [N] and ``mz_nm`` [Nm] on ``time_s``; ``None`` for zero.
+    sensor, rng
+        As in :func:`dynamometer_channel`.
+
+    Returns
+    -------
+    own_time_s : ndarray, shape (m,)
+        Sample times on the sensor's own clock, ``k / fs_hz`` [s].
+    values : ndarray, shape (m, 4)
+        ``fx_n, fy_n, fz_n, mz_nm`` (columns :data:`DYNAMOMETER_COLUMNS`) with noise and drift.
+    """
+    s = sensor
+    t = time_s
     if t.size < 2:
         raise ConfigError("dynamometer_channel needs at least two true samples")
     t0_own = (t[0] - s.clock_offset_s) / (1.0 + s.clock_drift_ppm * 1e-6)
@@ -140,27 +191,14 @@ def dynamometer_channel(
     k1 = math.floor(t1_own * s.fs_hz)
     own = np.arange(k0, k1 + 1, dtype=np.float64) / s.fs_hz
     tr = _own_to_recording(own, s.clock_offset_s, s.clock_drift_ppm)
-    noise = g.standard_normal((own.size, 4))
-    cols: dict[str, NDArray[np.float64]] = {}
-    zero = np.zeros(t.size)
-    for j, (name, true, sd, drift) in enumerate(
-        (
-            ("fx_n", fx_n, s.force_noise_n, s.force_drift_n_per_s),
-            ("fy_n", fy_n, s.force_noise_n, s.force_drift_n_per_s),
-            ("fz_n", fz_n, s.force_noise_n, s.force_drift_n_per_s),
-            ("mz_nm", mz_nm, s.torque_noise_nm, s.torque_drift_nm_per_s),
-        )
-    ):
-        x = zero if true is None else np.asarray(true, dtype=np.float64)
-        cols[name] = np.interp(tr, t, x) + sd * noise[:, j] + drift * own
-    data = pd.DataFrame(cols, index=pd.Index(own, name="time_s"))
-    return ExternalChannel(
-        name="dynamometer",
-        data=data,
-        units={"fx_n": "N", "fy_n": "N", "fz_n": "N", "mz_nm": "N*m"},
-        fs_hz=s.fs_hz,
-        source=source,
-    )
+    noise = rng.standard_normal((own.size, 4))
+    values = np.empty((own.size, 4))
+    for j, (x_true, sd, drift) in enumerate(zip(
+            true, (s.force_noise_n,) * 3 + (s.torque_noise_nm,),
+            (s.force_drift_n_per_s,) * 3 + (s.torque_drift_nm_per_s,), strict=True)):
+        x = np.interp(tr, t, np.asarray(x_true, dtype=np.float64)) if x_true is not None else 0.0
+        values[:, j] = x + sd * noise[:, j] + drift * own
+    return own, values
 
 
 def thermal_camera_channel(
@@ -203,11 +241,70 @@ def thermal_camera_channel(
     )
 
 
-def write_dynamometer_csv(channel: ExternalChannel, path: str | PathLike[str]) -> Path:
-    """Write ``time_s,fx_n,fy_n,fz_n,mz_nm`` (header line, SI units)."""
+def dynamometer_csv_decimals(
+    *, fs_hz: float | None, force_noise_n: float | None = None,
+    torque_noise_nm: float | None = None,
+) -> tuple[int, int, int, int, int]:
+    """Digits after the point of ``time_s, fx_n, fy_n, fz_n, mz_nm`` in the dynamometer CSV.
+
+    Time: the fewest digits that write ``k / fs_hz`` exactly (3 at 1 kHz), else 6 (1 us).
+    Values: the quantisation step ``q = 10**-d`` is at most 1/100 of the channel's noise std,
+    so it adds ``q / sqrt(12) <= noise / 346`` rms (a 4e-6 share of the noise variance); without
+    a noise figure (or noise 0) 4 digits for forces (0.1 mN) and 5 for torque (10 uNm).
+
+    Parameters
+    ----------
+    fs_hz : float or None
+        Sample rate [Hz].
+    force_noise_n, torque_noise_nm : float, optional
+        Noise std of the force [N] and torque [Nm] channels.
+    """
+    def below(noise: float | None, default: int) -> int:
+        if noise is None or not noise > 0.0:
+            return default
+        return int(min(max(math.ceil(math.log10(100.0 / noise) - 1e-9), 0), default))
+
+    dt = 6
+    if fs_hz is not None and fs_hz > 0:
+        for d in range(7):
+            steps = 10.0**d / fs_hz
+            if abs(steps - round(steps)) < 1e-9 * max(steps, 1.0):
+                dt = d
+                break
+    f = below(force_noise_n, 4)
+    return dt, f, f, f, below(torque_noise_nm, 5)
+
+
+def dynamometer_csv_rows(
+    own_time_s: NDArray[np.float64], values: NDArray[np.float64],
+    decimals: tuple[int, int, int, int, int],
+) -> NDArray[np.uint8]:
+    """The data lines of a dynamometer CSV (``time_s`` then :data:`DYNAMOMETER_COLUMNS`) as
+    ASCII bytes, for writing to a binary file (:func:`format_csv_fixed` formats them)."""
+    arr = np.empty((own_time_s.size, 5))
+    arr[:, 0] = own_time_s
+    arr[:, 1:] = values
+    return _csv_fixed_buffer(arr, decimals)
+
+
+def write_dynamometer_csv(
+    channel: ExternalChannel, path: str | PathLike[str], *,
+    decimals: tuple[int, int, int, int, int] | None = None,
+) -> Path:
+    """Write ``time_s,fx_n,fy_n,fz_n,mz_nm`` (header line, SI units, fixed point).
+
+    Missing lateral-force columns are written as 0. ``decimals`` default:
+    :func:`dynamometer_csv_decimals` from the channel's rate (no noise figure: 4 digits for
+    forces, 5 for torque); the simulator's DAQ passes its sensor's noise.
+    """
     p = Path(path)
-    df = channel.data.reindex(columns=["fx_n", "fy_n", "fz_n", "mz_nm"]).fillna(0.0)
-    df.to_csv(p, index=True, index_label="time_s", float_format="%.6g")
+    df = channel.data.reindex(columns=list(DYNAMOMETER_COLUMNS)).fillna(0.0)
+    dec = decimals if decimals is not None else dynamometer_csv_decimals(fs_hz=channel.fs_hz)
+    rows = dynamometer_csv_rows(df.index.to_numpy(dtype=np.float64),
+                                df.to_numpy(dtype=np.float64), dec)
+    with p.open("wb") as fh:
+        fh.write(DYNAMOMETER_CSV_HEADER)
+        fh.write(rows.data)
     return p
 
 
@@ -292,13 +389,18 @@ def format_csv_fixed(values: ArrayLike, decimals: ArrayLike) -> str:
         Values; NaN and infinities are written as ``nan``, ``inf``, ``-inf``.
     decimals : array-like of int, shape (m,)
         Digits after the decimal point per column (0-12); choose them below the channel's
-        noise (dynamometer: forces 1e-4 N against 8 N noise, torque 1e-5 Nm against 0.05 Nm).
+        noise (dynamometer: :func:`dynamometer_csv_decimals`).
 
     Returns
     -------
     str
         The rows, each ended by ``\\n``.
     """
+    return bytes(_csv_fixed_buffer(values, decimals)).decode("ascii")
+
+
+def _csv_fixed_buffer(values: ArrayLike, decimals: ArrayLike) -> NDArray[np.uint8]:
+    """:func:`format_csv_fixed` as a uint8 buffer (checked inputs, no string copy)."""
     arr = np.ascontiguousarray(values, dtype=np.float64)
     dec = np.ascontiguousarray(decimals, dtype=np.int64)
     if arr.ndim != 2 or dec.shape != (arr.shape[1],):
@@ -309,4 +411,4 @@ def format_csv_fixed(values: ArrayLike, decimals: ArrayLike) -> str:
     if arr.size and np.nanmax(np.abs(np.where(np.isfinite(arr), arr, 0.0))) * 10.0 ** (
             dec.max()) >= 9e18:
         raise ConfigError("format_csv_fixed: a value is too large for fixed-point output")
-    return bytes(_fixed_csv_kernel(arr, dec)).decode("ascii")
+    return _fixed_csv_kernel(arr, dec)
