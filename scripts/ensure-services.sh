@@ -20,6 +20,9 @@ apt_install() {
 # mosquitto: the binary only (tests/iotools/test_mqtt_live.py starts a private broker)
 if ! have mosquitto && [ ! -x /usr/sbin/mosquitto ]; then apt_install mosquitto; fi
 
+# chromium: headless browser for the web dashboard's end-to-end test (tests/web/test_browser.py)
+if ! have chromium && [ ! -x /usr/bin/chromium ]; then apt_install chromium chromium-driver; fi
+
 # PostgreSQL: reach CNCTWIN_PG_URL if set, else the local default; start the local cluster if down
 if [ -z "${CNCTWIN_PG_URL:-}" ]; then
   if ! have pg_isready && ! ls /usr/lib/postgresql/*/bin/pg_ctl >/dev/null 2>&1; then

@@ -1,0 +1,242 @@
+"""The dashboard's use-case views: thin calls into :mod:`cnctwin.usecases` and the spindle twin.
+
+Nothing here analyses a signal itself: the per-hole record is
+:func:`cnctwin.usecases.holes.hole_records`, the trends are :mod:`cnctwin.usecases.wear`,
+the tool temperature :class:`cnctwin.usecases.thermal.ToolThermalModel`,
+the hole quality :func:`cnctwin.usecases.quality.hole_quality`, the anomalies a detector of
+:mod:`cnctwin.usecases.anomaly` replayed by its ``backtest``, and the cutting torque
+:meth:`cnctwin.spindle.SpindleModel.cutting_torque`. This module only picks the inputs, says
+why a view is empty, and turns tables into JSON-ready rows.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from cnctwin.exceptions import CnctwinError, ConfigError
+from cnctwin.recording import Recording, find_gaps
+from cnctwin.spindle import SpindleModel
+
+__all__ = [
+    "DETECTORS",
+    "anomalies",
+    "cutting_torque",
+    "hole_table",
+    "jsonable",
+    "records",
+    "trends",
+]
+
+DETECTORS: tuple[str, ...] = ("physics", "envelope", "spectral", "tapping")
+"""Detectors the anomaly view offers (:mod:`cnctwin.usecases.anomaly`)."""
+
+
+def jsonable(v: Any) -> Any:
+    """A value JSON can hold: NaN/inf -> None, numpy scalars -> Python, times -> ISO text."""
+    if v is None or v is pd.NA or v is pd.NaT:
+        return None
+    if isinstance(v, float | np.floating):
+        f = float(v)
+        return f if math.isfinite(f) else None
+    if isinstance(v, bool | np.bool_):
+        return bool(v)
+    if isinstance(v, int | np.integer):
+        return int(v)
+    if isinstance(v, pd.Timestamp):
+        return v.isoformat()
+    if isinstance(v, dict):
+        return {str(k): jsonable(x) for k, x in v.items()}
+    if isinstance(v, list | tuple | np.ndarray):
+        return [jsonable(x) for x in v]
+    return v if isinstance(v, str) else str(v)
+
+
+def records(df: pd.DataFrame) -> list[dict[str, Any]]:
+    """Rows of ``df`` as JSON-ready dicts."""
+    cols = [str(c) for c in df.columns]
+    return [{c: jsonable(v) for c, v in zip(cols, row, strict=True)}
+            for row in df.itertuples(index=False, name=None)]
+
+
+def hole_table(recs: Sequence[Recording], *, model: SpindleModel | None,
+               set_size: int = 6) -> pd.DataFrame:
+    """The per-hole record of recordings in time order (:func:`hole_records`).
+
+    With ``model`` the torque columns use the calibrated spindle twin; without it the
+    library's default (thesis parameter set, noted in ``attrs["spindle_model"]``).
+    """
+    from cnctwin.usecases.holes import hole_records
+
+    return hole_records(list(recs), model=model, set_size=set_size)
+
+
+def trends(holes: pd.DataFrame, recs: Sequence[Recording], *, set_size: int = 6,
+           baseline: int = 30, window: int = 15) -> dict[str, Any]:
+    """Per-hole trends: torque and current with moving averages, relative increase (wear
+    indicator), within-set pattern, tool temperature, hole quality.
+
+    Each part that cannot be computed is replaced by a note saying why (too few holes, no
+    camera channel, ...), never by invented values.
+    """
+    from cnctwin.usecases.wear import moving_average, relative_increase, set_pattern
+
+    out: dict[str, Any] = {"n_holes": len(holes), "notes": []}
+    notes: list[str] = out["notes"]
+    if holes.empty:
+        notes.append("no hole in this recording (no plunge of the Z axis)")
+        return out
+    torque = holes["torque_mean_nm"].to_numpy(dtype=np.float64)
+    current = holes["current_mean_a"].to_numpy(dtype=np.float64)
+    out["hole"] = holes["hole"].to_numpy().tolist()
+    out["torque_mean_nm"] = torque
+    out["torque_ma_nm"] = moving_average(torque, window=window)
+    out["current_mean_a"] = current
+    out["current_ma_a"] = moving_average(current, window=window)
+    out["energy_j"] = holes["energy_j"].to_numpy(dtype=np.float64)
+    base = min(baseline, len(holes))
+    try:
+        out["relative_increase"] = relative_increase(
+            torque, baseline=base, set_size=set_size if len(holes) >= set_size else None)
+        out["baseline_holes"] = base
+    except CnctwinError as exc:
+        notes.append(f"relative increase not computed: {exc}")
+    if len(holes) >= set_size:
+        pat = set_pattern(torque, set_size=set_size)
+        out["set_pattern"] = {"position_mean": pat.position_mean, "n_sets": pat.n_sets,
+                              "rise_last_vs_first": pat.rise_last_vs_first}
+    else:
+        notes.append(f"within-set pattern needs one complete set of {set_size} holes")
+    out["temperature"] = _temperature(holes, recs, notes)
+    out["quality"] = _quality(holes, recs, notes)
+    return {k: jsonable(v) if k not in ("notes",) else v for k, v in out.items()}
+
+
+def _temperature(holes: pd.DataFrame, recs: Sequence[Recording],
+                 notes: list[str]) -> dict[str, Any] | None:
+    from cnctwin.usecases.thermal import ToolThermalModel, merge_camera
+
+    cams = [r.external["thermal_camera"] for r in recs if "thermal_camera" in r.external]
+    if not cams:
+        notes.append("tool temperature: no thermal-camera channel to calibrate the soft sensor "
+                     "(ToolThermalModel needs camera readings)")
+        return None
+    if len(cams) != len(recs):
+        notes.append("tool temperature: only some recordings have a camera channel; not shown")
+        return None
+    try:
+        cam_df = pd.concat([c.data for c in cams])
+        merged = merge_camera(holes, cam_df if len(cams) > 1 else cams[0])
+        camera = merged["camera_temperature_c"].to_numpy(dtype=np.float64)
+        model = ToolThermalModel().fit(merged, camera, fit_ambient=True)
+        return {"hole": merged["hole"].to_numpy(), "camera_c": camera,
+                "predicted_c": model.predict(merged), "tau_s": model.tau_s,
+                "c_eff_j_per_k": model.c_eff_j_per_k, "ambient_c": model.ambient_c,
+                "rmse_c": model.rmse_c, "n_points": model.n_points}
+    except CnctwinError as exc:
+        notes.append(f"tool temperature not computed: {exc}")
+        return None
+
+
+def _quality(holes: pd.DataFrame, recs: Sequence[Recording],
+             notes: list[str]) -> list[dict[str, Any]] | None:
+    from cnctwin.usecases.quality import hole_quality
+
+    parts = []
+    for r in recs:
+        c0, c1 = int(r.cycles[0]), int(r.cycles[-1])
+        mine = holes[(holes["cut_start_cycle"] >= c0) & (holes["cut_end_cycle"] <= c1)]
+        if mine.empty:
+            continue
+        try:
+            parts.append(hole_quality(r, mine))
+        except CnctwinError as exc:
+            notes.append(f"hole quality not computed: {exc}")
+            return None
+    return records(pd.concat(parts, ignore_index=True)) if parts else None
+
+
+def cutting_torque(rec: Recording, model: SpindleModel, *, spindle: str = "SP1",
+                   ) -> tuple[NDArray[np.float64], str]:
+    """Cutting torque of every HF sample from the calibrated spindle twin [Nm].
+
+    ``SpindleModel.cutting_torque`` is applied to each gap-free run of cycles separately so
+    the inertia term's dOmega/dt is never taken across missing cycles. Returns the torque and
+    the speed source used.
+    """
+    from cnctwin.analysis.segments import spindle_speed_rpm
+
+    cur_col = f"CURRENT|{spindle}"
+    if not rec.has(cur_col):
+        raise ConfigError(f"cutting torque needs {cur_col}; this recording has no spindle "
+                          "current")
+    current = rec.hf[cur_col].to_numpy(dtype=np.float64)
+    speed, source = spindle_speed_rpm(rec, spindle)
+    out = np.empty(current.size)
+    cyc = rec.cycles
+    starts = [0] + [int(np.searchsorted(cyc, g.before_cycle)) for g in find_gaps(cyc)]
+    ends = [*starts[1:], cyc.size]
+    for a, b in zip(starts, ends, strict=True):
+        with np.errstate(invalid="ignore"):
+            out[a:b] = model.cutting_torque(current[a:b], speed[a:b], fs_hz=rec.fs_hz)
+    return out, source
+
+
+def anomalies(recs: Sequence[Recording], holes: pd.DataFrame, *, detector: str = "physics",
+              learn_s: float | None = None, threshold: float = 0.0) -> dict[str, Any]:
+    """Replay recordings through a detector: teach on the first part, score the rest.
+
+    The same steps as ``cnctwin anomalies``: :func:`~cnctwin.usecases.anomaly.signal_stream`
+    then :func:`~cnctwin.usecases.anomaly.backtest`; the scores are those of a clone taught on
+    the same rows.
+    """
+    from cnctwin.usecases.anomaly import (
+        Detector,
+        EnvelopeDetector,
+        PhysicsResidualDetector,
+        SpectralDetector,
+        TappingDetector,
+        backtest,
+        signal_stream,
+    )
+
+    if detector not in DETECTORS:
+        raise ConfigError(f"detector {detector!r} is not known; use one of "
+                          f"{', '.join(DETECTORS)}")
+    have_holes = not holes.empty
+    if detector == "envelope" and not have_holes:
+        raise ConfigError("the envelope detector needs holes (progress through each cut); "
+                          "this recording has none: use detector=physics")
+    data = signal_stream(list(recs), holes if have_holes else None,
+                         cutting_only=have_holes and detector in ("envelope", "physics",
+                                                                  "spectral"))
+    if data.empty:
+        raise ConfigError("nothing to score: no cutting samples in the recordings")
+    fs = recs[0].fs_hz
+    makers: dict[str, Callable[[], Detector]] = {
+        "envelope": EnvelopeDetector, "physics": PhysicsResidualDetector,
+        "tapping": TappingDetector,
+        "spectral": lambda: SpectralDetector(fs_hz=fs, band_hz=(0.04 * fs, 0.48 * fs)),
+    }
+    det = makers[detector]()
+    t = data["time_s"].to_numpy(dtype=np.float64)
+    learn_until = learn_s if learn_s is not None else t[0] + (t[-1] - t[0]) / 3.0
+    res = backtest(det, data, time_s=t, learn_until_s=learn_until, threshold=threshold)
+    clone = det.clone()
+    learn = t < learn_until
+    clone.learn_many(data.loc[learn])
+    scores = clone.score_many(data.loc[~learn])
+    hole_at = (np.interp(res.alarms_s, t, data["hole"].to_numpy(dtype=np.float64))
+               if res.alarms_s else np.empty(0))
+    return {
+        "detector": repr(det), "learn_until_s": learn_until, "threshold": threshold,
+        "monitored_s": res.monitored_s, "alarms_s": res.alarms_s,
+        "alarm_holes": np.round(hole_at).astype(int).tolist(),
+        "score_time_s": t[~learn], "score": np.asarray(scores, dtype=np.float64),
+        "issues": list(data.attrs.get("issues", [])),
+    }

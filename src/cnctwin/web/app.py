@@ -1,0 +1,440 @@
+"""The dashboard application: :func:`create_app` builds a FastAPI app over a store and files.
+
+No global state: everything an app serves hangs off the :class:`Dashboard` made by
+:func:`create_app`, so tests and several dashboards in one process do not share anything.
+
+JSON API (every error is ``{"detail": "<what is wrong and what to do>"}``):
+
+=========================================  ===================================================
+``GET /api/recordings``                    summaries with signal-quality accounting
+``GET /api/machines``                      the fleet: recordings per machine, last activity
+``GET /api/recordings/{id}``               one summary plus its signals, units and issues
+``GET /api/recordings/{id}/signals/{sig}``  ``?px=&start_s=&end_s=``: min/max envelope
+``GET /api/recordings/{id}/holes``         per-hole record (``cnctwin.usecases.holes``)
+``GET /api/recordings/{id}/trends``        torque/current trends, wear indicator, temperature,
+                                           hole quality
+``GET /api/recordings/{id}/anomalies``     ``?detector=``: replay through a detector
+``GET /api/machines/{m}/holes``, ``/trends``  the same over all recordings of a machine
+``GET /api/live/status``, ``/api/live/stream``  edge-runtime status and its results as SSE
+=========================================  ===================================================
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import os
+import threading
+from collections.abc import AsyncIterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import orjson
+import pandas as pd
+from numpy.typing import NDArray
+
+from cnctwin.exceptions import CnctwinError, ConfigError, SignalNotFoundError, StoreError
+from cnctwin.recording import Recording
+from cnctwin.spindle import SpindleModel
+from cnctwin.web import analyses, pages
+from cnctwin.web.decimate import envelope_decimate
+from cnctwin.web.live import LiveSource
+from cnctwin.web.sources import Catalog, Entry
+
+__all__ = ["DERIVED_TORQUE", "Dashboard", "create_app", "plot_payload"]
+
+DERIVED_TORQUE = "twin.cutting_torque_nm"
+"""Name of the derived signal: cutting torque of the calibrated spindle twin [Nm]."""
+
+STATIC_DIR = Path(__file__).parent / "static"
+MAX_PX = 20_000
+
+
+def _plotly_js() -> Path:
+    """The plotly.js bundle shipped inside the ``plotly`` Python package (served locally)."""
+    try:
+        import plotly
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ConfigError("the dashboard needs plotly: pip install 'cnctwin[web]'") from exc
+    p = Path(plotly.__file__).parent / "package_data" / "plotly.min.js"
+    if not p.exists():  # pragma: no cover - depends on the plotly build
+        raise ConfigError(f"plotly is installed but {p} is missing; reinstall plotly")
+    return p
+
+
+def plot_payload(time_s: NDArray[np.float64], cycles: NDArray[np.int64],
+                 values: NDArray[np.float64], *, px: int, start_s: float | None,
+                 end_s: float | None) -> dict[str, Any]:
+    """The plot data of one signal in ``[start_s, end_s]``: a min/max envelope per segment.
+
+    The range is split at counter gaps; each gap-free segment gets a share of the ``px``
+    buckets proportional to its samples (at least one) and the segments are joined by a
+    ``null`` so the plot shows the gap instead of a line across it. A range of up to
+    ``2 px`` samples is sent at full resolution (``exact``).
+    """
+    lo = 0 if start_s is None else int(np.searchsorted(time_s, start_s, side="left"))
+    hi = time_s.size if end_s is None else int(np.searchsorted(time_s, end_s, side="right"))
+    t, c, v = time_s[lo:hi], cycles[lo:hi], values[lo:hi]
+    n = int(t.size)
+    brk = (np.flatnonzero(np.diff(c) > 1) + 1) if n > 1 else np.empty(0, dtype=np.int64)
+    bounds = [0, *brk.tolist(), n]
+    xs: list[NDArray[np.float64]] = []
+    ys: list[NDArray[np.float64]] = []
+    exact = True
+    for a, b in itertools.pairwise(bounds):
+        if b <= a:
+            continue
+        share = max(1, round(px * (b - a) / n))
+        env = envelope_decimate(t[a:b], v[a:b], px=share)
+        exact &= env.exact
+        if xs:  # a null between segments: the gap is not drawn over
+            xs.append(np.array([t[a - 1] + 0.5 * (t[a] - t[a - 1])]))
+            ys.append(np.array([np.nan]))
+        xs.append(env.x)
+        ys.append(env.y)
+    x = np.concatenate(xs) if xs else np.empty(0)
+    y = np.concatenate(ys) if ys else np.empty(0)
+    finite = v[np.isfinite(v)] if n else v
+    return {"x": x, "y": y, "n_source": n, "n_points": int(x.size), "exact": bool(exact),
+            "n_gaps": int(brk.size), "px": px,
+            "start_s": float(t[0]) if n else None, "end_s": float(t[-1]) if n else None,
+            "min": float(finite.min()) if finite.size else None,
+            "max": float(finite.max()) if finite.size else None}
+
+
+@dataclass
+class Dashboard:
+    """Everything one dashboard app serves (held in ``app.state.dashboard``)."""
+
+    catalog: Catalog
+    model: SpindleModel | None = None
+    model_source: str = ""
+    live: LiveSource | None = None
+    title: str = "cnctwin"
+    _lock: threading.RLock = field(default_factory=threading.RLock)
+    _cache: dict[tuple[str, ...], Any] = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ helpers
+    def _cached(self, key: tuple[str, ...], make: Any) -> Any:
+        with self._lock:
+            if key not in self._cache:
+                self._cache[key] = make()
+            return self._cache[key]
+
+    def machines(self) -> list[dict[str, Any]]:
+        """The fleet: one row per machine over every recording that opened."""
+        rows: dict[str, dict[str, Any]] = {}
+        for e in self.catalog.entries():
+            if e.error:
+                continue
+            m = rows.setdefault(e.machine or "?", {
+                "machine": e.machine or "?", "n_recordings": 0, "duration_s": 0.0,
+                "n_cycles": 0, "n_gaps": 0, "missing_s": 0.0, "partial": 0,
+                "first_activity": None, "last_activity": None, "recordings": []})
+            m["n_recordings"] += 1
+            m["duration_s"] += e.duration_s
+            m["n_cycles"] += e.n_cycles
+            m["recordings"].append(e.id)
+            if e.quality is not None:
+                m["n_gaps"] += e.quality.n_gaps
+                m["missing_s"] += e.quality.missing_s
+                m["partial"] += int(e.quality.partial)
+            if e.end_time is not None and (m["last_activity"] is None
+                                           or e.end_time > m["last_activity"]):
+                m["last_activity"] = e.end_time
+            if e.start_time is not None and (m["first_activity"] is None
+                                             or e.start_time < m["first_activity"]):
+                m["first_activity"] = e.start_time
+        return [analyses.jsonable(r) for r in sorted(rows.values(), key=lambda r: r["machine"])]
+
+    def machine_ids(self, machine: str) -> list[str]:
+        """Recording ids of one machine (raises naming the machines there are)."""
+        ids = [e.id for e in self.catalog.entries() if not e.error and
+               (e.machine or "?") == machine]
+        if not ids:
+            names = sorted({e.machine or "?" for e in self.catalog.entries() if not e.error})
+            raise StoreError(f"no machine {machine!r} in this dashboard; machines: "
+                             f"{', '.join(names) or 'none'}")
+        return ids
+
+    def recordings(self, ids: Sequence[str]) -> list[Recording]:
+        """Loaded recordings (cached in the catalog)."""
+        return [self.catalog.recording(i) for i in ids]
+
+    def holes(self, ids: Sequence[str]) -> pd.DataFrame:
+        """Per-hole record of the recordings ``ids`` (time order), cached."""
+        return self._cached(("holes", *ids), lambda: analyses.hole_table(
+            self.recordings(ids), model=self.model))
+
+    def holes_payload(self, ids: Sequence[str]) -> dict[str, Any]:
+        holes = self.holes(ids)
+        return {"ids": list(ids), "n_holes": len(holes), "columns": [str(c) for c in holes.columns],
+                "rows": analyses.records(holes),
+                "spindle_model": str(holes.attrs.get("spindle_model", "")),
+                "calibrated": self.model is not None, "model_source": self.model_source,
+                "thrust_source": str(holes.attrs.get("thrust_source", "")),
+                "issues": [str(i) for i in holes.attrs.get("issues", [])]}
+
+    def trends_payload(self, ids: Sequence[str]) -> dict[str, Any]:
+        holes = self.holes(ids)
+        return self._cached(("trends", *ids), lambda: analyses.trends(
+            holes, self.recordings(ids)))
+
+    def signal_names(self, entry: Entry) -> list[str]:
+        names = list(entry.columns)
+        if self.model is not None and "CURRENT|SP1" in names:
+            names.append(DERIVED_TORQUE)
+        return names
+
+    def signal_payload(self, entry_id: str, name: str, *, px: int, start_s: float | None,
+                       end_s: float | None) -> dict[str, Any]:
+        if not 1 <= px <= MAX_PX:
+            raise ConfigError(f"px must be between 1 and {MAX_PX} (the plot width in pixels), "
+                              f"not {px}")
+        if name == DERIVED_TORQUE:
+            if self.model is None:
+                raise SignalNotFoundError(
+                    f"signal {name!r} needs a calibrated spindle model: start the dashboard "
+                    "with --model spindle.json (see docs/edge.md, save_spindle_model)")
+            rec = self.catalog.recording(entry_id)
+            torque, source = self._cached(
+                ("torque", entry_id), lambda: analyses.cutting_torque(rec, self.model))
+            cycles = rec.cycles
+            time_s = rec.time_s
+            unit, values = "Nm", torque
+            note = f"SpindleModel.cutting_torque ({self.model_source or 'calibrated model'}; " \
+                   f"speed from {source})"
+        else:
+            sig = self.catalog.signal(entry_id, name)
+            cycles, time_s, values, unit, note = (sig.cycles, sig.time_s, sig.values, sig.unit,
+                                                  "")
+        out = plot_payload(time_s, cycles, values, px=px, start_s=start_s, end_s=end_s)
+        out.update({"recording": entry_id, "signal": name, "unit": unit, "note": note,
+                    "total_s": float(time_s[-1]) if time_s.size else 0.0})
+        return out
+
+    def anomalies_payload(self, ids: Sequence[str], detector: str,
+                          learn_s: float | None, px: int) -> dict[str, Any]:
+        def make() -> dict[str, Any]:
+            res = analyses.anomalies(self.recordings(ids), self.holes(ids), detector=detector,
+                                     learn_s=learn_s)
+            t = np.asarray(res.pop("score_time_s"), dtype=np.float64)
+            s = np.asarray(res.pop("score"), dtype=np.float64)
+            env = envelope_decimate(t, s, px=px)
+            res.update({"score_x": env.x, "score_y": env.y, "score_exact": env.exact,
+                        "n_scored": int(t.size)})
+            return res
+
+        key = ("anomalies", detector, str(learn_s), str(px), *ids)
+        return self._cached(key, make)
+
+
+def _json_response_class() -> Any:
+    from starlette.responses import Response
+
+    class OrjsonResponse(Response):
+        media_type = "application/json"
+
+        def render(self, content: Any) -> bytes:
+            return orjson.dumps(content, option=orjson.OPT_SERIALIZE_NUMPY
+                                | orjson.OPT_NON_STR_KEYS)
+
+    return OrjsonResponse
+
+
+def create_app(
+    *,
+    store_url: str | None = None,
+    recordings: Sequence[str | os.PathLike[str]] = (),
+    model: SpindleModel | str | os.PathLike[str] | None = None,
+    live: str | os.PathLike[str] | None = None,
+    title: str = "cnctwin",
+    cache_size: int = 4,
+    salvage: bool = False,
+) -> Any:
+    """Build the dashboard app.
+
+    Parameters
+    ----------
+    store_url : str, optional
+        A cnctwin store: a directory (DuckDB + Parquet) or a ``postgresql://`` URL. It must
+        exist (``cnctwin ingest FILE --store URL`` makes one).
+    recordings : sequence of path-like
+        Recording files (any format ``cnctwin.read_recording`` opens) or directories of them.
+    model : SpindleModel or path-like, optional
+        Calibrated spindle twin (or its JSON/TOML file, ``cnctwin.edge.save_spindle_model``)
+        for the cutting torque; without it the hole torques use the library default
+        (thesis parameters, flagged "not calibrated") and no torque signal is offered.
+    live : path-like, optional
+        ``--out`` directory of a ``cnctwin edge run`` (or its ``results.jsonl``) to follow
+        on the live page.
+    title : str, default 'cnctwin'
+        Shown in the page header.
+    cache_size : int, default 4
+        Whole recordings kept in memory.
+    salvage : bool, default False
+        Read damaged files with ``salvage=True`` (kept, flagged partial).
+
+    Returns
+    -------
+    fastapi.FastAPI
+        ``app.state.dashboard`` holds the :class:`Dashboard`.
+
+    Raises
+    ------
+    StoreError, ConfigError
+        If the store or a path does not exist (the message says what to do).
+    """
+    try:
+        from fastapi import FastAPI, Query, Request
+        from fastapi.responses import FileResponse, HTMLResponse, StreamingResponse
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ConfigError("the dashboard needs FastAPI: pip install 'cnctwin[web]'") from exc
+
+    if store_url is None and not recordings:
+        raise ConfigError("nothing to show: give a store (--store PATH_OR_URL) and/or recording "
+                          "files or directories (--recording PATH)")
+    spindle: SpindleModel | None
+    model_source = ""
+    if model is None or isinstance(model, SpindleModel):
+        spindle = model
+        model_source = "SpindleModel given" if model is not None else ""
+    else:
+        from cnctwin.edge.model_file import load_spindle_model
+
+        spindle = load_spindle_model(model)
+        model_source = str(model)
+    dash = Dashboard(
+        catalog=Catalog(store_url=store_url, recordings=recordings, cache_size=cache_size,
+                        salvage=salvage),
+        model=spindle, model_source=model_source,
+        live=LiveSource(live) if live is not None else None, title=title)
+    plotly_js = _plotly_js()
+    JsonResponse = _json_response_class()
+    @contextlib.asynccontextmanager
+    async def lifespan(_: Any) -> AsyncIterator[None]:
+        yield
+        dash.catalog.close()
+
+    app = FastAPI(title=f"{title} dashboard", default_response_class=JsonResponse,
+                  docs_url="/api/docs", redoc_url=None, lifespan=lifespan)
+    app.state.dashboard = dash
+
+    @app.exception_handler(CnctwinError)
+    async def _cnctwin_error(request: Request, exc: CnctwinError) -> Any:
+        status = 404 if isinstance(exc, SignalNotFoundError | StoreError) else 422
+        text = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
+        return JsonResponse({"detail": str(text)}, status_code=status)
+
+    # ------------------------------------------------------------------ static
+    @app.get("/static/plotly.min.js", include_in_schema=False)
+    def _plotly() -> Any:
+        return FileResponse(plotly_js, media_type="application/javascript",
+                            headers={"Cache-Control": "max-age=86400"})
+
+    @app.get("/static/{name}", include_in_schema=False)
+    def _static(name: str) -> Any:
+        p = STATIC_DIR / name
+        if "/" in name or name.startswith(".") or not p.is_file():
+            raise StoreError(f"no static file {name!r}")
+        media = {".js": "application/javascript", ".css": "text/css"}.get(p.suffix)
+        return FileResponse(p, media_type=media)
+
+    # ------------------------------------------------------------------ pages
+    @app.get("/", response_class=HTMLResponse, include_in_schema=False)
+    def _overview() -> Any:
+        return HTMLResponse(pages.overview_page(dash.title, dash.machines(),
+                                                dash.catalog.entries(), live=dash.live is not None,
+                                                store_url=dash.catalog.store_url))
+
+    @app.get("/recordings/{entry_id}", response_class=HTMLResponse, include_in_schema=False)
+    def _recording_page(entry_id: str) -> Any:
+        e = dash.catalog.entry(entry_id)
+        return HTMLResponse(pages.recording_page(dash.title, e, dash.signal_names(e),
+                                                 calibrated=dash.model is not None))
+
+    @app.get("/machines/{machine}", response_class=HTMLResponse, include_in_schema=False)
+    def _machine_page(machine: str) -> Any:
+        ids = dash.machine_ids(machine)
+        return HTMLResponse(pages.machine_page(dash.title, machine,
+                                               [dash.catalog.entry(i) for i in ids],
+                                               calibrated=dash.model is not None))
+
+    @app.get("/live", response_class=HTMLResponse, include_in_schema=False)
+    def _live_page() -> Any:
+        src = dash.live
+        return HTMLResponse(pages.live_page(dash.title, str(src.results) if src else None))
+
+    # ------------------------------------------------------------------ API
+    @app.get("/api/recordings")
+    def api_recordings() -> Any:
+        return JsonResponse([e.to_dict() for e in dash.catalog.entries()])
+
+    @app.get("/api/machines")
+    def api_machines() -> Any:
+        return JsonResponse(dash.machines())
+
+    @app.get("/api/recordings/{entry_id}")
+    def api_recording(entry_id: str) -> Any:
+        e = dash.catalog.entry(entry_id)
+        d = e.to_dict()
+        d["signals"] = dash.signal_names(e)
+        d["units"] = {**e.units, **({DERIVED_TORQUE: "Nm"} if dash.model else {})}
+        return JsonResponse(analyses.jsonable(d))
+
+    @app.get("/api/recordings/{entry_id}/signals/{name}")
+    def api_signal(entry_id: str, name: str, px: int = Query(1500),
+                   start_s: float | None = None, end_s: float | None = None) -> Any:
+        return JsonResponse(dash.signal_payload(entry_id, name, px=px, start_s=start_s,
+                                                end_s=end_s))
+
+    @app.get("/api/recordings/{entry_id}/holes")
+    def api_holes(entry_id: str) -> Any:
+        dash.catalog.entry(entry_id)
+        return JsonResponse(dash.holes_payload([entry_id]))
+
+    @app.get("/api/recordings/{entry_id}/trends")
+    def api_trends(entry_id: str) -> Any:
+        dash.catalog.entry(entry_id)
+        return JsonResponse(dash.trends_payload([entry_id]))
+
+    @app.get("/api/recordings/{entry_id}/anomalies")
+    def api_anomalies(entry_id: str, detector: str = "physics",
+                      learn_s: float | None = None, px: int = 1500) -> Any:
+        dash.catalog.entry(entry_id)
+        return JsonResponse(dash.anomalies_payload([entry_id], detector, learn_s, px))
+
+    @app.get("/api/machines/{machine}/holes")
+    def api_machine_holes(machine: str) -> Any:
+        return JsonResponse(dash.holes_payload(dash.machine_ids(machine)))
+
+    @app.get("/api/machines/{machine}/trends")
+    def api_machine_trends(machine: str) -> Any:
+        return JsonResponse(dash.trends_payload(dash.machine_ids(machine)))
+
+    @app.get("/api/live/status")
+    def api_live_status() -> Any:
+        if dash.live is None:
+            raise ConfigError("no live source: start the dashboard with --live DIR (the --out "
+                              "directory of `cnctwin edge run`)")
+        return JsonResponse(dash.live.status())
+
+    @app.get("/api/live/stream")
+    async def api_live_stream(from_start: bool = False, limit: int | None = None,
+                              kinds: str | None = None) -> Any:
+        if dash.live is None:
+            raise ConfigError("no live source: start the dashboard with --live DIR (the --out "
+                              "directory of `cnctwin edge run`)")
+        wanted = {k.strip() for k in kinds.split(",")} if kinds else None
+        gen = dash.live.events(from_start=from_start, limit=limit, kinds=wanted)
+        return StreamingResponse(gen, media_type="text/event-stream",
+                                 headers={"Cache-Control": "no-cache",
+                                          "X-Accel-Buffering": "no"})
+
+    @app.get("/healthz", include_in_schema=False)
+    def _health() -> Any:
+        return JsonResponse({"ok": True, "recordings": len(dash.catalog.entries())})
+
+    return app

@@ -1,0 +1,144 @@
+"""Live view: the edge runtime's ``results.jsonl`` tailed into Server-Sent Events.
+
+``cnctwin edge run ... --out DIR`` appends every result message (``torque``, ``hole_start``,
+``hole``, ``alarm``, ``gap``, ``status``; docs/edge.md) as one JSON line to
+``DIR/results.jsonl`` and rewrites ``DIR/status.json`` every second. The dashboard follows that
+file like ``tail -f``: each complete new line becomes one SSE event named after the message
+kind, with the line as its data. A partly written last line waits for its newline; a file that
+shrinks (a new run) is followed from its start again.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+from cnctwin.exceptions import ConfigError
+
+__all__ = ["LiveSource", "sse_event", "tail_lines"]
+
+
+def sse_event(data: str, *, event: str | None = None, event_id: str | None = None) -> str:
+    """One Server-Sent Event (``event:``/``id:``/``data:`` lines, blank line)."""
+    head = ""
+    if event:
+        head += f"event: {event}\n"
+    if event_id is not None:
+        head += f"id: {event_id}\n"
+    body = "".join(f"data: {line}\n" for line in data.splitlines() or [""])
+    return head + body + "\n"
+
+
+async def tail_lines(path: Path, *, from_start: bool, poll_s: float = 0.2,
+                     ) -> AsyncIterator[str]:
+    """Complete lines appended to ``path``, forever (from its start or from its end).
+
+    A missing file is waited for; a file that shrinks is read again from the start.
+    """
+    pos = 0
+    started = False
+    buf = b""
+    while True:
+        try:
+            size = os.stat(path).st_size
+        except FileNotFoundError:
+            size = -1
+        if size >= 0:
+            if not started:
+                pos = 0 if from_start else size
+                started = True
+            if size < pos:  # truncated or replaced: a new run
+                pos, buf = 0, b""
+            if size > pos:
+                with path.open("rb") as f:
+                    f.seek(pos)
+                    chunk = f.read(size - pos)
+                pos += len(chunk)
+                buf += chunk
+                *lines, buf = buf.split(b"\n")
+                for line in lines:
+                    if line.strip():
+                        yield line.decode("utf-8", errors="replace")
+                continue
+        elif not started:
+            started = True  # created later: read it from its start
+            from_start = True
+        await asyncio.sleep(poll_s)
+
+
+class LiveSource:
+    """The state directory of an edge run (``cnctwin edge run --out DIR``).
+
+    Parameters
+    ----------
+    path : path-like
+        The directory (holding ``results.jsonl``/``status.json``) or the JSON lines file.
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        p = Path(path)
+        if p.suffix.lower() == ".jsonl":
+            self.results = p
+            self.directory = p.parent
+        else:
+            self.directory = p
+            self.results = p / "results.jsonl"
+        if not self.directory.exists():
+            raise ConfigError(f"live directory {self.directory} does not exist; give the --out "
+                              "DIR of `cnctwin edge run` (it may be started after the dashboard, "
+                              "but the directory must exist)")
+
+    def status(self) -> dict[str, Any]:
+        """The last ``status.json`` of the run (empty with a note when there is none yet)."""
+        f = self.directory / "status.json"
+        try:
+            doc: dict[str, Any] = json.loads(f.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            return {"note": f"no {f.name} yet in {self.directory} (is `cnctwin edge run` "
+                            "running with this --out?)", "results": str(self.results)}
+        except json.JSONDecodeError as exc:  # written atomically; still say what happened
+            return {"note": f"{f} is not valid JSON: {exc}"}
+        doc["results"] = str(self.results)
+        return doc
+
+    async def events(self, *, from_start: bool = False, limit: int | None = None,
+                     kinds: set[str] | None = None, poll_s: float = 0.2,
+                     heartbeat_s: float = 15.0) -> AsyncIterator[str]:
+        """SSE events of the new result lines (all kinds, or only ``kinds``).
+
+        Each event is named after the message ``kind`` and carries the line as data; its id is
+        the message ``seq``. ``limit`` ends the stream after that many events (tests, one-shot
+        clients). A comment line is sent every ``heartbeat_s`` without data so proxies keep
+        the connection.
+        """
+        n = 0
+        lines = tail_lines(self.results, from_start=from_start, poll_s=poll_s)
+        pending: asyncio.Task[str] | None = None
+        try:
+            while limit is None or n < limit:
+                if pending is None:
+                    pending = asyncio.ensure_future(lines.__anext__())
+                done, _ = await asyncio.wait({pending}, timeout=heartbeat_s)
+                if not done:
+                    yield ": keep-alive\n\n"
+                    continue
+                line = pending.result()
+                pending = None
+                try:
+                    msg = json.loads(line)
+                    kind = str(msg.get("kind", "message"))
+                    seq = msg.get("seq")
+                except (json.JSONDecodeError, AttributeError):
+                    kind, seq = "invalid", None
+                if kinds is not None and kind not in kinds:
+                    continue
+                n += 1
+                yield sse_event(line, event=kind, event_id=None if seq is None else str(seq))
+        finally:
+            if pending is not None:
+                pending.cancel()
+            await lines.aclose()  # type: ignore[attr-defined]

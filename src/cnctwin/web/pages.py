@@ -1,0 +1,239 @@
+"""Server-rendered HTML pages of the dashboard (no template engine, no build step).
+
+Each page is a small HTML document that loads ``/static/style.css``, ``/static/app.js`` and
+the locally served ``/static/plotly.min.js``; the tables that describe recordings are rendered
+here, the plots and the use-case tables are filled by ``app.js`` from the JSON API.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+import urllib.parse
+from collections.abc import Sequence
+from typing import Any
+
+from cnctwin.signals import parse_column
+from cnctwin.web.sources import Entry
+
+__all__ = ["live_page", "machine_page", "overview_page", "recording_page"]
+
+
+def _e(v: object) -> str:
+    return html.escape("" if v is None else str(v))
+
+
+def _q(v: str) -> str:
+    return urllib.parse.quote(v, safe="")
+
+
+def _num(v: float | None, fmt: str = "{:.4g}", unit: str = "") -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "–"
+    return fmt.format(v) + (f" {unit}" if unit else "")
+
+
+def _time(v: Any) -> str:
+    if v is None:
+        return "–"
+    text = v.isoformat() if hasattr(v, "isoformat") else str(v)
+    return _e(text.replace("+00:00", "Z"))
+
+
+def _page(title: str, body: str, *, page: str, config: dict[str, Any] | None = None,
+          plotly: bool = True) -> str:
+    cfg = json.dumps(config or {}).replace("</", "<\\/")
+    scripts = '<script src="/static/plotly.min.js"></script>\n' if plotly else ""
+    return f"""<!doctype html>
+<html lang="en"><head><meta charset="utf-8">
+<meta name="viewport" content="width=device-width, initial-scale=1">
+<title>{_e(title)}</title>
+<link rel="stylesheet" href="/static/style.css">
+{scripts}<script src="/static/app.js"></script>
+</head><body data-page="{_e(page)}">
+<header><a class="brand" href="/">cnctwin</a>
+<nav><a href="/">fleet</a> <a href="/live">live</a> <a href="/api/docs">API</a></nav></header>
+<main>
+{body}
+</main>
+<script type="application/json" id="cfg">{cfg}</script>
+<script>document.addEventListener("DOMContentLoaded", () => cnctwin.start());</script>
+</body></html>
+"""
+
+
+def _gaps(n: int, missing_s: float) -> str:
+    return f"{n} ({missing_s:.3g} s)" if n else "0"
+
+
+def _quality_cells(e: Entry) -> str:
+    q = e.quality
+    if q is None:
+        return "<td colspan=6>–</td>"
+    gaps = _gaps(q.n_gaps, q.missing_s)
+    flag = ' class="warn"' if q.coverage < 1 or q.partial else ""
+    return (f"<td>{_num(q.nominal_rate_hz, '{:g}', 'Hz')}</td>"
+            f"<td{flag}>{_num(q.effective_rate_hz, '{:.4g}', 'Hz')}</td>"
+            f"<td{flag}>{gaps}</td>"
+            f"<td>{_num(q.anchor_jitter_ms, '{:.3g}', 'ms')}</td>"
+            f"<td{' class=warn' if q.partial else ''}>{'partial' if q.partial else 'no'}</td>"
+            f"<td title=\"{_e(chr(10).join(e.issues))}\">{q.n_issues}</td>")
+
+
+def overview_page(title: str, machines: Sequence[dict[str, Any]], entries: Sequence[Entry], *,
+                  live: bool, store_url: str | None) -> str:
+    """Fleet and recordings with duration, rate, gaps, jitter, partial flags, last activity."""
+    m_rows = "".join(
+        f"<tr><td><a href=\"/machines/{_q(m['machine'])}\">{_e(m['machine'])}</a></td>"
+        f"<td>{m['n_recordings']}</td><td>{_num(m['duration_s'], '{:.1f}', 's')}</td>"
+        f"<td>{m['n_cycles']}</td><td>{_gaps(m['n_gaps'], m['missing_s'])}</td>"
+        f"<td>{m['partial']}</td><td>{_time(m['last_activity'])}</td></tr>"
+        for m in machines)
+    r_rows = []
+    for e in entries:
+        if e.error:
+            r_rows.append(f"<tr class=\"error\"><td>{_e(e.id)}</td><td colspan=12>"
+                          f"{_e(e.label)}: cannot be read: {_e(e.error)}</td></tr>")
+            continue
+        r_rows.append(
+            f"<tr><td><a href=\"/recordings/{_q(e.id)}\">{_e(e.id)}</a></td>"
+            f"<td>{_e(e.label)}</td><td>{_e(e.machine or '?')}</td><td>{_e(e.source_format)}</td>"
+            f"<td>{_time(e.start_time)}</td><td>{_time(e.end_time)}</td>"
+            f"<td>{_num(e.duration_s, '{:.3f}', 's')}</td><td>{e.n_cycles}</td>"
+            f"{_quality_cells(e)}</tr>")
+    src = f"store {_e(store_url)}" if store_url else "recording files"
+    body = f"""
+<h1>{_e(title)}: fleet</h1>
+<p class="muted">Source: {src}. {len(entries)} recordings.
+{'<a href="/live">Live view</a> of the edge runtime.' if live else ''}</p>
+<h2>Machines</h2>
+<table id="machines"><thead><tr><th>machine</th><th>recordings</th><th>duration</th>
+<th>cycles</th><th>gaps (missing)</th><th>partial</th><th>last activity (UTC)</th></tr></thead>
+<tbody>{m_rows}</tbody></table>
+<h2>Recordings</h2>
+<p class="muted">Rate: nominal = 1 / cycle time; effective = recorded cycles per second of the
+counter span (gaps lower it). Jitter: scatter of the source's wall-clock stamps about the cycle
+counter. Issues: what the reader repaired (hover for the list).</p>
+<table id="recordings"><thead><tr><th>id</th><th>name</th><th>machine</th><th>format</th>
+<th>start (UTC)</th><th>end (UTC)</th><th>duration</th><th>cycles</th><th>rate</th>
+<th>effective</th><th>gaps (missing)</th><th>jitter</th><th>partial</th><th>issues</th></tr>
+</thead><tbody>{''.join(r_rows)}</tbody></table>
+"""
+    return _page(f"{title}: fleet", body, page="overview", plotly=False)
+
+
+def _signal_picker(signals: Sequence[str], units: dict[str, str]) -> str:
+    groups: dict[str, list[str]] = {}
+    for s in signals:
+        axis = parse_column(s)[1] if "|" in s else "twin (derived)"
+        groups.setdefault(axis or "-", []).append(s)
+    opts = []
+    for axis, names in groups.items():
+        items = "".join(f"<option value=\"{_e(n)}\">{_e(n)}"
+                        f"{' [' + _e(units[n]) + ']' if units.get(n) else ''}</option>"
+                        for n in names)
+        opts.append(f"<optgroup label=\"{_e(axis)}\">{items}</optgroup>")
+    return (f"<select id=\"signals\" multiple size=\"10\">{''.join(opts)}</select>")
+
+
+def _default_signals(signals: Sequence[str]) -> list[str]:
+    pref = ["CURRENT|SP1", "ENC_POS|Z1", "CMD_SPEED|SP1"]
+    chosen = [s for s in pref if s in signals][:2]
+    return chosen or list(signals[:1])
+
+
+def _use_case_sections(calibrated: bool) -> str:
+    torque = ("torque columns from the calibrated spindle model" if calibrated else
+              "torque columns from the library default (thesis parameters, <b>not calibrated "
+              "to this machine</b>; start with --model spindle.json)")
+    return f"""
+<section id="holes-section"><h2>Holes</h2>
+<p class="muted">Per-hole record (cnctwin.usecases.holes.hole_records); {torque}.</p>
+<div id="holes-info" class="muted">loading…</div>
+<div id="trend-plot" class="plot small"></div>
+<div id="temperature-plot" class="plot small"></div>
+<div class="scroll"><table id="holes-table"></table></div>
+<h3>Hole quality</h3><div class="scroll"><table id="quality-table"></table></div>
+<ul id="trend-notes" class="muted"></ul>
+</section>
+<section id="anomaly-section"><h2>Anomalies</h2>
+<p class="muted">Replay through a detector of cnctwin.usecases.anomaly: taught on the first third,
+scored on the rest.</p>
+<label>detector <select id="detector"><option>physics</option><option>envelope</option>
+<option>spectral</option><option>tapping</option></select></label>
+<button id="anomaly-run">run</button> <span id="anomaly-info" class="muted"></span>
+<div id="anomaly-plot" class="plot small"></div>
+</section>"""
+
+
+def recording_page(title: str, e: Entry, signals: Sequence[str], *, calibrated: bool) -> str:
+    """Summary, signal-quality figures, signal plot with server-side decimation, use cases."""
+    q = e.quality
+    qual = "" if q is None else f"""
+<dt>rate</dt><dd>{_num(q.nominal_rate_hz, '{:g}', 'Hz')} nominal,
+{_num(q.effective_rate_hz, '{:.5g}', 'Hz')} effective
+(coverage {_num(q.coverage * 100, '{:.3f}')} %)</dd>
+<dt>gaps</dt><dd>{q.n_gaps} ({q.missing_cycles} cycles, {_num(q.missing_s, '{:.4g}', 's')} missing;
+longest {_num(q.longest_gap_s, '{:.4g}', 's')}); wraps {q.wraps}</dd>
+<dt>clock</dt><dd>{q.n_anchors} wall-clock anchors,
+jitter {_num(q.anchor_jitter_ms, '{:.3g}', 'ms')}
+(max {_num(q.anchor_max_dev_ms, '{:.3g}', 'ms')})</dd>
+<dt>partial</dt><dd>{'<b class="warn">yes</b>' if q.partial else 'no'}</dd>"""
+    issues = "".join(f"<li>{_e(i)}</li>" for i in e.issues)
+    body = f"""
+<h1>{_e(e.label)} <span class="muted">{_e(e.id)}</span></h1>
+<dl class="summary"><dt>machine</dt><dd>{_e(e.machine or '?')}</dd>
+<dt>format</dt><dd>{_e(e.source_format)}</dd>
+<dt>time (UTC)</dt><dd>{_time(e.start_time)} – {_time(e.end_time)}</dd>
+<dt>duration</dt><dd>{_num(e.duration_s, '{:.3f}', 's')} ({e.n_cycles} cycles)</dd>{qual}
+</dl>
+<details><summary>{len(e.issues)} reader notes (meta.issues)</summary><ul>{issues}</ul></details>
+<section id="signal-section"><h2>Signals</h2>
+<div class="row"><div>{_signal_picker(signals, e.units)}
+<br><button id="plot-btn">plot</button> <button id="reset-btn">full range</button></div>
+<div class="grow"><div id="plot" class="plot"></div>
+<div id="plot-info" class="muted"></div></div></div>
+<p class="muted">Min/max envelope of each pixel column computed on the server: no peak is lost;
+zoom in (drag) to refetch the range, at full resolution once it fits the plot width.</p>
+</section>
+{_use_case_sections(calibrated)}
+"""
+    cfg = {"recording": e.id, "api": f"/api/recordings/{_q(e.id)}",
+           "signals": _default_signals(signals)}
+    return _page(f"{title}: {e.label}", body, page="recording", config=cfg)
+
+
+def machine_page(title: str, machine: str, entries: Sequence[Entry], *, calibrated: bool,
+                 ) -> str:
+    """Hole record and trends over every recording of one machine (time order)."""
+    rows = "".join(f"<li><a href=\"/recordings/{_q(e.id)}\">{_e(e.label)}</a> "
+                   f"{_time(e.start_time)}, {_num(e.duration_s, '{:.1f}', 's')}</li>"
+                   for e in entries)
+    body = f"""
+<h1>Machine {_e(machine)}</h1>
+<p class="muted">{len(entries)} recordings; the hole record continues across them in time
+order.</p><ul>{rows}</ul>
+{_use_case_sections(calibrated)}
+"""
+    cfg = {"machine": machine, "api": f"/api/machines/{_q(machine)}"}
+    return _page(f"{title}: {machine}", body, page="machine", config=cfg)
+
+
+def live_page(title: str, results: str | None) -> str:
+    """Edge-runtime status, rolling cutting torque, holes and alarms as they arrive (SSE)."""
+    if results is None:
+        body = ("<h1>Live</h1><p>No live source. Start the dashboard with "
+                "<code>--live DIR</code>, the <code>--out DIR</code> of <code>cnctwin edge "
+                "run</code>.</p>")
+        return _page(f"{title}: live", body, page="none", plotly=False)
+    body = f"""
+<h1>Live <span class="muted">{_e(results)}</span></h1>
+<div id="live-state" class="muted">connecting…</div>
+<dl id="live-status" class="summary"></dl>
+<div id="live-plot" class="plot"></div>
+<div class="row"><div class="grow"><h2>Holes</h2><div class="scroll">
+<table id="live-holes"></table></div></div>
+<div><h2>Alarms and gaps</h2><ul id="live-events"></ul></div></div>
+"""
+    return _page(f"{title}: live", body, page="live", config={"results": results})

@@ -1,0 +1,176 @@
+// cnctwin dashboard: small vanilla JS over the JSON API (no build step, no network access).
+"use strict";
+const cnctwin = (() => {
+  const cfg = () => JSON.parse(document.getElementById("cfg").textContent || "{}");
+  const $ = (id) => document.getElementById(id);
+  const esc = (v) => String(v ?? "–").replace(/[&<>"]/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;"}[c]));
+  const fmt = (v) => (typeof v === "number" ? (Number.isInteger(v) ? String(v) : v.toPrecision(5)) : esc(v));
+
+  async function getJSON(url) {
+    const r = await fetch(url);
+    const body = await r.json().catch(() => ({}));
+    if (!r.ok) throw new Error(body.detail || `${r.status} ${r.statusText}`);
+    return body;
+  }
+
+  function table(el, columns, rows, max) {
+    const shown = max ? rows.slice(0, max) : rows;
+    el.innerHTML = `<thead><tr>${columns.map((c) => `<th>${esc(c)}</th>`).join("")}</tr></thead><tbody>` +
+      shown.map((r) => `<tr>${columns.map((c) => `<td>${fmt(r[c])}</td>`).join("")}</tr>`).join("") + "</tbody>";
+  }
+
+  // ---------------------------------------------------------------- signal plot
+  function stackedLayout(traces, title) {
+    const n = traces.length, gap = 0.04, h = (1 - gap * (n - 1)) / n;
+    const layout = {margin: {l: 70, r: 20, t: 30, b: 40}, showlegend: false, title: {text: title, font: {size: 13}},
+      xaxis: {title: {text: "time since first cycle [s]"}}, hovermode: "x"};
+    traces.forEach((t, i) => {
+      const key = i === 0 ? "yaxis" : `yaxis${i + 1}`;
+      const lo = 1 - (i + 1) * h - i * gap;
+      layout[key] = {domain: [Math.max(0, lo), lo + h], title: {text: t.axisTitle, font: {size: 11}}};
+    });
+    return layout;
+  }
+
+  function recordingPage(c) {
+    const plot = $("plot"), info = $("plot-info"), sel = $("signals");
+    for (const o of sel.options) o.selected = c.signals.includes(o.value);
+    let range = null, busy = 0;
+    async function draw() {
+      const names = Array.from(sel.selectedOptions).map((o) => o.value);
+      if (!names.length) { info.textContent = "pick one or more signals"; return; }
+      const px = Math.max(200, Math.min(4000, Math.round(plot.clientWidth || 1000)));
+      const q = new URLSearchParams({px: String(px)});
+      if (range) { q.set("start_s", String(range[0])); q.set("end_s", String(range[1])); }
+      const mine = ++busy;
+      info.textContent = "loading…";
+      try {
+        const res = await Promise.all(names.map((n) => getJSON(`${c.api}/signals/${encodeURIComponent(n)}?${q}`)));
+        if (mine !== busy) return;
+        const traces = res.map((r, i) => ({x: r.x, y: r.y, type: "scatter", mode: "lines", name: r.signal,
+          line: {width: 1}, yaxis: i === 0 ? "y" : `y${i + 1}`, axisTitle: `${r.signal} [${r.unit}]`}));
+        const layout = stackedLayout(traces, "");
+        if (range) layout.xaxis.range = range;
+        await Plotly.react(plot, traces, layout, {responsive: true, displaylogo: false});
+        plot.dataset.points = String(res.reduce((a, r) => a + r.n_points, 0));
+        info.textContent = res.map((r) => `${r.signal}: ${r.n_points} of ${r.n_source} samples` +
+          (r.exact ? " (full resolution)" : ` (min/max of ${r.px} px)`) + (r.n_gaps ? `, ${r.n_gaps} gaps` : "") +
+          (r.note ? ` – ${r.note}` : "")).join("; ");
+      } catch (err) { info.textContent = `error: ${err.message}`; }
+    }
+    const hook = () => plot.on && plot.on("plotly_relayout", (ev) => {
+      if (ev["xaxis.range[0]"] !== undefined) { range = [ev["xaxis.range[0]"], ev["xaxis.range[1]"]]; draw(); }
+      else if (ev["xaxis.autorange"]) { range = null; draw(); }
+    });
+    $("plot-btn").onclick = () => draw();
+    $("reset-btn").onclick = () => { range = null; draw(); };
+    draw().then(hook);
+    useCases(c.api);
+  }
+
+  // ---------------------------------------------------------------- holes, trends, anomalies
+  const HOLE_COLS = ["hole", "set", "position_in_set", "start_s", "depth_mm", "speed_rpm", "current_mean_a",
+    "torque_first_nm", "torque_mean_nm", "energy_j", "thrust_proxy", "dev_x_maxabs_mm", "dev_y_maxabs_mm",
+    "dev_z_rms_mm", "tool", "cycle"];
+
+  async function useCases(api) {
+    const info = $("holes-info");
+    try {
+      const h = await getJSON(`${api}/holes`);
+      info.textContent = `${h.n_holes} holes; spindle model: ${h.spindle_model || "–"}; thrust: ${h.thrust_source || "–"}` +
+        (h.issues.length ? `; notes: ${h.issues.join(" | ")}` : "");
+      table($("holes-table"), HOLE_COLS.filter((c) => h.columns.includes(c)), h.rows, 500);
+      if (!h.n_holes) return;
+      const t = await getJSON(`${api}/trends`);
+      $("trend-notes").innerHTML = t.notes.map((n) => `<li>${esc(n)}</li>`).join("");
+      const traces = [
+        {x: t.hole, y: t.torque_mean_nm, mode: "markers", name: "torque per hole [Nm]", marker: {size: 4}},
+        {x: t.hole, y: t.torque_ma_nm, mode: "lines", name: "15-hole moving average [Nm]"},
+      ];
+      if (t.relative_increase) traces.push({x: t.hole, y: t.relative_increase.map((v) => v === null ? null : 100 * v),
+        mode: "lines", name: `increase over the first ${t.baseline_holes} holes [%]`, yaxis: "y2"});
+      await Plotly.react($("trend-plot"), traces, {margin: {l: 60, r: 60, t: 30, b: 40}, title: {text: "cutting torque per hole (wear indicator)", font: {size: 13}},
+        xaxis: {title: {text: "hole"}}, yaxis: {title: {text: "torque [Nm]"}},
+        yaxis2: {title: {text: "increase [%]"}, overlaying: "y", side: "right"}, legend: {orientation: "h"}},
+        {responsive: true, displaylogo: false});
+      if (t.temperature) {
+        const T = t.temperature;
+        await Plotly.react($("temperature-plot"), [
+          {x: T.hole, y: T.camera_c, mode: "markers", name: "thermal camera [°C]"},
+          {x: T.hole, y: T.predicted_c, mode: "lines", name: `soft sensor [°C] (rmse ${fmt(T.rmse_c)} °C)`}],
+          {margin: {l: 60, r: 20, t: 30, b: 40}, title: {text: "tool temperature", font: {size: 13}},
+            xaxis: {title: {text: "hole"}}, yaxis: {title: {text: "°C"}}, legend: {orientation: "h"}},
+          {responsive: true, displaylogo: false});
+      } else { $("temperature-plot").style.display = "none"; }
+      if (t.quality && t.quality.length) table($("quality-table"), Object.keys(t.quality[0]), t.quality, 500);
+    } catch (err) { info.textContent = `error: ${err.message}`; }
+    const run = $("anomaly-run");
+    run.onclick = async () => {
+      const ai = $("anomaly-info");
+      ai.textContent = "running…";
+      try {
+        const a = await getJSON(`${api}/anomalies?detector=${encodeURIComponent($("detector").value)}`);
+        ai.textContent = `${a.detector}: ${a.alarms_s.length} alarms in ${fmt(a.monitored_s)} s scored` +
+          (a.alarms_s.length ? ` at ${a.alarms_s.map((s, i) => `${fmt(s)} s (hole ${a.alarm_holes[i]})`).join(", ")}` : "");
+        const shapes = a.alarms_s.map((s) => ({type: "line", x0: s, x1: s, yref: "paper", y0: 0, y1: 1, line: {color: "red", width: 1}}));
+        await Plotly.react($("anomaly-plot"), [{x: a.score_x, y: a.score_y, type: "scatter", mode: "lines", line: {width: 1}, name: "score"}],
+          {margin: {l: 60, r: 20, t: 30, b: 40}, shapes, xaxis: {title: {text: "time [s]"}}, yaxis: {title: {text: "score"}},
+            title: {text: "detector score (red: alarms)", font: {size: 13}}}, {responsive: true, displaylogo: false});
+      } catch (err) { ai.textContent = `error: ${err.message}`; }
+    };
+  }
+
+  // ---------------------------------------------------------------- live
+  function livePage() {
+    const plot = $("live-plot"), state = $("live-state"), holes = [], events = $("live-events");
+    const WINDOW_S = 30, xs = [], ys = [];
+    let t0 = null, cycleTime = 0.002, pending = false;
+    Plotly.newPlot(plot, [{x: [], y: [], type: "scatter", mode: "lines", line: {width: 1}, name: "cutting torque"}],
+      {margin: {l: 60, r: 20, t: 30, b: 40}, title: {text: "cutting torque [Nm] (last 30 s)", font: {size: 13}},
+        xaxis: {title: {text: "time [s]"}}, yaxis: {title: {text: "Nm"}}}, {responsive: true, displaylogo: false});
+    const redraw = () => {
+      pending = false;
+      Plotly.react(plot, [{x: xs, y: ys, type: "scatter", mode: "lines", line: {width: 1}}], plot.layout);
+      plot.dataset.points = String(xs.length);
+    };
+    const es = new EventSource("/api/live/stream?from_start=true");
+    es.onopen = () => { state.textContent = "connected"; };
+    es.onerror = () => { state.textContent = "disconnected – retrying"; };
+    es.addEventListener("torque", (ev) => {
+      const m = JSON.parse(ev.data);
+      if (t0 === null) t0 = m.first_cycle;
+      for (let i = 0; i < m.n; i++) { xs.push((m.first_cycle + i - t0) * cycleTime); ys.push(m.torque_nm[i]); }
+      const cut = xs.length ? xs[xs.length - 1] - WINDOW_S : 0;
+      let k = 0; while (k < xs.length && xs[k] < cut) k++;
+      if (k) { xs.splice(0, k); ys.splice(0, k); }
+      if (!pending) { pending = true; requestAnimationFrame(redraw); }
+    });
+    es.addEventListener("hole", (ev) => {
+      const m = JSON.parse(ev.data);
+      holes.push(m.row);
+      table($("live-holes"), HOLE_COLS.filter((c) => c in m.row), holes.slice().reverse(), 200);
+    });
+    for (const kind of ["alarm", "gap"]) es.addEventListener(kind, (ev) => {
+      const m = JSON.parse(ev.data);
+      const li = document.createElement("li");
+      li.className = kind;
+      li.textContent = kind === "alarm" ? `alarm ${m.detector}: score ${fmt(m.score)} at cycle ${m.cycle} (${m.time || ""})`
+        : `gap: ${m.missing_cycles} cycles (${fmt(m.missing_s)} s) after ${m.after_cycle}`;
+      events.prepend(li);
+    });
+    es.addEventListener("status", (ev) => {
+      const s = JSON.parse(ev.data);
+      $("live-status").innerHTML = ["cycles", "cycles_per_s_recent", "lag_s", "holes", "alarms", "gaps", "missing_cycles", "late_rows"]
+        .filter((k) => k in s).map((k) => `<dt>${esc(k)}</dt><dd>${fmt(s[k])}</dd>`).join("");
+      state.textContent = `connected – last status seq ${s.seq ?? ""}`;
+    });
+  }
+
+  function start() {
+    const page = document.body.dataset.page, c = cfg();
+    if (page === "recording") recordingPage(c);
+    else if (page === "machine") useCases(c.api);
+    else if (page === "live") livePage();
+  }
+  return {start, getJSON};
+})();
