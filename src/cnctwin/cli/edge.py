@@ -42,6 +42,11 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     r.add_argument("--publish", metavar="URL",
                    help="mqtt://host:port/<topic prefix> for results (default prefix cnctwin)")
     r.add_argument("--store", metavar="URL", help="also append results to this store")
+    r.add_argument("--opcua", metavar="URL",
+                   help="serve the results over OPC UA at this endpoint, e.g. "
+                   "opc.tcp://0.0.0.0:4840/cnctwin (extra 'opcua')")
+    r.add_argument("--opcua-publish-hz", type=float, default=10.0,
+                   help="OPC UA publish rate of the decimated 500 Hz values [Hz]")
     r.add_argument("--speed", type=float, default=0.0,
                    help="replay pace: 1 = real time, N = N x, 0 = as fast as possible")
     r.add_argument("--chunk-cycles", type=int, default=50, help="cycles per chunk (replay)")
@@ -107,6 +112,8 @@ def status_table(st: dict[str, Any]) -> Any:
                                  f"oldest {s.get('dropped_oldest')}"))
         elif name == "store":
             rows.append(("store", f"{s.get('store')} blocks {s.get('blocks')}"))
+        elif name == "opcua":
+            rows.append(("opcua", f"{s.get('endpoint')} published {s.get('published')}"))
     for msg in (st.get("issues") or [])[-3:]:
         rows.append(("issue", str(msg)[:120]))
     for k, v in rows:
@@ -168,6 +175,11 @@ def _build(args: argparse.Namespace) -> Any:
                               username=u.username, password=u.password))
     if args.store:
         sinks.append(StoreSink(args.store, machine=machine))
+    if args.opcua:
+        from cnctwin.edge.opcua import OpcUaSink
+
+        sinks.append(OpcUaSink(args.opcua, machine=machine,
+                               publish_hz=args.opcua_publish_hz))
     return EdgeRuntime(src, procs, sinks, state_dir=out, machine=machine)
 
 

@@ -1,0 +1,544 @@
+"""OPC UA server sink of the edge runtime: the twin's computed quantities for SCADA/MES.
+
+:class:`OpcUaSink` runs an asyncua server in a background thread (its own asyncio loop; the
+runtime stays synchronous) and publishes, per machine, an object with variables that a client
+such as UaExpert or asyncua's ``uals``/``uaread`` can browse::
+
+    Objects/<machine>/                      (namespace ``urn:cnctwin:edge`` by default)
+        SpindleSpeed [rpm], CuttingTorque [Nm], CuttingTorquePeak [Nm], Cycle
+        ToolWear [um], ToolTipTemperature [degC], HoleCount
+        LastHole/  HoleNumber, Tool, StartTime, Depth [mm], TorqueMean [Nm],
+                   TorquePeak [Nm], TorqueEnergy [J], CurrentPeak [A], SpindleSpeed [rpm],
+                   Feed [mm/min], CutDuration [s], X [mm], Y [mm], DeviationXMaxAbs [mm],
+                   DeviationYMaxAbs [mm], DeviationZMaxAbs [mm], DeviationZRms [mm], Record
+        Alarm/     Active, Message, Detector, Score, Threshold, Cycle, Count
+
+Analog variables carry the ``EngineeringUnits`` property (``EUInformation`` with the UNECE
+code of the unit). Every value's SourceTimestamp is the time of the cycle it belongs to on the
+recording's time base (the CYCLE counter), not the wall clock; the ServerTimestamp is the
+server's clock. See docs/edge.md, "Open outputs: OPC UA".
+
+The 500 Hz torque and speed are decimated to ``publish_hz`` on the cycle grid: window ``k``
+holds cycles ``k*m .. k*m + m - 1`` with ``m = round(1 / (publish_hz * cycle_time_s))``. A
+window is published once a later cycle arrives (or at the end of the stream): the window mean
+of speed and torque, and the torque value of largest magnitude (sign kept) as the peak.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import math
+import threading
+import urllib.parse
+from collections import deque
+from concurrent.futures import Future
+from datetime import UTC, datetime, timedelta
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from cnctwin.edge.pipeline import Chunk
+from cnctwin.exceptions import ConfigError
+
+__all__ = ["DEFAULT_NAMESPACE", "EU_CODES", "OpcUaSink", "decimate_peak", "eu_unit_id"]
+
+DEFAULT_NAMESPACE = "urn:cnctwin:edge"
+_EU_NAMESPACE = "http://www.opcfoundation.org/UA/units/un/cefact"
+_EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
+
+EU_CODES: dict[str, str] = {
+    "rpm": "RPM", "Nm": "NU", "um": "4H", "degC": "CEL", "mm": "MMT", "J": "JOU", "s": "SEC",
+    "A": "AMP", "mm/min": "H81",
+}
+"""UNECE Recommendation 20 common codes of the units used (OPC UA Part 8, EUInformation)."""
+
+
+def eu_unit_id(code: str) -> int:
+    """``UnitId`` of an UNECE common code (OPC UA Part 8 §5.6.3: the code's bytes, big end).
+
+    >>> eu_unit_id("CEL")
+    4408652
+    """
+    uid = 0
+    for ch in code.upper()[:4]:
+        uid = (uid << 8) | ord(ch)
+    return uid
+
+
+def decimate_peak(
+    cycles: NDArray[np.int64], values: NDArray[np.float64], *, window_cycles: int
+) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    """Window statistics on the cycle grid: mean and signed peak of ``values``.
+
+    Parameters
+    ----------
+    cycles : numpy.ndarray of int64
+        Increasing cycle numbers (gaps allowed).
+    values : numpy.ndarray of float64
+        One value per cycle.
+    window_cycles : int
+        Window length ``m`` [cycles]; window ``k`` holds cycles ``k*m .. k*m + m - 1``.
+
+    Returns
+    -------
+    window : numpy.ndarray of int64
+        Window index ``k`` of each non-empty window, increasing.
+    mean : numpy.ndarray of float64
+        Mean of the values in the window (NaN ignored).
+    peak : numpy.ndarray of float64
+        The value of largest magnitude in the window, sign kept (NaN if all NaN).
+    last_cycle : numpy.ndarray of int64
+        Last cycle present in each window (its time stamps the window).
+    """
+    if cycles.size == 0:
+        e = np.empty(0)
+        return np.empty(0, np.int64), e, e, np.empty(0, np.int64)
+    w = cycles // window_cycles
+    starts = np.flatnonzero(np.concatenate([[True], w[1:] != w[:-1]]))
+    ends = np.concatenate([starts[1:], [w.size]])
+    ok = np.isfinite(values)
+    v0 = np.where(ok, values, 0.0)
+    cnt = np.add.reduceat(ok.astype(np.int64), starts)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.add.reduceat(v0, starts) / cnt
+    a = np.where(ok, np.abs(values), -1.0)
+    peak = np.full(starts.size, np.nan)
+    for j, (s, e) in enumerate(zip(starts.tolist(), ends.tolist(), strict=True)):
+        if cnt[j]:
+            peak[j] = values[s + int(np.argmax(a[s:e]))]
+    return w[starts], mean, peak, cycles[ends - 1]
+
+
+def _dt(t_ns: int) -> datetime:
+    return _EPOCH + timedelta(microseconds=int(t_ns) // 1000)
+
+
+class OpcUaSink:
+    """Publish torque, speed, hole records, wear, temperature and alarms over OPC UA.
+
+    Parameters
+    ----------
+    endpoint : str, default 'opc.tcp://0.0.0.0:4840/cnctwin'
+        Endpoint the server listens on (``opc.tcp://host:port/path``; port 0 is not allowed).
+    machine : str
+        Machine name: the browse name of the machine object.
+    publish_hz : float, default 10
+        Publish rate of the decimated 500 Hz values on the recording's clock [Hz]; between
+        0.01 Hz and the cycle rate.
+    namespace_uri : str, default 'urn:cnctwin:edge'
+        Namespace of the cnctwin nodes (node ids ``ns=<i>;s=<machine>.<path>``).
+    thermal : ToolThermalModel, optional
+        Calibrated :class:`cnctwin.usecases.thermal.ToolThermalModel`: ``ToolTipTemperature``
+        after each hole from its energy. Without it the variable stays
+        ``BadWaitingForInitialData`` (nothing is invented).
+    wear : WearEstimator, optional
+        Calibrated :class:`cnctwin.usecases.wear.WearEstimator`: ``ToolWear`` from the relative
+        increase of the holes' mean torque over the first ``wear_baseline_holes``.
+    wear_baseline_holes : int, default 6
+        New-tool reference holes for the wear estimate.
+    wear_set_size : int or None, default 6
+        Set size for :func:`cnctwin.usecases.wear.relative_increase` (``None``: per hole).
+    alarm_hold_s : float, default 1.0
+        ``Alarm/Active`` stays true this long on the recording clock after the last alarm [s].
+    hole_history_s : float, default 300
+        Cutting torque kept per cycle to find a hole's peak torque [s].
+    start_timeout_s : float, default 10
+        Time to wait for the server to listen [s].
+    max_pending : int, default 64
+        Batches of writes queued for the server loop before :meth:`write` waits (back
+        pressure instead of dropping values).
+
+    Raises
+    ------
+    ConfigError
+        Bad endpoint or rate, the port in use, or the server not starting.
+    """
+
+    name = "opcua"
+
+    def __init__(self, endpoint: str = "opc.tcp://0.0.0.0:4840/cnctwin", *, machine: str,
+                 publish_hz: float = 10.0, namespace_uri: str = DEFAULT_NAMESPACE,
+                 thermal: Any = None, wear: Any = None, wear_baseline_holes: int = 6,
+                 wear_set_size: int | None = 6, alarm_hold_s: float = 1.0,
+                 hole_history_s: float = 300.0, start_timeout_s: float = 10.0,
+                 max_pending: int = 64) -> None:
+        try:
+            import asyncua  # noqa: F401
+        except ImportError as exc:  # pragma: no cover - depends on the environment
+            raise ConfigError("the OPC UA sink needs asyncua: pip install 'cnctwin[opcua]'") \
+                from exc
+        if not (isinstance(publish_hz, int | float) and math.isfinite(publish_hz)
+                and 0.01 <= publish_hz <= 500.0):
+            raise ConfigError(f"publish_hz must be between 0.01 and 500 Hz (the 2 ms cycle "
+                              f"rate), not {publish_hz!r}")
+        u = urllib.parse.urlsplit(endpoint)
+        if u.scheme != "opc.tcp" or not u.hostname:
+            raise ConfigError(f"OPC UA endpoint {endpoint!r} must look like "
+                              "opc.tcp://0.0.0.0:4840/cnctwin")
+        try:
+            port = u.port or 4840
+        except ValueError as exc:
+            raise ConfigError(f"OPC UA endpoint {endpoint!r}: bad port ({exc})") from None
+        if port == 0:
+            raise ConfigError("give the OPC UA server a fixed port (clients must know it)")
+        self.endpoint, self.host, self.port = endpoint, u.hostname, port
+        self.machine = machine or "machine"
+        self.publish_hz = float(publish_hz)
+        self.namespace_uri = namespace_uri
+        self.thermal, self.wear = thermal, wear
+        self.wear_baseline_holes, self.wear_set_size = wear_baseline_holes, wear_set_size
+        self.alarm_hold_s, self.hole_history_s = alarm_hold_s, hole_history_s
+        self.max_pending = max_pending
+        self.published = 0
+        self.windows = 0
+        self.last_error = ""
+        self._cycle_time_s = 0.002
+        self._window: int | None = None
+        self._anchor: tuple[int, int] | None = None  # (cycle, time_ns) of the newest chunk
+        self._pend_c: list[NDArray[np.int64]] = []
+        self._pend_t: list[NDArray[np.float64]] = []
+        self._pend_n: list[NDArray[np.float64]] = []
+        self._hist: deque[tuple[NDArray[np.int64], NDArray[np.float64]]] = deque()
+        self._hole_torque: list[float] = []
+        self._temp: tuple[float, float] | None = None  # (temperature_c, end_s) of last hole
+        self._holes = 0
+        self._alarms = 0
+        self._alarm_until: int | None = None
+        self._futures: deque[Future[None]] = deque()
+        self._nodes: dict[str, Any] = {}
+        self._server: Any = None
+        self._loop = asyncio.new_event_loop()
+        self._ready = threading.Event()
+        self._start_error: BaseException | None = None
+        self._thread = threading.Thread(target=self._serve, name=f"opcua-{self.machine}",
+                                        daemon=True)
+        self._thread.start()
+        if not self._ready.wait(start_timeout_s):
+            self._shutdown()
+            raise ConfigError(f"the OPC UA server on {endpoint} did not start within "
+                              f"{start_timeout_s:g} s")
+        if self._start_error is not None:
+            err = self._start_error
+            self._shutdown()
+            if isinstance(err, OSError):
+                raise ConfigError(f"cannot listen on {self.host}:{port} for OPC UA ({err}); "
+                                  "the port is in use or not allowed: choose another "
+                                  "--opcua port") from err
+            raise ConfigError(f"the OPC UA server on {endpoint} failed to start: {err}") \
+                from err
+
+    # ---------------------------------------------------------------- server thread
+    def _serve(self) -> None:
+        asyncio.set_event_loop(self._loop)
+        try:
+            self._loop.run_until_complete(self._start())
+        except BaseException as exc:  # reported to the constructor
+            self._start_error = exc
+            self._ready.set()
+            return
+        self._ready.set()
+        self._loop.run_forever()
+
+    async def _start(self) -> None:
+        import logging
+
+        from asyncua import Server, ua
+
+        for name in ("asyncua", "asyncua.server"):  # the server logs every session at INFO
+            logging.getLogger(name).setLevel(logging.WARNING)
+        server = Server()
+        await server.init()
+        server.set_endpoint(self.endpoint)
+        server.set_server_name(f"cnctwin edge ({self.machine})")
+        server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+        idx = await server.register_namespace(self.namespace_uri)
+        self._idx = idx
+        m = self.machine
+        obj = await server.nodes.objects.add_object(ua.NodeId(m, idx), ua.QualifiedName(m, idx))
+        nodes = self._nodes
+
+        async def var(parent: Any, path: str, value: Any, vt: Any, unit: str | None = None,
+                      description: str = "") -> None:
+            name = path.rsplit(".", 1)[-1]
+            node = await parent.add_variable(ua.NodeId(f"{m}.{path}", idx),
+                                             ua.QualifiedName(name, idx), value,
+                                             varianttype=vt)
+            if unit is not None:
+                eu = ua.EUInformation(NamespaceUri=_EU_NAMESPACE,
+                                      UnitId=eu_unit_id(EU_CODES[unit]),
+                                      DisplayName=ua.LocalizedText(unit),
+                                      Description=ua.LocalizedText(unit))
+                await node.add_property(ua.NodeId(f"{m}.{path}.EngineeringUnits", idx),
+                                        ua.QualifiedName("EngineeringUnits", 0), eu,
+                                        datatype=ua.NodeId(ua.ObjectIds.EUInformation))
+            if description:
+                await node.write_attribute(ua.AttributeIds.Description, ua.DataValue(
+                    ua.Variant(ua.LocalizedText(description), ua.VariantType.LocalizedText)))
+            nodes[path] = node.nodeid
+
+        D, L, S, B = (ua.VariantType.Double, ua.VariantType.Int64, ua.VariantType.String,
+                      ua.VariantType.Boolean)
+        nan = float("nan")
+        await var(obj, "SpindleSpeed", nan, D, "rpm", "commanded spindle speed, window mean")
+        await var(obj, "CuttingTorque", nan, D, "Nm", "estimated cutting torque, window mean")
+        await var(obj, "CuttingTorquePeak", nan, D, "Nm",
+                  "cutting torque of largest magnitude in the window (sign kept)")
+        await var(obj, "Cycle", -1, L, None, "last CYCLE of the published window")
+        await var(obj, "ToolWear", nan, D, "um", "flank wear estimate (WearEstimator)")
+        await var(obj, "ToolTipTemperature", nan, D, "degC",
+                  "tool-tip temperature after the last hole (ToolThermalModel)")
+        await var(obj, "HoleCount", 0, L, None, "holes completed")
+        hole = await obj.add_object(ua.NodeId(f"{m}.LastHole", idx),
+                                    ua.QualifiedName("LastHole", idx))
+        for path, vt, unit in _HOLE_VARS:
+            init: Any = nan if vt == "d" else ("" if vt == "s" else -1)
+            if vt == "t":
+                init = _EPOCH
+            await var(hole, f"LastHole.{path}", init, {"d": D, "i": L, "s": S,
+                                                      "t": ua.VariantType.DateTime}[vt], unit)
+        alarm = await obj.add_object(ua.NodeId(f"{m}.Alarm", idx), ua.QualifiedName("Alarm", idx))
+        await var(alarm, "Alarm.Active", False, B, None, "an anomaly alarm is active")
+        await var(alarm, "Alarm.Message", "", S, None, "text of the last alarm")
+        await var(alarm, "Alarm.Detector", "", S)
+        await var(alarm, "Alarm.Score", nan, D)
+        await var(alarm, "Alarm.Threshold", nan, D)
+        await var(alarm, "Alarm.Cycle", -1, L)
+        await var(alarm, "Alarm.Count", 0, L)
+        # no value before the stream gives one (wear/temperature: only with a calibrated model)
+        waiting = ua.DataValue(StatusCode_=ua.StatusCode(ua.StatusCodes.BadWaitingForInitialData))
+        for path in nodes:
+            if path not in ("HoleCount", "Alarm.Active", "Alarm.Count"):
+                await server.write_attribute_value(nodes[path], waiting)
+        await server.start()
+        self._server = server
+
+    async def _apply(self, updates: list[tuple[Any, Any]]) -> None:
+        for nodeid, dv in updates:
+            await self._server.write_attribute_value(nodeid, dv)
+
+    # ---------------------------------------------------------------- values
+    def _dv(self, value: Any, vt: str, t_ns: int) -> Any:
+        from asyncua import ua
+
+        variant = {"d": ua.VariantType.Double, "i": ua.VariantType.Int64,
+                   "s": ua.VariantType.String, "b": ua.VariantType.Boolean,
+                   "t": ua.VariantType.DateTime}[vt]
+        if vt == "d":
+            value = float("nan") if value is None else float(value)
+        elif vt == "i":
+            value = -1 if value is None else int(value)
+        return ua.DataValue(ua.Variant(value, variant), SourceTimestamp=_dt(t_ns),
+                            ServerTimestamp=datetime.now(UTC))
+
+    def _time_ns(self, cycle: int) -> int:
+        if self._anchor is None:
+            return 0
+        c0, t0 = self._anchor
+        return t0 + round((cycle - c0) * self._cycle_time_s * 1e9)
+
+    def _submit(self, updates: list[tuple[Any, Any]]) -> None:
+        if not updates:
+            return
+        while self._futures and self._futures[0].done():
+            self._check(self._futures.popleft())
+        self._futures.append(asyncio.run_coroutine_threadsafe(self._apply(updates), self._loop))
+        self.published += len(updates)
+        while len(self._futures) > self.max_pending:  # back pressure, nothing dropped
+            self._check(self._futures.popleft(), wait=True)
+
+    def _check(self, fut: Future[None], *, wait: bool = False) -> None:
+        try:
+            fut.result(timeout=30.0 if wait else 0)
+        except Exception as exc:
+            self.last_error = f"{type(exc).__name__}: {exc}"
+
+    def _windows(self, *, final: bool) -> list[tuple[Any, Any]]:
+        if not self._pend_c:
+            return []
+        cyc = np.concatenate(self._pend_c)
+        tau = np.concatenate(self._pend_t)
+        spd = np.concatenate(self._pend_n)
+        m = self._window or 50
+        last_w = int(cyc[-1]) // m
+        n_done = cyc.size if final else int(np.searchsorted(cyc, last_w * m))
+        keep = slice(n_done, None)
+        self._pend_c = [cyc[keep]] if n_done < cyc.size else []
+        self._pend_t = [tau[keep]] if n_done < cyc.size else []
+        self._pend_n = [spd[keep]] if n_done < cyc.size else []
+        if n_done == 0:
+            return []
+        c, t, n = cyc[:n_done], tau[:n_done], spd[:n_done]
+        _, t_mean, t_peak, last = decimate_peak(c, t, window_cycles=m)
+        _, n_mean, _, _ = decimate_peak(c, n, window_cycles=m)
+        out: list[tuple[Any, Any]] = []
+        nd = self._nodes
+        for j in range(last.size):
+            ts = self._time_ns(int(last[j]))
+            out += [(nd["SpindleSpeed"], self._dv(n_mean[j], "d", ts)),
+                    (nd["CuttingTorque"], self._dv(t_mean[j], "d", ts)),
+                    (nd["CuttingTorquePeak"], self._dv(t_peak[j], "d", ts)),
+                    (nd["Cycle"], self._dv(int(last[j]), "i", ts))]
+            if self._alarm_until is not None and int(last[j]) > self._alarm_until:
+                out.append((nd["Alarm.Active"], self._dv(False, "b", ts)))
+                self._alarm_until = None
+        self.windows += last.size
+        return out
+
+    def _hole_peak(self, first: int, last: int) -> float:
+        vals = [t[(c >= first) & (c <= last)] for c, t in self._hist]
+        v = np.concatenate(vals) if vals else np.empty(0)
+        v = v[np.isfinite(v)]
+        return float(v[np.argmax(np.abs(v))]) if v.size else float("nan")
+
+    def _hole(self, msg: dict[str, Any]) -> list[tuple[Any, Any]]:
+        row = msg["row"]
+        ts = self._time_ns(int(msg["cycle"]))
+        nd = self._nodes
+        self._holes += 1
+        peak = self._hole_peak(int(row["cut_start_cycle"]), int(row["cut_end_cycle"]))
+        out = [(nd["HoleCount"], self._dv(self._holes, "i", ts))]
+        for path, vt, _unit in _HOLE_VARS:
+            key = _HOLE_KEYS[path]
+            if key == "*peak":
+                val: Any = peak
+            elif key == "*row":
+                val = json.dumps(row, default=str)
+            elif key == "start_time":
+                st = row.get("start_time")
+                val = pd.Timestamp(st).to_pydatetime() if st else _EPOCH
+            else:
+                val = row.get(key)
+            out.append((nd[f"LastHole.{path}"], self._dv(val, vt, ts)))
+        energy = row.get("energy_j")
+        if self.thermal is not None and energy is not None:
+            th = self.thermal
+            end_s = float(row["end_s"])
+            decay = 0.0 if self._temp is None else math.exp(
+                -max(end_s - self._temp[1], 0.0) / th.tau_s)
+            prev = th.ambient_c if self._temp is None else self._temp[0]
+            temp = th.ambient_c + (prev - th.ambient_c) * decay + float(energy) / th.c_eff_j_per_k
+            self._temp = (temp, end_s)
+            out.append((nd["ToolTipTemperature"], self._dv(temp, "d", ts)))
+        tq = row.get("torque_mean_nm")
+        self._hole_torque.append(float("nan") if tq is None else float(tq))
+        if self.wear is not None and len(self._hole_torque) >= self.wear_baseline_holes:
+            from cnctwin.usecases.wear import relative_increase
+
+            inc = relative_increase(self._hole_torque, baseline=self.wear_baseline_holes,
+                                    set_size=self.wear_set_size)
+            wear_um = float(self.wear.predict(inc[-1:])[0])
+            out.append((nd["ToolWear"], self._dv(wear_um, "d", ts)))
+        return out
+
+    def _alarm(self, msg: dict[str, Any]) -> list[tuple[Any, Any]]:
+        c = int(msg["cycle"])
+        ts = self._time_ns(c)
+        nd = self._nodes
+        self._alarms += 1
+        self._alarm_until = c + round(self.alarm_hold_s / self._cycle_time_s)
+        det = str(msg.get("detector", ""))
+        score = float(msg.get("score", math.nan))
+        thr = float(msg.get("threshold", math.nan))
+        text = (f"{det}: anomaly score {score:.3g} above {thr:.3g} at cycle {c}"
+                + (f" ({msg['time']})" if msg.get("time") else ""))
+        return [(nd["Alarm.Active"], self._dv(True, "b", ts)),
+                (nd["Alarm.Message"], self._dv(text, "s", ts)),
+                (nd["Alarm.Detector"], self._dv(det, "s", ts)),
+                (nd["Alarm.Score"], self._dv(score, "d", ts)),
+                (nd["Alarm.Threshold"], self._dv(thr, "d", ts)),
+                (nd["Alarm.Cycle"], self._dv(c, "i", ts)),
+                (nd["Alarm.Count"], self._dv(self._alarms, "i", ts))]
+
+    # ---------------------------------------------------------------- Sink protocol
+    def write(self, messages: list[dict[str, Any]], chunk: Chunk | None) -> None:
+        if chunk is not None and len(chunk):
+            self._cycle_time_s = chunk.cycle_time_s
+            self._anchor = (chunk.first_cycle, int(chunk.time_ns[0]))
+            if self._window is None:
+                m = round(1.0 / (self.publish_hz * chunk.cycle_time_s))
+                if m < 1:
+                    raise ConfigError(f"publish_hz {self.publish_hz:g} is above the cycle "
+                                      f"rate {1 / chunk.cycle_time_s:g} Hz")
+                self._window = m
+        updates: list[tuple[Any, Any]] = []
+        for msg in messages:
+            kind = msg["kind"]
+            if kind == "torque":
+                c0 = int(msg["first_cycle"])
+                cyc = np.arange(c0, c0 + int(msg["n"]), dtype=np.int64)
+                tau = np.asarray(msg["torque_nm"], dtype=np.float64)
+                self._pend_c.append(cyc)
+                self._pend_t.append(tau)
+                self._pend_n.append(np.asarray(msg["speed_rpm"], dtype=np.float64))
+                self._hist.append((cyc, tau))
+                updates += self._windows(final=False)
+            elif kind == "hole":
+                updates += self._hole(msg)
+            elif kind == "alarm":
+                updates += self._alarm(msg)
+        if self._hist:
+            horizon = int(self._hist[-1][0][-1]) - round(self.hole_history_s
+                                                          / self._cycle_time_s)
+            while len(self._hist) > 1 and int(self._hist[0][0][-1]) < horizon:
+                self._hist.popleft()
+        self._submit(updates)
+
+    def status(self) -> dict[str, Any]:
+        return {"endpoint": self.endpoint, "published": self.published,
+                "windows": self.windows, "holes": self._holes, "alarms": self._alarms,
+                "last_error": self.last_error}
+
+    def flush(self, *, timeout_s: float = 30.0) -> None:
+        """Wait until every write handed to the server is applied."""
+        while self._futures:
+            fut = self._futures.popleft()
+            try:
+                fut.result(timeout=timeout_s)
+            except Exception as exc:
+                self.last_error = f"{type(exc).__name__}: {exc}"
+
+    def finish(self) -> None:
+        """Publish the open window (end of stream) and wait for the server to apply it."""
+        self._submit(self._windows(final=True))
+        self.flush()
+
+    def close(self) -> None:
+        """Publish what is open, then stop the server and its thread."""
+        if self._server is not None:
+            self.finish()
+        self._shutdown()
+
+    def _shutdown(self) -> None:
+        loop = self._loop
+        if self._server is not None and loop.is_running():
+            with contextlib.suppress(Exception):  # already stopping
+                asyncio.run_coroutine_threadsafe(self._server.stop(), loop).result(10)
+            self._server = None
+        if loop.is_running():
+            loop.call_soon_threadsafe(loop.stop)
+        self._thread.join(timeout=10)
+        if not loop.is_running() and not loop.is_closed():
+            loop.close()
+
+
+# LastHole variables: (browse name, value kind d/i/s/t, unit) and the hole-row key they show
+_HOLE_VARS: tuple[tuple[str, str, str | None], ...] = (
+    ("HoleNumber", "i", None), ("Tool", "i", None), ("StartTime", "t", None),
+    ("Depth", "d", "mm"), ("TorqueMean", "d", "Nm"), ("TorquePeak", "d", "Nm"),
+    ("TorqueEnergy", "d", "J"), ("CurrentPeak", "d", "A"), ("SpindleSpeed", "d", "rpm"),
+    ("Feed", "d", "mm/min"), ("CutDuration", "d", "s"), ("X", "d", "mm"), ("Y", "d", "mm"),
+    ("DeviationXMaxAbs", "d", "mm"), ("DeviationYMaxAbs", "d", "mm"),
+    ("DeviationZMaxAbs", "d", "mm"), ("DeviationZRms", "d", "mm"), ("Record", "s", None),
+)
+_HOLE_KEYS: dict[str, str] = {
+    "HoleNumber": "hole", "Tool": "tool", "StartTime": "start_time", "Depth": "depth_mm",
+    "TorqueMean": "torque_mean_nm", "TorquePeak": "*peak", "TorqueEnergy": "energy_j",
+    "CurrentPeak": "current_peak_a", "SpindleSpeed": "speed_rpm", "Feed": "feed_mm_min",
+    "CutDuration": "cut_duration_s", "X": "x_mm", "Y": "y_mm",
+    "DeviationXMaxAbs": "dev_x_maxabs_mm", "DeviationYMaxAbs": "dev_y_maxabs_mm",
+    "DeviationZMaxAbs": "dev_z_maxabs_mm", "DeviationZRms": "dev_z_rms_mm", "Record": "*row",
+}
