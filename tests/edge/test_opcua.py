@@ -1,0 +1,229 @@
+"""OPC UA sink: a real asyncua server on a free loopback port, read with an asyncua client,
+against the batch results of the library on the same recording.
+
+Recording: the simulated 3-hole ``tool_wear_run`` of ``conftest.wear_run`` (thesis §5.1).
+Batch references: ``SpindleModel.cutting_torque`` (the streamed torque equals it exactly,
+test_replay), ``hole_records`` and ``simulate_tool_temperature``; decimation windows are
+``cycle // 50`` at 10 Hz on the 2 ms cycle (module docstring of ``cnctwin.edge.opcua``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import socket
+import threading
+from datetime import UTC
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pytest
+
+pytest.importorskip("asyncua")
+
+from cnctwin.cli import main
+from cnctwin.edge import EdgeRuntime, HoleProcessor, ReplaySource, TorqueProcessor
+from cnctwin.edge.opcua import OpcUaSink, decimate_peak, eu_unit_id
+from cnctwin.exceptions import ConfigError
+from cnctwin.recording import Recording
+from cnctwin.spindle import SpindleModel
+from cnctwin.usecases.holes import hole_records
+from cnctwin.usecases.thermal import ToolThermalModel, simulate_tool_temperature
+
+from ._memsink import MemorySink
+
+WINDOW = 50  # cycles: 10 Hz on the 2 ms cycle
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class _KeepServing:
+    """Hands everything to the OPC UA sink but only finishes it when the runtime closes its
+    sinks, so the test can read the final state before stopping the server."""
+
+    name = "opcua"
+
+    def __init__(self, sink: OpcUaSink) -> None:
+        self.sink = sink
+
+    def write(self, messages: list[dict[str, Any]], chunk: Any) -> None:
+        self.sink.write(messages, chunk)
+
+    def status(self) -> dict[str, Any]:
+        return self.sink.status()
+
+    def close(self) -> None:
+        self.sink.finish()
+
+
+def _ns(t: Any) -> int:
+    ts = pd.Timestamp(t)
+    return int((ts.tz_localize(UTC) if ts.tzinfo is None else ts).value)
+
+
+def _batch_windows(rec: Recording, tau: np.ndarray) -> dict[int, tuple[float, float, float]]:
+    """Source time [ns] of each window's last cycle -> (speed mean, torque mean, peak)."""
+    cyc = rec.cycles
+    speed = rec.hf["CMD_SPEED|SP1"].to_numpy()
+    t_ns = rec.hf["time"].to_numpy(dtype="datetime64[ns]").view(np.int64)
+    out = {}
+    for w in np.unique(cyc // WINDOW):
+        sel = (cyc // WINDOW) == w
+        v = tau[sel]
+        out[int(t_ns[sel][-1]) // 1000 * 1000] = (float(speed[sel].mean()), float(v.mean()),
+                                                  float(v[np.argmax(np.abs(v))]))
+    return out
+
+
+def test_decimate_peak_closed_form() -> None:
+    # cycles 98..203 with 150..159 missing; values = (-1)^c * c: the peak of a window is its
+    # last cycle present (odd, so negative); every window holds whole (even, odd) pairs, each
+    # summing to -1, so every mean is -0.5
+    cyc = np.concatenate([np.arange(98, 150), np.arange(160, 204)]).astype(np.int64)
+    v = np.where(cyc % 2 == 0, 1.0, -1.0) * cyc
+    w, mean, peak, last = decimate_peak(cyc, v, window_cycles=WINDOW)
+    assert w.tolist() == [1, 2, 3, 4] and last.tolist() == [99, 149, 199, 203]
+    assert peak.tolist() == [-99.0, -149.0, -199.0, -203.0]
+    np.testing.assert_allclose(mean, [-0.5] * 4, rtol=1e-15)
+
+
+def test_unit_ids_are_the_unece_codes() -> None:
+    # OPC UA Part 8 §5.6.3: degree Celsius "CEL" -> 4408652 (the spec's worked example)
+    assert eu_unit_id("CEL") == 4408652
+    assert eu_unit_id("NU") == 0x4E55 and eu_unit_id("RPM") == 0x52504D
+
+
+def test_opcua_matches_batch(wear_recording: Recording, spindle_model: SpindleModel) -> None:
+    rec = wear_recording
+    port = _free_port()
+    url = f"opc.tcp://127.0.0.1:{port}/cnctwin"
+    thermal = ToolThermalModel(tau_s=20.0, c_eff_j_per_k=150.0, ambient_c=22.0)
+    sink = OpcUaSink(url, machine="mill-1", publish_hz=10.0, thermal=thermal)
+    got: list[tuple[float, int]] = []
+    subscribed = threading.Event()
+    done = threading.Event()
+    final: dict[str, Any] = {}
+
+    async def client() -> None:
+        from asyncua import Client, ua
+
+        class Handler:
+            def datachange_notification(self, node: Any, val: Any, data: Any) -> None:
+                dv = data.monitored_item.Value
+                if dv.StatusCode_.is_good():
+                    got.append((float(val), _ns(dv.SourceTimestamp)))
+
+        async with Client(url) as c:
+            idx = await c.get_namespace_index("urn:cnctwin:edge")
+            obj = await c.nodes.objects.get_child([f"{idx}:mill-1"])
+            peak_node = await obj.get_child([f"{idx}:CuttingTorquePeak"])
+            sub = await c.create_subscription(10, Handler())
+            await sub.subscribe_data_change(peak_node, queuesize=1000)
+            subscribed.set()
+            while not done.is_set():
+                await asyncio.sleep(0.05)
+            await asyncio.sleep(0.3)  # last notifications
+            for name in ("SpindleSpeed", "CuttingTorque", "CuttingTorquePeak", "Cycle",
+                         "HoleCount", "ToolTipTemperature", "ToolWear"):
+                node = await obj.get_child([f"{idx}:{name}"])
+                final[name] = await node.read_data_value(raise_on_bad_status=False)
+            hole = await obj.get_child([f"{idx}:LastHole"])
+            for ch in await hole.get_children():
+                final["LastHole." + (await ch.read_browse_name()).Name] = await ch.read_value()
+            eu = await obj.get_child([f"{idx}:CuttingTorque", "0:EngineeringUnits"])
+            final["eu"] = await eu.read_value()
+            final["ns"] = ua.StatusCodes.BadWaitingForInitialData
+
+    th = threading.Thread(target=lambda: asyncio.run(client()))
+    th.start()
+    try:
+        assert subscribed.wait(20)
+        mem = MemorySink()
+        # paced at 5x real time so the subscription sees the windows as they are published
+        EdgeRuntime(ReplaySource(rec, chunk_cycles=50, speed=5.0),
+                    [TorqueProcessor(spindle_model), HoleProcessor(spindle_model)],
+                    [mem, _KeepServing(sink)]).run()
+        done.set()
+        th.join(30)
+    finally:
+        done.set()
+        sink.close()
+    assert not th.is_alive() and sink.last_error == ""
+
+    tau = spindle_model.cutting_torque(rec.hf["CURRENT|SP1"].to_numpy(),
+                                       rec.hf["CMD_SPEED|SP1"].to_numpy())
+    windows = _batch_windows(rec, tau)
+    # every value the client saw is the batch peak of the window its source time names
+    assert len(got) >= 40, len(got)  # of ~125 windows; coalescing may skip some
+    for val, t_ns in got:
+        assert t_ns in windows, t_ns
+        assert math.isclose(val, windows[t_ns][2], rel_tol=1e-12, abs_tol=1e-12)
+    # final window: mean speed, mean torque, peak, stamped with the last cycle's time
+    t_last = _ns(rec.hf["time"].iloc[-1]) // 1000 * 1000
+    spd, mean, peak = windows[t_last]
+    assert _ns(final["CuttingTorque"].SourceTimestamp) == t_last
+    np.testing.assert_allclose([final["SpindleSpeed"].Value.Value,
+                                final["CuttingTorque"].Value.Value,
+                                final["CuttingTorquePeak"].Value.Value],
+                               [spd, mean, peak], rtol=1e-12, atol=1e-12)
+    assert final["Cycle"].Value.Value == int(rec.cycles[-1])
+    eu = final["eu"]
+    assert eu.UnitId == eu_unit_id("NU") and eu.DisplayName.Text == "Nm"
+    # last hole against the batch hole record
+    batch = hole_records([rec], model=spindle_model)
+    assert final["HoleCount"].Value.Value == len(batch) == 3
+    row = batch.iloc[-1]
+    assert final["LastHole.HoleNumber"] == 2
+    for name, col in (("Depth", "depth_mm"), ("TorqueMean", "torque_mean_nm"),
+                      ("TorqueEnergy", "energy_j"), ("CurrentPeak", "current_peak_a"),
+                      ("DeviationZRms", "dev_z_rms_mm"), ("X", "x_mm"), ("Y", "y_mm")):
+        assert math.isclose(final[f"LastHole.{name}"], float(row[col]), rel_tol=1e-12,
+                            abs_tol=1e-12), name
+    cut = (rec.cycles >= row["cut_start_cycle"]) & (rec.cycles <= row["cut_end_cycle"])
+    v = tau[cut]
+    assert math.isclose(final["LastHole.TorquePeak"], float(v[np.argmax(np.abs(v))]),
+                        rel_tol=1e-12)
+    assert _ns(final["LastHole.StartTime"]) == _ns(row["start_time"]) // 1000 * 1000
+    # tool-tip temperature: the library's per-hole lumped model on the batch energies
+    end_s = batch["end_s"].to_numpy()
+    temps = simulate_tool_temperature(batch["energy_j"].to_numpy(),
+                                      np.concatenate([[np.inf], np.diff(end_s)]),
+                                      tau_s=20.0, c_eff_j_per_k=150.0, ambient_c=22.0)
+    assert math.isclose(final["ToolTipTemperature"].Value.Value, float(temps[-1]),
+                        rel_tol=1e-12)
+    # no wear model given: the value is not invented
+    assert final["ToolWear"].StatusCode_.value == final["ns"]
+
+
+@pytest.mark.parametrize("hz", [0.0, -1.0, float("nan"), 1000.0])
+def test_bad_publish_rate(hz: float) -> None:
+    with pytest.raises(ConfigError, match="publish_hz"):
+        OpcUaSink(f"opc.tcp://127.0.0.1:{_free_port()}/x", machine="m", publish_hz=hz)
+
+
+def test_bad_endpoint_and_port_in_use() -> None:
+    with pytest.raises(ConfigError, match=r"opc\.tcp://"):
+        OpcUaSink("http://127.0.0.1:4840/x", machine="m")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        with pytest.raises(ConfigError, match="in use"):
+            OpcUaSink(f"opc.tcp://127.0.0.1:{port}/x", machine="m")
+
+
+def test_cli_bad_rate(tmp_path: Path, wear_run: dict[str, Any],
+                      spindle_model: SpindleModel) -> None:
+    from cnctwin.edge import save_spindle_model
+
+    mfile = save_spindle_model(spindle_model, tmp_path / "m.json", source="test")
+    code = main(["edge", "run", "--source", str(wear_run["path"]), "--model", str(mfile),
+                 "--out", str(tmp_path / "out"), "--quiet", "--opcua",
+                 f"opc.tcp://127.0.0.1:{_free_port()}/x", "--opcua-publish-hz", "0"])
+    assert code == 2
