@@ -19,6 +19,9 @@ Detectors
 ``TappingDetector``
     The loose tap of thesis Figure 5.10: fluctuation of spindle current and Z following error
     while the spindle runs in reverse (extraction), relative to the learned level.
+``WearAdaptiveDetector`` (:mod:`cnctwin.usecases.monitoring`)
+    Torque band around a teach-in profile or the physics-predicted torque, scaled by a wear
+    index tracked per hole at a bounded rate (no false alarms over a tool life, from part 1).
 
 References
 ----------
@@ -768,7 +771,8 @@ def signal_stream(
     pandas.DataFrame
         ``time_s`` (from the first sample of the first recording) [s], ``current_a`` [A],
         ``speed_rpm`` (actual spindle speed) [rpm], ``predicted_current_a`` (spindle twin with
-        the thesis parameters at zero cutting torque) [A], ``z_error_mm`` (DES_POS - ENC_POS of
+        the thesis parameters at zero cutting torque) [A], ``torque_nm`` (cutting torque of the
+        same twin, thesis Eq. 3.1) [Nm], ``z_error_mm`` (DES_POS - ENC_POS of
         Z1, 0 if absent) [mm], ``progress`` [-], ``hole`` [-]. Without a spindle speed
         signal the speed (and the prediction) is NaN and ``attrs["issues"]`` says so.
     """
@@ -789,8 +793,11 @@ def signal_stream(
         except SignalNotFoundError as exc:  # e.g. UMich: no CMD_SPEED; keep, flag
             speed = np.full(len(cur), np.nan)
             issues.append(f"{r.meta.source_files[:1]}: spindle speed NaN ({exc})")
+        with np.errstate(invalid="ignore"):
+            torque = model.cutting_torque(cur, speed, fs_hz=r.fs_hz)
         d = pd.DataFrame({"time_s": t, "current_a": cur, "speed_rpm": speed,
-                          "predicted_current_a": model.predict_current_a(0.0, speed)})
+                          "predicted_current_a": model.predict_current_a(0.0, speed),
+                          "torque_nm": torque})
         if r.has("DES_POS|Z1") and r.has("ENC_POS|Z1"):
             d["z_error_mm"] = (r.hf["DES_POS|Z1"] - r.hf["ENC_POS|Z1"]).to_numpy()
         else:
@@ -816,7 +823,22 @@ def signal_stream(
     return data
 
 
-DETECTORS: tuple[type[Detector], ...] = (
-    PhysicsResidualDetector, EnvelopeDetector, SpectralDetector, TappingDetector,
-)
-"""Every detector class; the conformance tests run on each."""
+DETECTORS: tuple[type[Detector], ...]
+"""Every detector class (built on first access by the module ``__getattr__``)."""
+
+
+def __getattr__(name: str) -> Any:
+    """``DETECTORS``: every detector class, the conformance tests run on each.
+
+    Built on first access because :mod:`cnctwin.usecases.monitoring` subclasses
+    :class:`Detector` from this module (a module-level tuple would be a circular import).
+    """
+    if name == "DETECTORS":
+        from cnctwin.usecases.monitoring import WearAdaptiveDetector
+
+        detectors: tuple[type[Detector], ...] = (
+            PhysicsResidualDetector, EnvelopeDetector, SpectralDetector, TappingDetector,
+            WearAdaptiveDetector,
+        )
+        return detectors
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
