@@ -10,7 +10,11 @@ Measures in one run, on the same simulated drilling recording (tool-wear run, th
 * the runtime with torque + per-hole record + anomaly detector (PhysicsResidualDetector,
   one ``score_one`` per cycle) + JSON lines;
 * the same + MQTT publish through the store-and-forward queue to a private mosquitto
-  (skipped, and said so, without a mosquitto binary).
+  (skipped, and said so, without a mosquitto binary);
+* torque + holes + anomaly + JSON lines + the OPC UA server sink (``cnctwin.edge.opcua``,
+  10 Hz publish rate, asyncua server thread in the same process and on the same CPU; no
+  client connected; the server start, about 2 s, is outside the timed part), measured
+  alternately with the same path without it (skipped without asyncua).
 
 Physical need: 500 cycles/s per machine (one sample per 2 ms position-control cycle).
 "machines per core" = cycles per CPU-second / 500. The process is pinned to one CPU.
@@ -136,6 +140,43 @@ def main() -> None:
     rows.append(("runtime: torque -> JSON lines", n / w, n / c))
     w, c = _measure(runtime(True), args.repeat)
     rows.append(("runtime: torque + holes + anomaly -> JSON lines", n / w, n / c))
+    import importlib.util
+
+    if importlib.util.find_spec("asyncua") is not None:
+        from cnctwin.edge.opcua import OpcUaSink
+
+        with socket.socket() as sk:
+            sk.bind(("127.0.0.1", 0))
+            port = int(sk.getsockname()[1])
+        best = {False: (float("inf"), float("inf")), True: (float("inf"), float("inf"))}
+        for _ in range(args.repeat):
+            for with_opc in (False, True):  # alternating, so load changes hit both
+                d = Path(tempfile.mkdtemp(dir=tmp))
+                sinks: list[Any] = [JsonLinesSink(d / "results.jsonl")]
+                opc = None
+                if with_opc:
+                    opc = OpcUaSink(f"opc.tcp://127.0.0.1:{port}/bench", machine="bench")
+                    sinks.append(opc)
+                rt = EdgeRuntime(ReplaySource(rec, chunk_cycles=50),
+                                 [TorqueProcessor(model), HoleProcessor(model),
+                                  AnomalyProcessor(model=model, learn_s=5.0)], sinks,
+                                 state_dir=d)
+                c0, w0 = time.process_time(), time.perf_counter()
+                st = rt.run(close=False)
+                rt.finish()  # includes waiting until the server applied every write
+                wt, ct = time.perf_counter() - w0, time.process_time() - c0
+                assert st["cycles"] == n
+                if opc is not None:
+                    assert opc.windows >= n // 50 and opc.last_error == "", opc.status()
+                bw, bc = best[with_opc]
+                best[with_opc] = (min(bw, wt), min(bc, ct))
+        for with_opc, label in ((False, "runtime: torque + holes + anomaly -> JSON lines "
+                                        "(alternating with the next row)"),
+                                (True, "runtime: same + OPC UA server sink (10 Hz)")):
+            bw, bc = best[with_opc]
+            rows.append((label, n / bw, n / bc))
+    else:
+        print("asyncua not installed: OPC UA rows skipped (pip install 'cnctwin[opcua]')")
     br = _broker()
     if br is not None:
         proc, port = br

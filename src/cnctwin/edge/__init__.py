@@ -9,6 +9,7 @@ Layers (pure pieces first, orchestration last):
 * :mod:`~cnctwin.edge.processors`: cutting torque, per-hole record, anomaly detectors.
 * :mod:`~cnctwin.edge.forward`: the bounded on-disk queue of store-and-forward.
 * :mod:`~cnctwin.edge.sinks`: MQTT (store-and-forward), the store, JSON lines.
+* :mod:`~cnctwin.edge.opcua`: an OPC UA server sink (extra ``opcua``; import it from there).
 * :mod:`~cnctwin.edge.runtime`: :class:`EdgeRuntime`, the loop and its status.
 
 See docs/edge.md.
