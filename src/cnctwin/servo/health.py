@@ -24,7 +24,6 @@ that parameter; nothing is filled in.
 
 from __future__ import annotations
 
-import contextlib
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -571,6 +570,8 @@ class HealthResult:
         Parameter -> reason.
     settings : dict
         Test settings (z_alarm, cusum_k, cusum_h, baseline_windows, window_s, rel_floors).
+    notes : list of str
+        Findings worth reading (reference model, rejected models).
     """
 
     axis: str
@@ -580,6 +581,7 @@ class HealthResult:
     alarms: list[HealthAlarm] = field(default_factory=list)
     no_baseline: dict[str, str] = field(default_factory=dict)
     settings: dict[str, object] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
 
     def series(self, parameter: str) -> tuple[FloatArray, FloatArray, FloatArray]:
         """(window index, value, stderr) of one parameter (identified windows only)."""
@@ -599,7 +601,8 @@ class HealthResult:
 def identify_window(
     recording: Recording, axis: str, *, index: int = 0, source: str = "", label: str = "",
     model: AxisLoopModel | None = None, setpoint_chain: bool = True, effort_signal: str = "auto",
-    jerk_models: tuple[str, ...] = JERK_FILTER_TYPES, n_bootstrap: int = 50, seed: int = 0,
+    jerk_models: tuple[str, ...] = JERK_FILTER_TYPES, min_travel: float = 0.5,
+    n_bootstrap: int = 50, seed: int = 0,
 ) -> HealthWindow:
     """Identify the health parameters of one axis in one window.
 
@@ -625,6 +628,10 @@ def identify_window(
         Jerk-filter models tried by the setpoint-chain fit
         (:data:`~cnctwin.servo.identify.JERK_FILTER_TYPES`; restrict it when MD32402 is known:
         the PT2 and double-MA fits take most of the time).
+    min_travel : float, default 0.5
+        Least peak-to-peak travel of DES_POS for the window to count as excited [mm or deg];
+        below it every parameter is reported as not identified (a creeping or parked axis
+        gives a Kv regression on quantization noise).
     n_bootstrap : int, default 50
         Bootstrap resamples of the regressions.
     seed : int, default 0
@@ -645,7 +652,17 @@ def identify_window(
     ni: dict[str, str] = {}
     base = {"index": index, "label": label or f"{source}#{index}", "source": source,
             "start_time": start, "duration_s": dur, "n_cycles": rec.n_cycles}
+    des_col = f"DES_POS|{axis}"
+    des_w = (rec.hf[des_col].to_numpy(dtype=np.float64) if des_col in rec.hf.columns
+             else np.array([np.nan]))
+    travel = float(np.nanmax(des_w) - np.nanmin(des_w)) if np.isfinite(des_w).any() else 0.0
     try:
+        if travel < min_travel:
+            unit = rec.meta.units.get(des_col, "")
+            raise IdentificationError(
+                f"not enough excitation: DES_POS|{axis} travels {travel:.3g} {unit} in the "
+                f"window (< min_travel {min_travel:g})" if des_col in rec.hf.columns
+                else f"DES_POS|{axis} is not recorded")
         ident = identify_axis(rec, axis, n_bootstrap=n_bootstrap, seed=seed,
                               jerk_models=jerk_models)
     except IdentificationError as exc:
@@ -722,8 +739,8 @@ class LoopHealthMonitor:
     reference : sequence of HealthWindow, optional
         Windows of an earlier period used as the baseline instead of the first windows.
     model : AxisLoopModel, optional
-        Reference loop model for the residual; default: built from the first window whose
-        identification has Kv.
+        Reference loop model, kept here for the caller (:func:`track_loop_health` sets it from
+        the first window that yields a model fitting its own window).
 
     Notes
     -----
@@ -800,9 +817,6 @@ class LoopHealthMonitor:
         """Add one window; returns the alarms it raised."""
         res = self.result
         res.windows.append(window)
-        if self.model is None and window.identification is not None:
-            with contextlib.suppress(IdentificationError):
-                self.model = AxisLoopModel.from_identification(window.identification)
         if not self.baseline_ready:
             if len(res.windows) >= self.baseline_windows:
                 self._make_baseline(list(res.windows), "windows")
@@ -877,6 +891,8 @@ def track_loop_health(
     rel_floors: Mapping[str, float] | None = None,
     effort_signal: str = "auto",
     jerk_models: tuple[str, ...] = JERK_FILTER_TYPES,
+    min_travel: float = 0.5,
+    max_reference_residual: float = 0.5,
     n_bootstrap: int = 50,
     seed: int = 0,
 ) -> HealthResult:
@@ -904,6 +920,12 @@ def track_loop_health(
     jerk_models : tuple of str
         Jerk-filter models of the reference window's setpoint-chain fit
         (:func:`identify_window`).
+    min_travel : float, default 0.5
+        Least DES_POS travel of an excited window [mm or deg] (:func:`identify_window`).
+    max_reference_residual : float, default 0.5
+        The first window whose loop model predicts its own window with a residual ratio below
+        this becomes the reference model of ``residual_ratio``; a model that does not fit
+        where it was identified is no reference (listed in ``notes``).
     n_bootstrap : int, default 50
         Bootstrap resamples per window.
     seed : int, default 0
@@ -925,12 +947,16 @@ def track_loop_health(
     mon = LoopHealthMonitor(axis, baseline_windows=baseline_windows, parameters=parameters,
                             z_alarm=z_alarm, cusum_k=cusum_k, cusum_h=cusum_h,
                             rel_floors=rel_floors, reference=reference)
+    res = mon.result
+    res.settings.update(window_s=window_s, min_travel=min_travel,
+                        max_reference_residual=max_reference_residual)
+    model_reason = "no reference loop model yet (Kv not identified in an earlier window)"
     if reference is not None:
-        ref_ident = next((w.identification for w in reference if w.identification is not None
-                          and "kv_1_s" in w.identification.params), None)
-        if ref_ident is not None:
-            mon.model = AxisLoopModel.from_identification(ref_ident)
-    mon.result.settings["window_s"] = window_s
+        for w in reference:
+            if w.identification is not None and "kv_1_s" in w.identification.params:
+                mon.model = AxisLoopModel.from_identification(w.identification)
+                res.notes.append(f"reference loop model from {w.label}")
+                break
     index = 0
     for i, item in enumerate(recordings):
         if isinstance(item, Recording):
@@ -942,26 +968,44 @@ def track_loop_health(
             rec = read_recording(item)
             src = labels[i] if labels is not None else Path(item).name
         for k, win in enumerate(split_windows(rec, window_s=window_s)):
-            need_chain = mon.model is None
+            need_model = mon.model is None
             w = identify_window(win, axis, index=index, source=src, label=f"{src}#{k}",
-                                model=mon.model, setpoint_chain=need_chain,
+                                model=mon.model, setpoint_chain=need_model,
                                 effort_signal=effort_signal, jerk_models=jerk_models,
-                                n_bootstrap=n_bootstrap, seed=seed)
-            if need_chain and w.identification is not None and mon.model is None:
-                try:
-                    mon.model = AxisLoopModel.from_identification(w.identification)
-                except IdentificationError:
-                    pass
-                else:
-                    # the window that defines the model gets its (in-sample) residual too
-                    try:
-                        rr = residual_ratio(mon.model, win.select(axes=[axis]), axis)
-                        params = {**w.params, "residual_ratio": rr}
-                        ni = {k2: v for k2, v in w.not_identified.items()
-                              if k2 != "residual_ratio"}
-                        w = replace(w, params=params, not_identified=ni)
-                    except IdentificationError:
-                        pass
+                                min_travel=min_travel, n_bootstrap=n_bootstrap, seed=seed)
+            if need_model:
+                model_reason, w = _adopt_model(mon, w, win, axis, max_reference_residual,
+                                               model_reason)
             mon.update(w)
             index += 1
+    if mon.model is None:
+        res.notes.append(f"residual_ratio not tracked: {model_reason}")
     return mon.finish()
+
+
+def _adopt_model(mon: LoopHealthMonitor, w: HealthWindow, win: Recording, axis: str,
+                 max_ratio: float, reason: str) -> tuple[str, HealthWindow]:
+    """Make the window's loop model the reference if it predicts its own window."""
+    ni = dict(w.not_identified)
+    if w.identification is None or "kv_1_s" not in w.identification.params:
+        ni["residual_ratio"] = reason
+        return reason, replace(w, not_identified=ni)
+    try:
+        model = AxisLoopModel.from_identification(w.identification)
+        rr = residual_ratio(model, win, axis)
+    except IdentificationError as exc:
+        reason = f"no reference loop model: {exc}"
+        ni["residual_ratio"] = reason
+        return reason, replace(w, not_identified=ni)
+    if not rr.value < max_ratio:
+        reason = (f"the loop model identified in {w.label} does not predict its own window "
+                  f"(residual ratio {rr.value:.3g} >= {max_ratio:g}; e.g. an unidentified FFW "
+                  f"weight or setpoint filter), so it is not used as the reference")
+        mon.result.notes.append(reason)
+        ni["residual_ratio"] = reason
+        return reason, replace(w, not_identified=ni)
+    mon.model = model
+    mon.result.notes.append(f"reference loop model from {w.label} (in-sample residual ratio "
+                            f"{rr.value:.3g})")
+    ni.pop("residual_ratio", None)
+    return "", replace(w, params={**w.params, "residual_ratio": rr}, not_identified=ni)
