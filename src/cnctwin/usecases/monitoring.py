@@ -194,7 +194,12 @@ class WearAdaptiveDetector(Detector):
         EWMA time constant of signal and reference [samples] (100 ms at 500 Hz); restarts per
         hole.
     tolerance : float, default 0.06
-        Allowed deviation from the reference, a fraction of it [-].
+        Allowed rise above the reference, a fraction of it (harder material, a chipped edge,
+        wear faster than ``max_step``) [-].
+    tolerance_below : float, default 0.12
+        Allowed drop below the reference [-]. Wider: a tool that cooled during a long break
+        cuts ~5 % lower on its first hole (the simulated drill runs at ~500 degC, 1e-4 /K),
+        while a breakage drops the torque by ~90 %.
     initial_tolerance : float, default 0.3
         The same while fewer than ``settle_holes`` holes have been tracked (physics mode: the
         uncertainty of the handbook constants and of the torque estimate) [-].
@@ -219,7 +224,8 @@ class WearAdaptiveDetector(Detector):
     Notes
     -----
     Per sample: ``r = w c(b) e`` with ``e`` the base reference (expected value or learned bin
-    mean) and ``c(b)`` the shape correction; score ``= |S(v) - S(r)| / (tol S(r)) - 1`` (S: the
+    mean) and ``c(b)`` the shape correction; score ``= |S(v) - S(r)| / (tol S(r)) - 1`` (tol:
+    ``tolerance`` above, ``tolerance_below`` below the reference; S: the
     EWMA, started as a running mean), above 0 is anomalous; a sample is judged once the EWMA
     has run ``smoothing`` samples in the hole. At the end of a hole without an alarm,
     ``q(b)`` = mean of ``v / e`` per bin, ``rho`` = median of ``q(b) / c(b)``;
@@ -238,6 +244,7 @@ class WearAdaptiveDetector(Detector):
         n_bins: int = 50,
         smoothing: float = 50.0,
         tolerance: float = 0.06,
+        tolerance_below: float = 0.12,
         initial_tolerance: float = 0.3,
         settle_holes: int = 3,
         max_step: float = 0.01,
@@ -248,12 +255,14 @@ class WearAdaptiveDetector(Detector):
         if n_bins < 1 or smoothing < 1 or settle_holes < 1:
             raise ConfigError(f"n_bins, smoothing and settle_holes must be >= 1; got {n_bins}, "
                               f"{smoothing}, {settle_holes}")
-        if not (tolerance > 0 and initial_tolerance > 0 and max_step >= 0):
-            raise ConfigError("tolerance and initial_tolerance must be > 0, max_step >= 0")
+        if not (tolerance > 0 and tolerance_below > 0 and initial_tolerance > 0
+                and max_step >= 0):
+            raise ConfigError("the tolerances must be > 0 and max_step >= 0")
         self.signal, self.progress, self.segment, self.expected = (
             signal, progress, segment, expected)
         self.n_bins, self.smoothing = n_bins, smoothing
         self.tolerance, self.initial_tolerance = tolerance, initial_tolerance
+        self.tolerance_below = tolerance_below
         self.settle_holes, self.max_step = settle_holes, max_step
         self.shape_gain, self.min_engagement = shape_gain, min_engagement
         self.judge_until = judge_until
@@ -272,7 +281,8 @@ class WearAdaptiveDetector(Detector):
     def _params(self) -> dict[str, Any]:
         return {"signal": self.signal, "progress": self.progress, "segment": self.segment,
                 "expected": self.expected, "n_bins": self.n_bins, "smoothing": self.smoothing,
-                "tolerance": self.tolerance, "initial_tolerance": self.initial_tolerance,
+                "tolerance": self.tolerance, "tolerance_below": self.tolerance_below,
+                "initial_tolerance": self.initial_tolerance,
                 "settle_holes": self.settle_holes, "max_step": self.max_step,
                 "shape_gain": self.shape_gain, "min_engagement": self.min_engagement,
                 "judge_until": self.judge_until}
@@ -362,7 +372,7 @@ class WearAdaptiveDetector(Detector):
             return None
         self._q_sum[b] += v / e
         self._q_n[b] += 1
-        return abs(self._sv - self._sr) / self._sr
+        return (self._sv - self._sr) / self._sr
 
     def learn_one(self, x: Mapping[str, float]) -> None:
         """Teach-in: learn the profile (or, with ``expected``, track the wear index)."""
@@ -375,9 +385,11 @@ class WearAdaptiveDetector(Detector):
         dev = self._step(x, teach=False, learn=True)
         if dev is None:
             return 0.0
-        tol = (self.tolerance if self.holes_tracked >= self.settle_holes
-               else self.initial_tolerance)
-        score = dev / tol - 1.0
+        if self.holes_tracked < self.settle_holes:
+            tol = self.initial_tolerance
+        else:
+            tol = self.tolerance if dev >= 0 else self.tolerance_below
+        score = abs(dev) / tol - 1.0
         if score > 0:
             self._alarmed = True
         return score

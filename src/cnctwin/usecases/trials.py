@@ -18,6 +18,7 @@ The detector never sees the drawn time; the teach-in length does not depend on i
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -29,13 +30,16 @@ from cnctwin.usecases.anomaly import (
     BacktestResult,
     Detector,
     EnvelopeDetector,
+    PhysicsResidualDetector,
     SpectralDetector,
     TappingDetector,
     backtest,
     signal_stream,
 )
+from cnctwin.usecases.monitoring import WearAdaptiveDetector, expected_torque_stream
 
 __all__ = [
+    "DRILLING_MONITORS",
     "FAULT_KINDS",
     "Trial",
     "fault_free_run",
@@ -49,6 +53,42 @@ FAULT_KINDS: tuple[str, ...] = ("loose_tool", "tapping_no_fault", "breakage", "h
 """``Trial.kind`` values: the fault, or a fault-free tapping / drilling run (false alarms)."""
 
 _SEED_KEY = 6  # issue number: the hidden draw uses its own random stream [seed, 6]
+
+DRILLING_MONITORS: tuple[str, ...] = ("envelope", "adaptive", "physics", "residual")
+"""Detectors of breakage / hardness change in :func:`fault_trial` and :func:`fault_free_run`:
+
+* ``envelope``: :class:`~cnctwin.usecases.anomaly.EnvelopeDetector` of the spindle current
+  (EWMA 20 ms), teach-in, alarm at 3 margins (the vendor baseline);
+* ``adaptive``: :class:`~cnctwin.usecases.monitoring.WearAdaptiveDetector` of the cutting
+  torque around the teach-in profile, wear index tracked per hole;
+* ``physics``: the same around the Kienzle-predicted torque, **no teach-in** (scores from the
+  first hole);
+* ``residual``: :class:`~cnctwin.usecases.anomaly.PhysicsResidualDetector`, spindle current
+  against the twin at zero cutting torque, in learned standard deviations (teach-in).
+"""
+
+
+def _monitor(name: str, envelope_threshold: float) -> tuple[Detector, float, bool]:
+    """(detector, alarm threshold, scores from part 1 without teach-in) of a monitor name."""
+    if name == "envelope":
+        return EnvelopeDetector(smoothing=10.0), envelope_threshold, False
+    if name == "adaptive":
+        return WearAdaptiveDetector(), 0.0, False
+    if name == "physics":
+        return WearAdaptiveDetector(expected="expected_torque_nm"), 0.0, True
+    if name == "residual":
+        return PhysicsResidualDetector(), 0.0, False
+    raise ConfigError(f"monitor must be one of {DRILLING_MONITORS}, not {name!r}")
+
+
+def _drilling_stream(rec: Any) -> pd.DataFrame:
+    """Cut-only detector stream of a drilling recording with the physics-expected torque."""
+    from cnctwin.usecases.holes import hole_record
+
+    holes = hole_record(rec, store=False)
+    data = signal_stream([rec], holes, cutting_only=True)
+    data["expected_torque_nm"] = expected_torque_stream(data, holes)
+    return data
 
 
 @dataclass
@@ -181,6 +221,7 @@ def fault_trial(
     gap_between_sets_s: float | None = None,
     max_delay_s: float = 2.0,
     envelope_threshold: float = 3.0,
+    monitor: str = "envelope",
 ) -> Trial:
     """Drilling run (tool-wear scenario) with a fault at a hidden, randomly drawn time.
 
@@ -216,23 +257,47 @@ def fault_trial(
         Alarm when the smoothed current is more than this many margins outside the envelope
         (fault-free holes reach at most 1.8 in the trials of docs/validation-usecases.md, a
         breakage ~70, a hardness change of +13 % ~11).
+    monitor : str, default 'envelope'
+        Detector for ``breakage``, ``hardness`` and ``none`` (:data:`DRILLING_MONITORS`);
+        ``physics`` scores every hole from the first (no teach-in). Chatter always uses the
+        spectral detector.
 
     Notes
     -----
     Every fault persists once started (``backtest(persistent=True)``): alarms after the onset
-    are not false alarms.
+    are not false alarms. The simulation of one (kind, seed) is cached, so trying several
+    monitors on the same draw simulates once.
     """
-    from cnctwin.sim.faults import Chatter, Fault, HardnessChange, ToolBreakage
-    from cnctwin.sim.scenarios import tool_wear_run
-    from cnctwin.usecases.holes import hole_record
-
     if kind not in ("breakage", "hardness", "chatter", "none"):
         raise ConfigError(f"kind must be breakage, hardness, chatter or none, not {kind!r}")
+    det, threshold, part1 = _monitor(monitor, envelope_threshold)
+    res, hidden, data = _drilling_trial_run(kind, seed, n_holes, teach_holes, gap_between_sets_s)
+    rec = res.recordings[0]
+    if kind == "chatter":
+        det = SpectralDetector(fs_hz=rec.fs_hz, band_hz=(100.0, 240.0))
+        threshold, part1 = 0.0, False
+    learn_until = (float(data["time_s"].iloc[0]) - 1.0 if part1 else
+                   float(data.loc[data["hole"] == teach_holes, "time_s"].iloc[0]) - 1e-6)
+    onsets = [o for o in res.truth["fault_onsets_s"] if o is not None]
+    bt = backtest(det, data, time_s=data["time_s"], learn_until_s=learn_until,
+                  fault_onsets_s=onsets, max_delay_s=max_delay_s, threshold=threshold,
+                  persistent=True)
+    return Trial("drilling_no_fault" if kind == "none" else kind, seed, hidden,
+                 onsets[0] if onsets else None, repr(det), bt, data, learn_until, res)
+
+
+@functools.lru_cache(maxsize=2)
+def _drilling_trial_run(
+    kind: str, seed: int, n_holes: int, teach_holes: int, gap_between_sets_s: float | None
+) -> tuple[Any, dict[str, Any], pd.DataFrame]:
+    """Simulated drilling run of :func:`fault_trial` (hidden draw, recording, cut stream)."""
+    from cnctwin.sim.faults import Chatter, Fault, HardnessChange, ToolBreakage
+    from cnctwin.sim.scenarios import tool_wear_run
+
     rng = np.random.default_rng([seed, _SEED_KEY])
     hole = int(rng.integers(teach_holes, n_holes))
     faults: list[Fault] = []
     hidden: dict[str, Any] = {}
-    det: Detector = EnvelopeDetector(smoothing=10.0)
     if kind == "breakage":
         frac = float(rng.uniform(0.2, 0.8))
         faults.append(ToolBreakage(hole=hole, depth_fraction=frac))
@@ -250,20 +315,7 @@ def fault_trial(
     kw: dict[str, Any] = ({} if gap_between_sets_s is None
                           else {"gap_between_sets_s": gap_between_sets_s})
     res = tool_wear_run(n_holes=n_holes, seed=seed, faults=faults, dynamometer=False, **kw)
-    rec = res.recordings[0]
-    holes = hole_record(rec)
-    threshold = envelope_threshold
-    if kind == "chatter":
-        det = SpectralDetector(fs_hz=rec.fs_hz, band_hz=(100.0, 240.0))
-        threshold = 0.0
-    data = signal_stream([rec], holes, cutting_only=True)
-    learn_until = float(data.loc[data["hole"] == teach_holes, "time_s"].iloc[0]) - 1e-6
-    onsets = [o for o in res.truth["fault_onsets_s"] if o is not None]
-    bt = backtest(det, data, time_s=data["time_s"], learn_until_s=learn_until,
-                  fault_onsets_s=onsets, max_delay_s=max_delay_s, threshold=threshold,
-                  persistent=True)
-    return Trial("drilling_no_fault" if kind == "none" else kind, seed, hidden,
-                 onsets[0] if onsets else None, repr(det), bt, data, learn_until, res)
+    return res, hidden, _drilling_stream(res.recordings[0])
 
 
 def fault_free_run(
@@ -272,33 +324,90 @@ def fault_free_run(
     n_holes: int = 120,
     teach_holes: int = 12,
     envelope_threshold: float = 3.0,
+    monitors: Sequence[str] = (*DRILLING_MONITORS, "spectral"),
+    compress_life: bool = False,
+    segment_holes: int | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> dict[str, BacktestResult]:
     """Long fault-free drilling run scored by the drilling detectors of :func:`fault_trial`.
 
     The false-alarm rate of a detector needs fault-free time: over ``T`` hours without an
     alarm the rate is below ``3 / T`` per hour with 95 % confidence (Poisson, zero events).
     The run (tool-wear scenario, its sets and pauses) is taught on the first ``teach_holes``
-    holes like :func:`fault_trial` and scored on the rest.
+    holes like :func:`fault_trial` and scored on the rest (``physics``: scored from the first
+    hole, no teach-in).
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the simulation (segment ``k`` uses ``1000 seed + k``).
+    n_holes : int, default 120
+        Holes of the run; 2676 is the whole tool life of thesis §5.1 (3.46 h of machining).
+    teach_holes : int, default 12
+        Teach-in holes (two sets).
+    envelope_threshold : float, default 3
+        Alarm threshold of the envelope baseline.
+    monitors : sequence of str
+        :data:`DRILLING_MONITORS` names and ``spectral`` (the chatter detector).
+    compress_life : bool, default False
+        Compress the thesis wear curve into ``n_holes`` (run-in, rate and end of life scaled
+        as in ``scripts/validate_wear_full.py``): the whole tool life in a short run.
+    segment_holes : int, optional
+        Simulate in segments of this many holes (``start_hole`` carries the wear on) so that
+        only one segment's recording is in memory (a 2676-hole run in one piece needs ~4 GB);
+        the cut streams are joined with a 4 s pause, the tool cools at each joint.
+    progress : callable, optional
+        Called with a message per segment and detector.
 
     Returns
     -------
     dict of str to BacktestResult
-        ``envelope`` (breakage / hardness detector) and ``spectral`` (chatter detector).
+        One per name in ``monitors``.
     """
     from cnctwin.sim.scenarios import tool_wear_run
-    from cnctwin.usecases.holes import hole_record
 
-    res = tool_wear_run(n_holes=n_holes, seed=seed, dynamometer=False)
-    rec = res.recordings[0]
-    data = signal_stream([rec], hole_record(rec), cutting_only=True)
-    learn_until = float(data.loc[data["hole"] == teach_holes, "time_s"].iloc[0]) - 1e-6
+    for m in monitors:
+        if m != "spectral":
+            _monitor(m, envelope_threshold)  # validates the name
+    size = n_holes if segment_holes is None else max(int(segment_holes), 1)
+    ov: dict[str, Any] | None = None
+    if compress_life:
+        ov = {"wear.n_end": float(n_holes), "wear.run_in_holes": 40.0 * n_holes / 2676,
+              "wear.rate_um_per_hole": 147.0 / n_holes}
+    keep = ["time_s", "current_a", "speed_rpm", "predicted_current_a", "torque_nm",
+            "expected_torque_nm", "progress", "hole"]
+    parts: list[pd.DataFrame] = []
+    t_end = 0.0
+    fs_hz = 500.0
+    for k, h0 in enumerate(range(0, n_holes, size)):
+        n = min(size, n_holes - h0)
+        res = tool_wear_run(n_holes=n, start_hole=h0, seed=seed if size == n_holes
+                            else 1000 * seed + k, overrides=ov, dynamometer=False)
+        rec = res.recordings[0]
+        fs_hz = rec.fs_hz
+        d = _drilling_stream(rec)[keep]
+        del rec, res
+        d["hole"] = np.where(d["hole"] >= 0, d["hole"] + h0, d["hole"])
+        d["time_s"] = d["time_s"] + (t_end + 4.0 if parts else 0.0)
+        t_end = float(d["time_s"].iloc[-1])
+        parts.append(d)
+        if progress is not None:
+            progress(f"holes {h0}-{h0 + n - 1} simulated")
+    data = pd.concat(parts, ignore_index=True)
+    del parts
+    taught = float(data.loc[data["hole"] == teach_holes, "time_s"].iloc[0]) - 1e-6
     out = {}
-    for name, det, thr in (
-        ("envelope", EnvelopeDetector(smoothing=10.0), envelope_threshold),
-        ("spectral", SpectralDetector(fs_hz=rec.fs_hz, band_hz=(100.0, 240.0)), 0.0),
-    ):
+    for name in monitors:
+        if name == "spectral":
+            det: Detector = SpectralDetector(fs_hz=fs_hz, band_hz=(100.0, 240.0))
+            thr, part1 = 0.0, False
+        else:
+            det, thr, part1 = _monitor(name, envelope_threshold)
+        learn_until = float(data["time_s"].iloc[0]) - 1.0 if part1 else taught
         out[name] = backtest(det, data, time_s=data["time_s"], learn_until_s=learn_until,
                              threshold=thr)
+        if progress is not None:
+            progress(f"{name}: {out[name].false_alarms} false alarms")
     return out
 
 
