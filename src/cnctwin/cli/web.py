@@ -37,10 +37,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def _cmd_web(args: argparse.Namespace) -> int:
-    if args.store is None and not args.recording:
+    if args.store is None and not args.recording and args.live is None:
         raise ConfigError("give --store PATH_OR_URL and/or --recording PATH (a file or a "
-                          "directory of recordings); `cnctwin ingest FILE --store PATH` fills "
-                          "a store")
+                          "directory of recordings) and/or --live DIR (`cnctwin edge run "
+                          "--out DIR`); `cnctwin ingest FILE --store PATH` fills a store")
     if args.store is not None and "://" not in args.store and not Path(args.store).exists():
         raise ConfigError(f"store path {args.store} does not exist; create it with `cnctwin "
                           f"ingest FILE... --store {args.store}` or check the path")

@@ -293,9 +293,10 @@ def create_app(
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise ConfigError("the dashboard needs FastAPI: pip install 'cnctwin[web]'") from exc
 
-    if store_url is None and not recordings:
-        raise ConfigError("nothing to show: give a store (--store PATH_OR_URL) and/or recording "
-                          "files or directories (--recording PATH)")
+    if store_url is None and not recordings and live is None:
+        raise ConfigError("nothing to show: give a store (--store PATH_OR_URL), recording "
+                          "files or directories (--recording PATH) and/or an edge run's "
+                          "state directory (--live DIR)")
     spindle: SpindleModel | None
     model_source = ""
     if model is None or isinstance(model, SpindleModel):

@@ -80,7 +80,9 @@ def _anchor_deviation_ms(meta: RecordingMeta) -> tuple[float, float]:
     cyc = np.array([a[0] for a in meta.time_anchors], dtype=np.int64)
     ns = np.array([pd.Timestamp(a[1]).value for a in meta.time_anchors], dtype=np.int64)
     step_ns = round(meta.cycle_time_s * 1e9)
-    offset = (ns - (cyc - cyc[0]) * step_ns).astype(np.float64)
+    offset_ns = ns - (cyc - cyc[0]) * step_ns
+    # difference in int64 first: epoch nanoseconds (~1.7e18) as float64 have 256 ns steps
+    offset = (offset_ns - offset_ns[0]).astype(np.float64)
     bounds = np.array(sorted(g.after_cycle for g in meta.gaps), dtype=np.int64)
     section = np.searchsorted(bounds, cyc, side="left")
     devs = []

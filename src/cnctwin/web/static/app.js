@@ -23,7 +23,7 @@ const cnctwin = (() => {
   function stackedLayout(traces, title) {
     const n = traces.length, gap = 0.04, h = (1 - gap * (n - 1)) / n;
     const layout = {margin: {l: 70, r: 20, t: 30, b: 40}, showlegend: false, title: {text: title, font: {size: 13}},
-      xaxis: {title: {text: "time since first cycle [s]"}}, hovermode: "x"};
+      xaxis: {title: {text: "time since first cycle [s]"}, anchor: n > 1 ? `y${n}` : "y"}, hovermode: "x"};
     traces.forEach((t, i) => {
       const key = i === 0 ? "yaxis" : `yaxis${i + 1}`;
       const lo = 1 - (i + 1) * h - i * gap;

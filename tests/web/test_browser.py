@@ -1,0 +1,93 @@
+"""End to end: `cnctwin web` started as a server on a free port, pages rendered by headless
+Chromium; the DOM must hold the plots drawn by plotly.js (served locally, no network)."""
+
+from __future__ import annotations
+
+import os
+import re
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.web.conftest import require_tool
+
+pytestmark = pytest.mark.browser
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def server(wear12: dict[str, Any], c4a_file: Path, model_file: Path,
+           tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    port = _free_port()
+    live = tmp_path_factory.mktemp("live")
+    log = (tmp_path_factory.mktemp("srv") / "server.log").open("w")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cnctwin", "web", "--recording", str(wear12["path"]),
+         "--recording", str(c4a_file), "--model", str(model_file), "--live", str(live),
+         "--port", str(port)], stdout=log, stderr=subprocess.STDOUT)
+    url = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                with urllib.request.urlopen(url + "/healthz", timeout=2) as r:
+                    if r.status == 200:
+                        break
+            except OSError:
+                if proc.poll() is not None or time.monotonic() > deadline:
+                    log.flush()
+                    raise RuntimeError(f"cnctwin web did not start (exit {proc.poll()}); "
+                                       f"see {log.name}") from None
+                time.sleep(0.2)
+        yield url
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+        log.close()
+
+
+def _dump_dom(url: str, tmp_path: Path) -> str:
+    chromium = require_tool("chromium", install="apt-get install chromium "
+                            "(scripts/ensure-services.sh does it as root)")
+    cmd = [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+           "--no-first-run", "--disable-background-networking", "--disable-component-update",
+           "--disable-sync", f"--user-data-dir={tmp_path / 'profile'}",
+           "--virtual-time-budget=20000", "--window-size=1400,1600", "--dump-dom", url]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=90,
+                         env={**os.environ, "HOME": str(tmp_path)})
+    assert res.returncode == 0, res.stderr[-2000:]
+    return res.stdout
+
+
+def test_recording_page_draws_the_plot(server: str, tmp_path: Path) -> None:
+    dom = _dump_dom(server + "/recordings/file:0", tmp_path)
+    # plotly.js ran (its SVG root is there) and drew the two default signals
+    assert dom.count('class="main-svg"') >= 2
+    points = int(re.search(r'id="plot"[^>]*data-points="(\d+)"', dom)  # type: ignore[union-attr]
+                 .group(1))
+    assert 0 < points <= 2 * (2 * 4000 + 2)
+    info = re.search(r'id="plot-info"[^>]*>([^<]*)<', dom).group(1)  # type: ignore[union-attr]
+    assert "CURRENT|SP1" in info and "of 26169 samples" in info and "error" not in info
+    # the use-case section filled from the API: 12 holes (the simulated program)
+    assert re.search(r'id="holes-info"[^>]*>12 holes', dom)
+    assert dom.count("<tr>") > 12
+
+
+def test_overview_page(server: str, tmp_path: Path) -> None:
+    dom = _dump_dom(server + "/", tmp_path)
+    assert "sinumerik_adapter_840Dsl" in dom and "1 (7.72 s)" in dom
