@@ -77,6 +77,16 @@ def test_anomalies(run_dir, tmp_path: Path, detector: str,  # type: ignore[no-un
     assert (tmp_path / "alarms.csv").exists()
 
 
+@pytest.mark.parametrize("detector", ["adaptive", "physics-torque"])
+def test_anomalies_wear_adaptive_fault_free(run_dir, tmp_path: Path,  # type: ignore[no-untyped-def]
+                                            detector: str) -> None:
+    # fault-free 12-hole run: no alarm (physics-torque scores from the first hole, no teach-in)
+    d, _ = run_dir
+    assert main(["anomalies", *_files(d), "--detector", detector, "--out", str(tmp_path)]) == 0
+    assert len(pd.read_csv(tmp_path / "alarms.csv")) == 0
+    assert (tmp_path / f"anomalies_{detector}.png").exists()
+
+
 def test_missing_file(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["holes", "/nonexistent/x.json"]) == 2
     assert "not found" in capsys.readouterr().err

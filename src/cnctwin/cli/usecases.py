@@ -6,8 +6,11 @@
     Tool-wear trend: relative increase of the per-hole cutting torque over the new tool (set
     means remove the heating pattern), calibrated to micrometres on measured points, and the
     remaining-life forecast.
-``anomalies FILE... [--detector envelope|physics|spectral|tapping] [--learn-s N] [--out DIR]``
-    Teach a detector on the first seconds, score the rest, list the alarms.
+``anomalies FILE... [--detector envelope|adaptive|physics-torque|physics|spectral|tapping]
+[--learn-s N] [--material M] [--out DIR]``
+    Teach a detector on the first seconds, score the rest, list the alarms. ``adaptive``: the
+    wear-adaptive torque band around the teach-in profile; ``physics-torque``: the same around
+    the Kienzle-predicted torque, no teach-in (``--learn-s 0`` by default).
 """
 
 from __future__ import annotations
@@ -56,8 +59,15 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                        description="Teach a detector on the first --learn-s seconds of the "
                        "recordings (good data), score the rest, list the alarms.")
     a.add_argument("files", nargs="+", type=Path, metavar="FILE")
-    a.add_argument("--detector", choices=("envelope", "physics", "spectral", "tapping"),
-                   default="envelope")
+    a.add_argument("--detector", choices=("envelope", "adaptive", "physics-torque", "physics",
+                                          "spectral", "tapping"),
+                   default="envelope",
+                   help="adaptive: wear-adaptive torque band (teach-in profile); "
+                        "physics-torque: the same around the Kienzle torque, from part 1")
+    a.add_argument("--material", default="aisi1045",
+                   help="Kienzle material for physics-torque (aisi1045, grey_cast_iron)")
+    a.add_argument("--drill-mm", type=float, default=8.5,
+                   help="drill diameter for physics-torque [mm] (8.5)")
     a.add_argument("--learn-s", type=float, default=None,
                    help="teach-in duration [s] (default: the first third)")
     a.add_argument("--threshold", type=float, default=0.0, help="alarm above this score (0)")
@@ -198,7 +208,7 @@ def _stream(recs: list[Any], holes: pd.DataFrame | None, detector: str) -> pd.Da
     from cnctwin.usecases.anomaly import signal_stream
 
     return signal_stream(recs, holes, cutting_only=holes is not None and detector in
-                         ("envelope", "physics", "spectral"))
+                         ("envelope", "adaptive", "physics-torque", "physics", "spectral"))
 
 
 def _cmd_anomalies(args: argparse.Namespace) -> int:
@@ -210,6 +220,7 @@ def _cmd_anomalies(args: argparse.Namespace) -> int:
         backtest,
     )
     from cnctwin.usecases.figures import plot_anomaly_scores
+    from cnctwin.usecases.monitoring import WearAdaptiveDetector
 
     recs = _read(args.files)
     if args.detector == "tapping":
@@ -223,7 +234,7 @@ def _cmd_anomalies(args: argparse.Namespace) -> int:
         try:
             _, holes = _holes(args.files)
         except ConfigError:
-            if args.detector == "envelope":  # needs the progress through each hole
+            if args.detector in ("envelope", "adaptive", "physics-torque"):  # need the holes
                 raise
             holes = None
             print("note: no hole found; scoring every sample (not only the cuts)")
@@ -232,8 +243,16 @@ def _cmd_anomalies(args: argparse.Namespace) -> int:
         raise ConfigError("nothing to score: no cutting samples in the recordings")
     for issue in data.attrs.get("issues", []):
         print(f"note: {issue}")
+    if args.detector == "physics-torque":
+        from cnctwin.usecases.monitoring import expected_torque_stream
+
+        assert holes is not None
+        data["expected_torque_nm"] = expected_torque_stream(
+            data, holes, material=args.material, diameter_mm=args.drill_mm)
     det = {
         "envelope": lambda: EnvelopeDetector(),
+        "adaptive": lambda: WearAdaptiveDetector(),
+        "physics-torque": lambda: WearAdaptiveDetector(expected="expected_torque_nm"),
         "physics": lambda: PhysicsResidualDetector(),
         # default band 20-240 Hz at 500 Hz, scaled with the sampling rate (UMich: 10 Hz)
         "spectral": lambda: SpectralDetector(fs_hz=recs[0].fs_hz, band_hz=(
@@ -241,7 +260,8 @@ def _cmd_anomalies(args: argparse.Namespace) -> int:
         "tapping": lambda: TappingDetector(),
     }[args.detector]()
     t = data["time_s"].to_numpy()
-    learn_s = args.learn_s if args.learn_s is not None else t[0] + (t[-1] - t[0]) / 3.0
+    learn_s = args.learn_s if args.learn_s is not None else (
+        t[0] - 1.0 if args.detector == "physics-torque" else t[0] + (t[-1] - t[0]) / 3.0)
     res = backtest(det, data, time_s=t, learn_until_s=learn_s, threshold=args.threshold)
     hole_at = np.interp(res.alarms_s, t, data["hole"].to_numpy()) if res.alarms_s else []
     alarms = pd.DataFrame({"alarm_s": res.alarms_s,

@@ -276,6 +276,7 @@ class WearAdaptiveDetector(Detector):
         self._teach_n = np.zeros(n_bins)
         self._teach_full = math.nan
         self._shape = np.ones(n_bins)
+        self._scoring = False
         self._reset_hole(None)
 
     def _params(self) -> dict[str, Any]:
@@ -379,9 +380,10 @@ class WearAdaptiveDetector(Detector):
         self._step(x, teach=self.expected is None, learn=True)
 
     def score_one(self, x: Mapping[str, float]) -> float:
-        if self.expected is None and self.holes_tracked < self.settle_holes \
-                and self._teach_n.any():
-            self.holes_tracked = self.settle_holes  # the teach-in is the calibration
+        if not self._scoring:
+            self._scoring = True
+            if self.expected is None and self._teach_n.any():
+                self.holes_tracked = self.settle_holes  # the teach-in is the calibration
         dev = self._step(x, teach=False, learn=True)
         if dev is None:
             return 0.0
