@@ -78,7 +78,9 @@ def plot_payload(time_s: NDArray[np.float64], cycles: NDArray[np.int64],
     hi = time_s.size if end_s is None else int(np.searchsorted(time_s, end_s, side="right"))
     t, c, v = time_s[lo:hi], cycles[lo:hi], values[lo:hi]
     n = int(t.size)
-    brk = (np.flatnonzero(np.diff(c) > 1) + 1) if n > 1 else np.empty(0, dtype=np.int64)
+    # cycles increase strictly: a span of n - 1 means no gap, and the scan can be skipped
+    gapless = n < 2 or int(c[-1]) - int(c[0]) == n - 1
+    brk = np.empty(0, dtype=np.int64) if gapless else np.flatnonzero(np.diff(c) > 1) + 1
     bounds = [0, *brk.tolist(), n]
     xs: list[NDArray[np.float64]] = []
     ys: list[NDArray[np.float64]] = []
@@ -96,7 +98,8 @@ def plot_payload(time_s: NDArray[np.float64], cycles: NDArray[np.int64],
         ys.append(env.y)
     x = np.concatenate(xs) if xs else np.empty(0)
     y = np.concatenate(ys) if ys else np.empty(0)
-    finite = v[np.isfinite(v)] if n else v
+    # every bucket's extremes are kept, so the kept points hold the range's min and max
+    finite = y[np.isfinite(y)]
     return {"x": x, "y": y, "n_source": n, "n_points": int(x.size), "exact": bool(exact),
             "n_gaps": int(brk.size), "px": px,
             "start_s": float(t[0]) if n else None, "end_s": float(t[-1]) if n else None,
