@@ -86,7 +86,7 @@ def test_decimate_peak_closed_form() -> None:
     # last cycle present (odd, so negative); every window holds whole (even, odd) pairs, each
     # summing to -1, so every mean is -0.5
     cyc = np.concatenate([np.arange(98, 150), np.arange(160, 204)]).astype(np.int64)
-    v = np.where(cyc % 2 == 0, 1.0, -1.0) * cyc
+    v = np.where(cyc % 2 == 0, 1.0, -1.0) * cyc.astype(np.float64)
     w, mean, peak, last = decimate_peak(cyc, v, window_cycles=WINDOW)
     assert w.tolist() == [1, 2, 3, 4] and last.tolist() == [99, 149, 199, 203]
     assert peak.tolist() == [-99.0, -149.0, -199.0, -203.0]

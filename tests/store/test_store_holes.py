@@ -109,8 +109,9 @@ def test_filters(store: Store, two: dict[str, str]) -> None:
 def test_rows_from_edge_messages_and_extra_columns(store: Store, two: dict[str, str]) -> None:
     # the edge runtime's hole messages carry start_time as ISO text and may hold more keys
     holes = hole_frame(0, 2)
-    rows = []
-    for r in holes.to_dict("records"):
+    rows: list[dict[str, Any]] = []
+    for rec in holes.to_dict("records"):
+        r = {str(k): v for k, v in rec.items()}
         r["start_time"] = r["start_time"].isoformat()
         r["tool"] = None if pd.isna(r["tool"]) else int(r["tool"])
         r["thrust_proxy"] = None
