@@ -454,10 +454,15 @@ class _TruthParquet:
         table = pa.table(frame)
         if self._writer is None:
             # lz4 without dictionary, pages v2: ~7x faster than zstd with dictionary and 20 %
-            # smaller on these float columns (benchmarks/bench_sim.py, session 2)
+            # smaller on these float columns (benchmarks/bench_sim.py, session 2); the cycle
+            # delta-encoded and the float32 truth byte-stream-split: -40 % bytes (session 3)
+            enc = {f.name: "BYTE_STREAM_SPLIT" for f in table.schema
+                   if pa.types.is_floating(f.type)}
+            enc.update({f.name: "DELTA_BINARY_PACKED" for f in table.schema
+                        if pa.types.is_integer(f.type)})
             self._writer = pq.ParquetWriter(self.path, table.schema, compression="lz4",
                                             use_dictionary=False, write_batch_size=65_536,
-                                            data_page_version="2.0")
+                                            data_page_version="2.0", column_encoding=enc)
         self._writer.write_table(table)
 
     def close(self) -> Path | None:
@@ -469,16 +474,18 @@ class _TruthParquet:
 
 @dataclass
 class _Progress:
+    """Progress of one program: ``time_s`` of ``total_s`` machine time (the planned duration
+    the hook gets with every chunk, so the program is not planned twice)."""
+
     fn: ProgressFn | None
-    total_s: float
     label: str
     done: float = 0.0
     share: float = 1.0
 
-    def __call__(self, time_s: float) -> None:
-        if self.fn is not None and self.total_s > 0:
-            frac = self.done + self.share * min(time_s / self.total_s, 1.0)
-            self.fn(min(frac, 1.0), f"{self.label} {time_s:.0f}/{self.total_s:.0f} s")
+    def __call__(self, time_s: float, total_s: float) -> None:
+        if self.fn is not None and total_s > 0:
+            frac = self.done + self.share * min(time_s / total_s, 1.0)
+            self.fn(min(frac, 1.0), f"{self.label} {time_s:.0f}/{total_s:.0f} s")
 
 
 class _Process:
@@ -548,7 +555,7 @@ class _Process:
             self.daq.feed(ci.time_s, np.vstack([load.fx_n, load.fy_n, load.thrust_n,
                                                 load.torque_nm]), on)
         if self.progress is not None:
-            self.progress(float(ci.time_s[-1]))
+            self.progress(float(ci.time_s[-1]), ci.duration_s)
         if self.truth_out is not None:
             if keep.any():
                 frame: dict[str, NDArray[Any]] = {"cycle": ci.cycle[keep]}
@@ -812,7 +819,7 @@ class _NoLoad(_Process):
 
     def __call__(self, ci: CuttingInput) -> CuttingOutput:
         if self.progress is not None:
-            self.progress(float(ci.time_s[-1]))
+            self.progress(float(ci.time_s[-1]), ci.duration_s)
         return CuttingOutput(spindle_torque_nm=np.zeros(len(ci)))
 
 
@@ -879,14 +886,6 @@ def _collect(res: ScenarioResult, sim: Any, sink: Any, path: Path | None,
         res.paths += _sink_files(sink, path) + daq.paths
         if tp is not None and tp.close() is not None:
             res.paths.append(tp.path)
-
-
-def _duration_s(program: Program, machine: Machine) -> float:
-    """Machine time of a program (the interpolator plans it; no sampling)."""
-    from cnctwin.sim.simulation import iter_chunks
-
-    first = next(iter(iter_chunks(program, machine, 1)))
-    return float(getattr(first, "duration_s", 0.0))
 
 
 def _sim_seed(seed: int, *key: int) -> int:
@@ -1010,7 +1009,7 @@ def air_cut_sweep(
     _write_program(o, "air_cut_sweep.mpf", text, res.paths)
     sink, path = _make_sink(o, "air_cut_sweep", fmt, max_file_mb)
     tee = _EventTee(sink) if sink is not None else None
-    prog_fn = _Progress(progress, _duration_s(prog, cfg.machine), "air cut")
+    prog_fn = _Progress(progress, "air cut")
     hook = _NoLoad(surface_z_mm=0.0, faults=(), rng=np.random.default_rng(seed), truth=None,
                    daq=None, progress=prog_fn)
     sim = _simulate(prog, cfg, seed=seed, hook=hook, sink=tee, chunk_cycles=chunk_cycles)
@@ -1080,8 +1079,7 @@ def warm_up(
         prog = parse_program(text)
         stem = f"warm_up_{int(s)}rpm"
         _write_program(o, f"{stem}.mpf", text, res.paths)
-        total = _duration_s(prog, cfg.machine)
-        pf = _Progress(progress, total, f"{s:.0f} rpm", done=i / len(speeds_rpm),
+        pf = _Progress(progress, f"{s:.0f} rpm", done=i / len(speeds_rpm),
                        share=1.0 / len(speeds_rpm))
         hook = _NoLoad(surface_z_mm=0.0, faults=(), rng=np.random.default_rng(seed), truth=None,
                        daq=None, progress=pf)
@@ -1201,7 +1199,7 @@ def drilling_validation(
         daq = _DynamometerDAQ(cfg.dynamometer, np.random.default_rng([seed, i, 2]), o,
                               f"dynamometer_{tag}")
         tp = _TruthParquet(o / f"truth_per_cycle_{tag}.parquet") if o is not None else None
-        pf = _Progress(progress, _duration_s(prog, cfg.machine), f"{mat} {n:.0f} rpm",
+        pf = _Progress(progress, f"{mat} {n:.0f} rpm",
                        done=i / len(cuts), share=1.0 / len(cuts))
         hook = DrillingProcess(cfg, material=material, feed_mm_per_rev=f, speed_rpm=n,
                                hole_depth_mm=depth_mm, surface_z_mm=0.0, faults=(), rng=rng,
@@ -1320,7 +1318,7 @@ def tool_wear_run(
     daq = (_DynamometerDAQ(cfg.dynamometer, np.random.default_rng([seed, 2]), o, "dynamometer")
            if dynamometer else None)
     tp = _TruthParquet(o / "truth_per_cycle.parquet") if o is not None else None
-    pf = _Progress(progress, _duration_s(prog, cfg.machine), "wear run")
+    pf = _Progress(progress, "wear run")
     hook = DrillingProcess(cfg, material=cfg.materials["aisi1045"], feed_mm_per_rev=feed,
                            speed_rpm=speed_rpm, hole_depth_mm=depth_mm,
                            walk_direction_rad=walk_direction_rad, surface_z_mm=0.0,
@@ -1413,7 +1411,7 @@ def loose_tap(
     _write_program(o, "loose_tap.mpf", text, res.paths)
     daq = _DynamometerDAQ(cfg.dynamometer, np.random.default_rng([seed, 2]), o, "dynamometer")
     tp = _TruthParquet(o / "truth_per_cycle.parquet") if o is not None else None
-    pf = _Progress(progress, _duration_s(prog, cfg.machine), "tapping")
+    pf = _Progress(progress, "tapping")
     hook = TappingProcess(cfg, material=cfg.materials["aisi1045"], surface_z_mm=0.0,
                           faults=(fault,), rng=np.random.default_rng([seed, 1]), truth=tp,
                           daq=daq, progress=pf)
@@ -1509,7 +1507,7 @@ def milling_square_circle(
     _write_program(o, "milling_square_circle.mpf", text, res.paths)
     daq = _DynamometerDAQ(cfg.dynamometer, np.random.default_rng([seed, 2]), o, "dynamometer")
     tp = _TruthParquet(o / "truth_per_cycle.parquet") if o is not None else None
-    pf = _Progress(progress, _duration_s(prog, cfg.machine), "milling")
+    pf = _Progress(progress, "milling")
     hook = MillingProcess(cfg, material=cfg.materials["al7050"], surface_z_mm=0.0,
                           faults=flist, rng=np.random.default_rng([seed, 1]), truth=tp,
                           daq=daq, progress=pf)

@@ -317,14 +317,29 @@ def write_thermal_camera_csv(channel: ExternalChannel, path: str | PathLike[str]
     return p
 
 
+_DIGIT_PAIRS = np.frombuffer(b"".join(b"%02d" % i for i in range(100)), dtype=np.uint8).copy()
+"""ASCII of "00" ... "99": two digits per division in :func:`_fixed_csv_kernel`."""
+
+_FIXED_MAX = 9e18
+"""Largest ``|value| * 10**decimals`` the fixed-point formatter takes (int64 range)."""
+
+
 @njit(cache=True)
 def _fixed_csv_kernel(
-    values: NDArray[np.float64], decimals: NDArray[np.int64]
-) -> NDArray[np.uint8]:  # pragma: no cover - compiled
+    values: NDArray[np.float64], decimals: NDArray[np.int64], pairs: NDArray[np.uint8]
+) -> tuple[NDArray[np.uint8], int]:  # pragma: no cover - compiled
+    """Rows of ``values`` as ``%.{d}f`` CSV bytes; second result: the first row with a value
+    too large for int64 fixed point (``-1`` if none; the buffer is then incomplete)."""
     n, m = values.shape
     width = 24 + int(decimals.max()) if m else 1
     buf = np.empty(n * m * width + 1, dtype=np.uint8)
     digits = np.empty(24, dtype=np.uint8)
+    scales = np.empty(m)
+    for j in range(m):
+        sc = 1.0
+        for _ in range(decimals[j]):
+            sc *= 10.0
+        scales[j] = sc
     pos = 0
     for i in range(n):
         for j in range(m):
@@ -345,36 +360,47 @@ def _fixed_csv_kernel(
                     buf[pos + 2] = 102
                     pos += 3
             else:
-                scale = 1
-                for _ in range(d):
-                    scale *= 10
-                q = int(round(abs(x) * scale))  # noqa: RUF046 - numba typing
-                ip = q // scale
-                fp = q - ip * scale
+                xs = abs(x) * scales[j]
+                if xs >= _FIXED_MAX:
+                    return buf[:pos], i
+                q = int(round(xs))  # noqa: RUF046 - numba typing
                 if x < 0.0 and q != 0:
                     buf[pos] = 45
                     pos += 1
+                # digits from the right: the d fraction digits, then the integer part two
+                # at a time; written out left to right
                 k = 0
-                if ip == 0:
-                    digits[0] = 48
-                    k = 1
-                while ip > 0:
-                    digits[k] = 48 + ip % 10
-                    ip //= 10
+                for _ in range(d):
+                    digits[k] = 48 + q % 10
+                    q //= 10
                     k += 1
-                for t in range(k - 1, -1, -1):
+                nf = k
+                if q == 0:
+                    digits[k] = 48
+                    k += 1
+                while q >= 10:
+                    r = q % 100
+                    q //= 100
+                    digits[k] = pairs[2 * r + 1]
+                    digits[k + 1] = pairs[2 * r]
+                    k += 2
+                if q > 0:
+                    digits[k] = 48 + q
+                    k += 1
+                while k > nf + 1 and digits[k - 1] == 48:  # a leading zero of a pair
+                    k -= 1
+                for t in range(k - 1, nf - 1, -1):
                     buf[pos] = digits[t]
                     pos += 1
                 if d > 0:
                     buf[pos] = 46
                     pos += 1
-                    for t in range(d - 1, -1, -1):
-                        buf[pos + t] = 48 + fp % 10
-                        fp //= 10
-                    pos += d
+                    for t in range(nf - 1, -1, -1):
+                        buf[pos] = digits[t]
+                        pos += 1
             buf[pos] = 44 if j < m - 1 else 10
             pos += 1
-    return buf[:pos]
+    return buf[:pos], -1
 
 
 def format_csv_fixed(values: ArrayLike, decimals: ArrayLike) -> str:
@@ -408,7 +434,8 @@ def _csv_fixed_buffer(values: ArrayLike, decimals: ArrayLike) -> NDArray[np.uint
                           f"{arr.shape} and {dec.shape}")
     if dec.size and (dec.min() < 0 or dec.max() > 12):
         raise ConfigError(f"format_csv_fixed: decimals must be 0-12, got {dec.tolist()}")
-    if arr.size and np.nanmax(np.abs(np.where(np.isfinite(arr), arr, 0.0))) * 10.0 ** (
-            dec.max()) >= 9e18:
-        raise ConfigError("format_csv_fixed: a value is too large for fixed-point output")
-    return _fixed_csv_kernel(arr, dec)
+    buf, bad = _fixed_csv_kernel(arr, dec, _DIGIT_PAIRS)
+    if bad >= 0:
+        raise ConfigError(f"format_csv_fixed: row {bad} has a value too large for fixed-point "
+                          f"output ({arr[bad].tolist()} with decimals {dec.tolist()})")
+    return buf

@@ -15,6 +15,7 @@ negligible for the load, and it keeps every physical block one compiled pass per
 
 from __future__ import annotations
 
+import math
 import sys
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
@@ -104,6 +105,9 @@ class CuttingInput:
         Index of the executing block in the program.
     cycle_time_s : float
         Position-control cycle [s].
+    duration_s : float
+        Machine time of the whole program as the interpolator planned it [s] (NaN when the
+        trajectory was given without it); for progress reports.
     """
 
     cycle: NDArray[np.int64]
@@ -117,6 +121,7 @@ class CuttingInput:
     tool: NDArray[Any]
     block_index: NDArray[Any]
     cycle_time_s: float
+    duration_s: float = math.nan
 
     def __len__(self) -> int:
         return int(self.cycle.size)
@@ -369,7 +374,7 @@ def simulate(
                 des_pos={ax: des[i] for i, ax in enumerate(feed)}, position=pos,
                 spindle_speed_rpm=speed_cmd, spindle_pos_deg=sp_pos_cmd, spindle_mode=sp_mode,
                 tool=np.asarray(traj.tool), block_index=np.asarray(traj.block_index),
-                cycle_time_s=tc,
+                cycle_time_s=tc, duration_s=float(getattr(traj, "duration_s", math.nan)),
             )
             cout = cutting(cin)
             load = np.broadcast_to(np.asarray(cout.spindle_torque_nm, dtype=np.float64), (n,))
