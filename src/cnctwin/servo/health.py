@@ -25,6 +25,7 @@ that parameter; nothing is filled in.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -46,6 +47,7 @@ from cnctwin.servo.identify import (
 from cnctwin.servo.predict import AxisLoopModel, prediction_residual
 
 __all__ = [
+    "DEFAULT_MAX_REL_STDERR",
     "DEFAULT_REL_FLOORS",
     "HEALTH_PARAMETERS",
     "BaselineParameter",
@@ -77,6 +79,13 @@ DEFAULT_REL_FLOORS: Mapping[str, float] = {
 """Relative uncertainty floors [-] added in quadrature to every test: a machine's parameters are
 not constant to better than this between production windows (temperature, lubrication), and
 identification on near noise-free data reports standard errors far below it [E]."""
+
+DEFAULT_MAX_REL_STDERR: Mapping[str, float] = {
+    "kv_1_s": 0.1, "speed_loop_equiv_time_s": 0.5, "coulomb_pos": 0.5, "coulomb_neg": 0.5,
+}
+"""Largest relative standard error [-] for a window estimate to be used: beyond it the window
+did not excite the parameter (e.g. a P law fitted on a setpoint velocity, Kv 0.19 +- 0.03 1/s on
+the servo trace's braking test) [E]."""
 
 _POSITION_SIGNALS = ("DES_POS", "ENC_POS", "ENC1_POS", "ENC2_POS", "CTRL_POS", "CTRL_DIFF2",
                      "CONT_DEV", "VEL_FFW", "TORQUE_FFW", "CMD_SPEED", "CURRENT", "TORQUE",
@@ -268,7 +277,10 @@ def residual_ratio(
     and the ratio grows. Jackknife over blocks (Efron & Stein 1981) keeps the error
     autocorrelation inside each block.
     """
-    _, _, res = prediction_residual(model, recording, axis)
+    with warnings.catch_warnings():
+        # a window without a predictable run gives an empty mean (checked below)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        _, _, res = prediction_residual(model, recording, axis)
     d = axis_data(recording, axis)
     fe = d.signals["DES_POS"] - d.signals["ENC_POS"]
     ok = np.isfinite(res) & np.isfinite(fe)
@@ -602,7 +614,7 @@ def identify_window(
     recording: Recording, axis: str, *, index: int = 0, source: str = "", label: str = "",
     model: AxisLoopModel | None = None, setpoint_chain: bool = True, effort_signal: str = "auto",
     jerk_models: tuple[str, ...] = JERK_FILTER_TYPES, min_travel: float = 0.5,
-    n_bootstrap: int = 50, seed: int = 0,
+    max_rel_stderr: Mapping[str, float] | None = None, n_bootstrap: int = 50, seed: int = 0,
 ) -> HealthWindow:
     """Identify the health parameters of one axis in one window.
 
@@ -632,6 +644,9 @@ def identify_window(
         Least peak-to-peak travel of DES_POS for the window to count as excited [mm or deg];
         below it every parameter is reported as not identified (a creeping or parked axis
         gives a Kv regression on quantization noise).
+    max_rel_stderr : mapping, optional
+        Largest relative standard error per parameter (:data:`DEFAULT_MAX_REL_STDERR`); a
+        less certain estimate is reported as not identified with its value and SE.
     n_bootstrap : int, default 50
         Bootstrap resamples of the regressions.
     seed : int, default 0
@@ -669,6 +684,7 @@ def identify_window(
         reason = f"not identified in this window: {exc}"
         return HealthWindow(**base, params={},  # type: ignore[arg-type]
                             not_identified={p: reason for p in HEALTH_PARAMETERS})
+    limits = {**DEFAULT_MAX_REL_STDERR, **dict(max_rel_stderr or {})}
     for name in ("kv_1_s", "speed_loop_equiv_time_s", "reversal_error"):
         if name in ident.params:
             params[name] = ident.params[name]
@@ -702,6 +718,18 @@ def identify_window(
                                         unit=d.units.get(code, ""), position_unit=pos_u)
         params.update(fr.params)
         ni.update(fr.not_identified)
+    for name, lim in limits.items():
+        e = params.get(name)
+        if e is None:
+            continue
+        rel = e.stderr / abs(e.value) if e.value else math.inf
+        if math.isfinite(e.stderr) and rel > lim:
+            del params[name]
+            ni[name] = (f"too uncertain in this window: {e.value:.4g} +- {e.stderr:.2g} {e.unit} "
+                        f"(relative SE {rel:.2g} > {lim:g}); not enough excitation or the "
+                        f"model does not hold")
+            if name == "speed_loop_equiv_time_s":
+                params.pop("speed_loop_bandwidth_hz", None)
     if model is not None:
         try:
             params["residual_ratio"] = residual_ratio(model, rec, axis)
