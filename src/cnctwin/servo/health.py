@@ -1006,7 +1006,7 @@ def track_loop_health(
                                                model_reason)
             mon.update(w)
             index += 1
-    if mon.model is None:
+    if mon.model is None and model_reason not in res.notes:
         res.notes.append(f"residual_ratio not tracked: {model_reason}")
     return mon.finish()
 
