@@ -638,9 +638,16 @@ class DrillingProcess(_Process):
         kw: dict[str, Any] = {"drill": cfg.drill, "material": self.material, "wear_um": wear,
                               "hardness_factor": hard, "spindle_angle_rad": angle,
                               "model": cfg.drilling, "dt_s": dt}
-        # tool temperature from the fault-free mean load (one pass), then the load with it
-        base = drilling_load(depth, n, feed, rng=None, **kw)
-        power = np.abs(base.torque_nm * n) * 2.0 * math.pi / 60.0
+        # tool temperature from the fault-free mean load (one pass, only where the tip is in
+        # the material: outside it the load is exactly 0), then the load with it
+        idx = np.flatnonzero(depth > 0.0)
+        power = np.zeros(depth.size)
+        if idx.size:
+            base = drilling_load(depth[idx], n[idx], feed[idx], drill=cfg.drill,
+                                 material=self.material, wear_um=wear[idx],
+                                 hardness_factor=np.broadcast_to(hard, depth.shape)[idx],
+                                 spindle_angle_rad=angle[idx], model=cfg.drilling, dt_s=dt)
+            power[idx] = np.abs(base.torque_nm * n[idx]) * 2.0 * math.pi / 60.0
         temp = tool_temperature(power, dt_s=dt, thermal=cfg.tool_thermal,
                                 initial_c=self.temperature_c)
         self.temperature_c = float(temp[-1])

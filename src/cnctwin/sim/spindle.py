@@ -679,6 +679,9 @@ def _kernel(  # pragma: no cover - compiled
     rpm = 60.0 / (2.0 * math.pi)
     sq2 = math.sqrt(2.0)
     psi_sq_margin = 1.0 + 1e-9
+    psi_sq_far = 1.0 + 1e-8  # > psi_sq_margin: the product test never skips a needed id_ref
+    umax2 = umax * umax
+    inv_kt0 = 1.0 / (1.5 * p * psi0)
     w = state[0]
     th = state[1]
     integ = state[2]
@@ -726,8 +729,11 @@ def _kernel(  # pragma: no cover - compiled
             # field weakening: id from the voltage ellipse (steady state, Rs neglected)
             we = p * abs(w)
             id_ref = 0.0
-            if we > 1.0:
-                arg = (umax / we) ** 2 - (lq * i_q) ** 2
+            lq_iq = lq * i_q
+            # well below the voltage limit, umax^2 > we^2 (psi_t^2 (1 + 1e-8) + (lq iq)^2),
+            # id_ref is 0: decided with products, no division on the speed loop's path
+            if we > 1.0 and umax2 <= we * we * (psi_sq_far * psi_t * psi_t + lq_iq * lq_iq):
+                arg = (umax / we) ** 2 - lq_iq * lq_iq
                 # below the voltage limit (sqrt(arg) > psi_t with margin) id_ref is 0.0:
                 # skip the sqrt there (same bits)
                 if arg <= psi_sq_margin * psi_t * psi_t:
@@ -749,7 +755,8 @@ def _kernel(  # pragma: no cover - compiled
                 t_ref = -t_max
             else:
                 integ += ki * e * dt
-            iq_ref = t_ref / kt_drive
+            # i_d is exactly 0 below base speed: the constant 1 / kt then (no division)
+            iq_ref = t_ref * inv_kt0 if i_d == 0.0 else t_ref / kt_drive
             # current loop (first order)
             i_d += a_i * (id_ref - i_d)
             i_q += a_i * (iq_ref - i_q)
