@@ -28,10 +28,22 @@ def _free_port() -> int:
 
 
 @pytest.fixture(scope="module")
-def server(wear12: dict[str, Any], c4a_file: Path, model_file: Path,
+def live_dir(wear12: dict[str, Any], model_file: Path,
+             tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The state directory of a finished `cnctwin edge run` replay of the wear run."""
+    from cnctwin.cli import main
+
+    live = tmp_path_factory.mktemp("live")
+    assert main(["edge", "run", "--source", str(wear12["path"]), "--model", str(model_file),
+                 "--out", str(live), "--quiet", "--learn-s", "2"]) == 0
+    return live
+
+
+@pytest.fixture(scope="module")
+def server(wear12: dict[str, Any], c4a_file: Path, model_file: Path, live_dir: Path,
            tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     port = _free_port()
-    live = tmp_path_factory.mktemp("live")
+    live = live_dir
     log = (tmp_path_factory.mktemp("srv") / "server.log").open("w")
     proc = subprocess.Popen(
         [sys.executable, "-m", "cnctwin", "web", "--recording", str(wear12["path"]),
@@ -91,3 +103,17 @@ def test_recording_page_draws_the_plot(server: str, tmp_path: Path) -> None:
 def test_overview_page(server: str, tmp_path: Path) -> None:
     dom = _dump_dom(server + "/", tmp_path)
     assert "sinumerik_adapter_840Dsl" in dom and "1 (7.72 s)" in dom
+
+
+def test_live_page_receives_events(server: str, tmp_path: Path, live_dir: Path) -> None:
+    # limit = every line of the finished run: the stream then ends with an `end` event and
+    # the page closes its EventSource (an open stream would keep the headless page loading)
+    n = len((live_dir / "results.jsonl").read_text().splitlines())
+    dom = _dump_dom(server + f"/live?limit={n}", tmp_path)
+    assert "stream ended" in dom
+    # the drawn x axis (plotly's tick labels) shows the last 30 s of the 52 s run
+    ticks = [float(t) for t in re.findall(r'class="xtick"><text[^>]*data-unformatted="([-\d.]+)"',
+                                          dom)]
+    assert ticks and min(ticks) >= 22.0 and 45.0 <= max(ticks) <= 52.4
+    table = re.search(r'<table id="live-holes">(.*?)</table>', dom, re.S).group(1)  # type: ignore[union-attr]
+    assert table.count("<tr>") == 1 + 12  # header + the 12 holes of the run

@@ -42,12 +42,13 @@ def test_stream_replays_results(edge_out: Path) -> None:
     with TestClient(create_app(live=edge_out)) as c:  # live only: no store, no files
         r = c.get("/api/live/stream", params={"from_start": "true", "limit": 40})
         assert r.status_code == 200 and r.headers["content-type"].startswith("text/event-stream")
-        ev = _events(r.text)
+        *ev, end = _events(r.text)
+        assert end == ("end", "", '{"events": 40}')  # the browser closes on it
         assert [e[2] for e in ev] == lines[:40]  # every line, in order, unchanged
         assert all(e[0] == json.loads(e[2])["kind"] for e in ev)
         assert [e[1] for e in ev] == [str(json.loads(x)["seq"]) for x in lines[:40]]
-        holes = _events(c.get("/api/live/stream", params={"from_start": "true", "limit": 12,
-                                                          "kinds": "hole"}).text)
+        *holes, _ = _events(c.get("/api/live/stream", params={"from_start": "true",
+                                                              "limit": 12, "kinds": "hole"}).text)
         assert [json.loads(e[2])["hole"] for e in holes] == list(range(12))
         st = c.get("/api/live/status").json()
         assert st["holes"] == 12 and st["results"] == str(edge_out / "results.jsonl")

@@ -111,8 +111,9 @@ class LiveSource:
         """SSE events of the new result lines (all kinds, or only ``kinds``).
 
         Each event is named after the message ``kind`` and carries the line as data; its id is
-        the message ``seq``. ``limit`` ends the stream after that many events (tests, one-shot
-        clients). A comment line is sent every ``heartbeat_s`` without data so proxies keep
+        the message ``seq``. ``limit`` ends the stream after that many events with an ``end``
+        event (tests, one-shot clients: a browser's EventSource would otherwise reconnect and
+        replay). A comment line is sent every ``heartbeat_s`` without data so proxies keep
         the connection.
         """
         n = 0
@@ -138,6 +139,7 @@ class LiveSource:
                     continue
                 n += 1
                 yield sse_event(line, event=kind, event_id=None if seq is None else str(seq))
+            yield sse_event(json.dumps({"events": n}), event="end")
         finally:
             if pending is not None:
                 pending.cancel()

@@ -93,12 +93,12 @@ def overview_page(title: str, machines: Sequence[dict[str, Any]], entries: Seque
     r_rows = []
     for e in entries:
         if e.error:
-            r_rows.append(f"<tr class=\"error\"><td>{_e(e.id)}</td><td colspan=12>"
-                          f"{_e(e.label)}: cannot be read: {_e(e.error)}</td></tr>")
+            r_rows.append(f"<tr class=\"error\"><td>{_e(e.label)}</td><td colspan=12>"
+                          f"cannot be read: {_e(e.error)}</td></tr>")
             continue
         r_rows.append(
-            f"<tr><td><a href=\"/recordings/{_q(e.id)}\">{_e(e.id)}</a></td>"
-            f"<td>{_e(e.label)}</td><td>{_e(e.machine or '?')}</td><td>{_e(e.source_format)}</td>"
+            f"<tr><td><a href=\"/recordings/{_q(e.id)}\" title=\"{_e(e.id)}\">{_e(e.label)}</a>"
+            f"</td><td>{_e(e.machine or '?')}</td><td>{_e(e.source_format)}</td>"
             f"<td>{_time(e.start_time)}</td><td>{_time(e.end_time)}</td>"
             f"<td>{_num(e.duration_s, '{:.3f}', 's')}</td><td>{e.n_cycles}</td>"
             f"{_quality_cells(e)}</tr>")
@@ -115,7 +115,7 @@ def overview_page(title: str, machines: Sequence[dict[str, Any]], entries: Seque
 <p class="muted">Rate: nominal = 1 / cycle time; effective = recorded cycles per second of the
 counter span (gaps lower it). Jitter: scatter of the source's wall-clock stamps about the cycle
 counter. Issues: what the reader repaired (hover for the list).</p>
-<table id="recordings"><thead><tr><th>id</th><th>name</th><th>machine</th><th>format</th>
+<table id="recordings"><thead><tr><th>recording</th><th>machine</th><th>format</th>
 <th>start (UTC)</th><th>end (UTC)</th><th>duration</th><th>cycles</th><th>rate</th>
 <th>effective</th><th>gaps (missing)</th><th>jitter</th><th>partial</th><th>issues</th></tr>
 </thead><tbody>{''.join(r_rows)}</tbody></table>

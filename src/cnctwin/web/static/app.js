@@ -130,10 +130,15 @@ const cnctwin = (() => {
         xaxis: {title: {text: "time [s]"}}, yaxis: {title: {text: "Nm"}}}, {responsive: true, displaylogo: false});
     const redraw = () => {
       pending = false;
-      Plotly.react(plot, [{x: xs, y: ys, type: "scatter", mode: "lines", line: {width: 1}}], plot.layout);
+      // new arrays: Plotly.react compares data by reference and would skip a mutated one
+      Plotly.react(plot, [{x: xs.slice(), y: ys.slice(), type: "scatter", mode: "lines", line: {width: 1}}], plot.layout);
       plot.dataset.points = String(xs.length);
     };
-    const es = new EventSource("/api/live/stream?from_start=true");
+    const q = new URLSearchParams({from_start: "true"});
+    const limit = new URLSearchParams(location.search).get("limit");
+    if (limit) q.set("limit", limit);
+    const es = new EventSource(`/api/live/stream?${q}`);
+    es.addEventListener("end", () => { es.close(); state.textContent = "stream ended (limit reached)"; });
     es.onopen = () => { state.textContent = "connected"; };
     es.onerror = () => { state.textContent = "disconnected – retrying"; };
     es.addEventListener("torque", (ev) => {
