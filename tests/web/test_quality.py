@@ -27,6 +27,10 @@ def test_real_recording_gap_and_rate(real_rec: Recording) -> None:
     # (recording.cycles_to_time docstring): the scatter is measurable, a few ms at most
     assert q.n_anchors == len(real_rec.meta.time_anchors) >= 2
     assert 0.0 < q.anchor_jitter_ms <= q.anchor_max_dev_ms < 10.0
+    # ... except across the gap: the reader's note says the 19 anchors ahead of it are off the
+    # others by +8.002 s (the gap's wall-clock length is not its 3859 cycles)
+    assert any("+8.002 s" in i for i in real_rec.meta.issues)
+    assert q.clock_step_s == pytest.approx(8.002, abs=0.001)
     assert q.n_issues == len(real_rec.meta.issues) and not q.partial
 
 
@@ -34,7 +38,7 @@ def test_simulated_recording_is_clean(wear12_rec: Recording) -> None:
     q = signal_quality_of(wear12_rec)
     # the simulator stamps one anchor per second exactly on the counter's clock
     assert q.n_gaps == 0 and q.coverage == 1.0 and q.effective_rate_hz == pytest.approx(500.0)
-    assert q.anchor_jitter_ms == 0.0
+    assert q.anchor_jitter_ms == 0.0 and q.clock_step_s == 0.0
 
 
 def test_known_anchor_offsets_and_gap() -> None:
@@ -50,6 +54,7 @@ def test_known_anchor_offsets_and_gap() -> None:
     assert q.coverage == pytest.approx(2301 / 2401)
     assert q.anchor_jitter_ms == pytest.approx(math.sqrt(4.5), rel=1e-9)
     assert q.anchor_max_dev_ms == pytest.approx(3.0, rel=1e-9)
+    assert q.clock_step_s == 0.0  # every anchor lies before the gap: one anchored section
     assert q.partial and q.n_issues == 1
 
 

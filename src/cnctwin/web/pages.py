@@ -67,6 +67,13 @@ def _gaps(n: int, missing_s: float) -> str:
     return f"{n} ({missing_s:.3g} s)" if n else "0"
 
 
+def _step(step_s: float) -> str:
+    # wall clock vs counter across gaps; shown only when it is more than a cycle's worth
+    if not math.isfinite(step_s) or step_s < 0.002:
+        return ""
+    return f' <span class="warn">(clock steps {step_s:.3g} s at gaps)</span>'
+
+
 def _quality_cells(e: Entry) -> str:
     q = e.quality
     if q is None:
@@ -76,7 +83,7 @@ def _quality_cells(e: Entry) -> str:
     return (f"<td>{_num(q.nominal_rate_hz, '{:g}', 'Hz')}</td>"
             f"<td{flag}>{_num(q.effective_rate_hz, '{:.4g}', 'Hz')}</td>"
             f"<td{flag}>{gaps}</td>"
-            f"<td>{_num(q.anchor_jitter_ms, '{:.3g}', 'ms')}</td>"
+            f"<td>{_num(q.anchor_jitter_ms, '{:.3g}', 'ms')}{_step(q.clock_step_s)}</td>"
             f"<td{' class=warn' if q.partial else ''}>{'partial' if q.partial else 'no'}</td>"
             f"<td title=\"{_e(chr(10).join(e.issues))}\">{q.n_issues}</td>")
 
@@ -178,7 +185,8 @@ def recording_page(title: str, e: Entry, signals: Sequence[str], *, calibrated: 
 longest {_num(q.longest_gap_s, '{:.4g}', 's')}); wraps {q.wraps}</dd>
 <dt>clock</dt><dd>{q.n_anchors} wall-clock anchors,
 jitter {_num(q.anchor_jitter_ms, '{:.3g}', 'ms')}
-(max {_num(q.anchor_max_dev_ms, '{:.3g}', 'ms')})</dd>
+(max {_num(q.anchor_max_dev_ms, '{:.3g}', 'ms')}) within gap-free runs;
+across gaps the wall clock and the counter differ by {_num(q.clock_step_s, '{:.4g}', 's')}</dd>
 <dt>partial</dt><dd>{'<b class="warn">yes</b>' if q.partial else 'no'}</dd>"""
     issues = "".join(f"<li>{_e(i)}</li>" for i in e.issues)
     body = f"""

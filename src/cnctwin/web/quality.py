@@ -48,6 +48,10 @@ class SignalQuality:
         each gap-free section [ms]; NaN with fewer than two anchors in one section.
     anchor_max_dev_ms : float
         Largest absolute deviation of an anchor from that line [ms].
+    clock_step_s : float
+        Largest difference between the gap-free sections' median anchor offsets: how far the
+        wall clock and the counter disagree across gaps (a gap whose wall-clock length is not
+        its missing cycles) [s]; 0 with one anchored section, NaN without anchors.
     partial : bool
         The reader kept what it could from damaged input (``salvage=True``).
     n_issues : int
@@ -65,6 +69,7 @@ class SignalQuality:
     n_anchors: int
     anchor_jitter_ms: float
     anchor_max_dev_ms: float
+    clock_step_s: float
     partial: bool
     n_issues: int
 
@@ -73,10 +78,11 @@ class SignalQuality:
         return asdict(self)
 
 
-def _anchor_deviation_ms(meta: RecordingMeta) -> tuple[float, float]:
-    """Std and max abs of anchor wall-clock minus the counter line, per gap-free section [ms]."""
-    if len(meta.time_anchors) < 2:
-        return float("nan"), float("nan")
+def _anchor_deviation_ms(meta: RecordingMeta) -> tuple[float, float, float]:
+    """Std and max abs of anchor wall-clock minus the counter line, per gap-free section [ms],
+    and the spread of the sections' median offsets [s]."""
+    if not meta.time_anchors:
+        return float("nan"), float("nan"), float("nan")
     cyc = np.array([a[0] for a in meta.time_anchors], dtype=np.int64)
     ns = np.array([pd.Timestamp(a[1]).value for a in meta.time_anchors], dtype=np.int64)
     step_ns = round(meta.cycle_time_s * 1e9)
@@ -86,14 +92,17 @@ def _anchor_deviation_ms(meta: RecordingMeta) -> tuple[float, float]:
     bounds = np.array(sorted(g.after_cycle for g in meta.gaps), dtype=np.int64)
     section = np.searchsorted(bounds, cyc, side="left")
     devs = []
+    medians = []
     for k in np.unique(section):
         sel = offset[section == k]
+        medians.append(float(np.median(sel)))
         if sel.size >= 2:
             devs.append(sel - np.median(sel))
+    step_s = (max(medians) - min(medians)) / 1e9
     if not devs:
-        return float("nan"), float("nan")
+        return float("nan"), float("nan"), step_s
     d = np.concatenate(devs) / 1e6
-    return float(np.std(d)), float(np.max(np.abs(d)))
+    return float(np.std(d)), float(np.max(np.abs(d))), step_s
 
 
 def signal_quality(meta: RecordingMeta, *, n_cycles: int, first_cycle: int | None,
@@ -124,7 +133,7 @@ def signal_quality(meta: RecordingMeta, *, n_cycles: int, first_cycle: int | Non
     span = (int(last_cycle) - int(first_cycle) + 1) if (
         first_cycle is not None and last_cycle is not None and n_cycles) else 0
     missing = sum(g.missing for g in meta.gaps)
-    jitter, max_dev = _anchor_deviation_ms(meta)
+    jitter, max_dev, clock_step = _anchor_deviation_ms(meta)
     return SignalQuality(
         nominal_rate_hz=1.0 / dt,
         effective_rate_hz=n_cycles / (span * dt) if span else float("nan"),
@@ -137,6 +146,7 @@ def signal_quality(meta: RecordingMeta, *, n_cycles: int, first_cycle: int | Non
         n_anchors=len(meta.time_anchors),
         anchor_jitter_ms=jitter,
         anchor_max_dev_ms=max_dev,
+        clock_step_s=clock_step,
         partial=bool(meta.partial),
         n_issues=len(meta.issues),
     )
