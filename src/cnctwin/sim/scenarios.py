@@ -596,11 +596,13 @@ class DrillingProcess(_Process):
         Programmed depth (progress of :class:`~cnctwin.sim.faults.ToolBreakage`) [mm].
     walk_direction_rad : float, default 0.7
         Direction of the static walk force in XY [rad] (lip asymmetry of this drill).
+    initial_tool_temperature_c : float, optional
+        Tool-tip temperature at the start [degC]; default the ambient temperature (cold tool).
     """
 
     def __init__(self, cfg: ScenarioConfig, *, material: Material, feed_mm_per_rev: float,
                  speed_rpm: float, hole_depth_mm: float, walk_direction_rad: float = 0.7,
-                 **kw: Any) -> None:
+                 initial_tool_temperature_c: float | None = None, **kw: Any) -> None:
         super().__init__(**kw)
         self.cfg = cfg
         self.material = material
@@ -608,7 +610,9 @@ class DrillingProcess(_Process):
         self.speed_rpm = speed_rpm
         self.hole_depth_mm = hole_depth_mm
         self.walk_direction_rad = walk_direction_rad
-        self.temperature_c = cfg.tool_thermal.ambient_temperature_c
+        self.temperature_c = (cfg.tool_thermal.ambient_temperature_c
+                              if initial_tool_temperature_c is None
+                              else float(initial_tool_temperature_c))
         self._acc: dict[int, list[float]] = {}
         # chisel-edge skid direction per hole (uniform): own stream, drawn once per new hole
         self._dir_rng = np.random.default_rng(int(self.rng.integers(2**32)))
@@ -1263,6 +1267,7 @@ def tool_wear_run(
     walk_direction_rad: float = 0.7,
     faults: Sequence[Fault | Mapping[str, Any]] = (),
     dynamometer: bool = True,
+    initial_tool_temperature_c: float | None = None,
     fmt: str = "parquet",
     max_file_mb: float | None = 500.0,
     chunk_cycles: int = 50_000,
@@ -1306,6 +1311,10 @@ def tool_wear_run(
         count from ``start_hole``.
     dynamometer : bool, default True
         Record the dynamometer.
+    initial_tool_temperature_c : float, optional
+        Tool-tip temperature at the start [degC]; default ambient (cold tool). With
+        ``start_hole`` it continues a run simulated in pieces without a cold restart (pass the
+        previous piece's ``truth["final_tool_temperature_c"]``).
     """
     cfg = ScenarioConfig.build(overrides, machine=machine)
     o = _prepare(out)
@@ -1331,7 +1340,8 @@ def tool_wear_run(
                            walk_direction_rad=walk_direction_rad, surface_z_mm=0.0,
                            faults=flist, rng=np.random.default_rng([seed, 1]), truth=tp,
                            daq=daq, daq_off_blocks=gap_blocks, progress=pf,
-                           first_hole=start_hole)
+                           first_hole=start_hole,
+                           initial_tool_temperature_c=initial_tool_temperature_c)
     sink, path = _make_sink(o, "tool_wear_run", fmt, max_file_mb)
     sim = _simulate(prog, cfg, seed=seed, hook=hook, sink=sink, chunk_cycles=chunk_cycles)
     if daq is not None:
@@ -1354,6 +1364,10 @@ def tool_wear_run(
     res.truth["holes"] = rows
     res.truth["fault_onsets_s"] = hook.onsets
     res.truth["final_wear_um"] = float(flank_wear_um(start_hole + n_holes - 1, curve=cfg.wear))
+    res.truth["initial_tool_temperature_c"] = (th.ambient_temperature_c
+                                               if initial_tool_temperature_c is None
+                                               else float(initial_tool_temperature_c))
+    res.truth["final_tool_temperature_c"] = hook.temperature_c
     res.truth["dynamometer_sessions"] = daq.sessions if daq is not None else []
     res.truth["n_cycles"] = sim.trajectory["n_cycles"]
     if sim.recording is not None:
