@@ -28,9 +28,10 @@ def test_real_recording_gap_and_rate(real_rec: Recording) -> None:
     assert q.n_anchors == len(real_rec.meta.time_anchors) >= 2
     assert 0.0 < q.anchor_jitter_ms <= q.anchor_max_dev_ms < 10.0
     # ... except across the gap: the reader's note says the 19 anchors ahead of it are off the
-    # others by +8.002 s (the gap's wall-clock length is not its 3859 cycles)
+    # median of all anchors by +8.002 s (the gap's wall-clock length is not its 3859 cycles);
+    # the step between the two sections' own medians is the same within 2 ms (one cycle)
     assert any("+8.002 s" in i for i in real_rec.meta.issues)
-    assert q.clock_step_s == pytest.approx(8.002, abs=0.001)
+    assert q.clock_step_s == pytest.approx(8.002, abs=0.002)
     assert q.n_issues == len(real_rec.meta.issues) and not q.partial
 
 

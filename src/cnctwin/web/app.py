@@ -124,6 +124,11 @@ class Dashboard:
         with self._lock:
             if key not in self._cache:
                 self._cache[key] = make()
+                # per-sample results (the torque signal) are as large as a recording: keep as
+                # many as the catalog keeps recordings; hole tables and trends are small
+                big = [k for k in self._cache if k[0] == "torque"]
+                for old in big[: max(0, len(big) - self.catalog.cache_size)]:
+                    del self._cache[old]
             return self._cache[key]
 
     def machines(self) -> list[dict[str, Any]]:
