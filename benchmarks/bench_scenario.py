@@ -30,7 +30,6 @@ import datetime as dt
 import io
 import json
 import os
-import re
 import resource
 import subprocess
 import sys
@@ -40,16 +39,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from _common import cpu_model, export_rev, pin_one_core, replace_section
+
 GOAL_S = 15.0
 FULL_HOLES = 2676
-
-
-def _pin_one_core() -> str:
-    if hasattr(os, "sched_setaffinity"):
-        cpu = min(os.sched_getaffinity(0))
-        os.sched_setaffinity(0, {cpu})
-        return f"sched_setaffinity cpu {cpu}"
-    return "not pinned"
 
 
 def _disk(out: Path) -> dict[str, float]:
@@ -114,7 +107,7 @@ def _wrapped_parts() -> tuple[dict[str, float], Callable[[], None]]:
 
 
 def _child_main(holes: int, parts: bool) -> None:
-    pinned = _pin_one_core()
+    pinned = pin_one_core()
     with tempfile.TemporaryDirectory() as tmp:
         _run_cli(Path(tmp) / "warm", 6)  # numba caches, imports
         cpu_parts: dict[str, float] = {}
@@ -144,14 +137,6 @@ def _child(src: Path, holes: int, *, parts: bool = False) -> dict[str, Any]:
     return dict(json.loads(out.strip().splitlines()[-1]))
 
 
-def _export_rev(rev: str, dest: Path) -> Path:
-    repo = Path(__file__).resolve().parents[1]
-    archive = subprocess.run(["git", "-C", str(repo), "archive", rev, "src"],
-                             capture_output=True, check=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
-    return dest / "src"
-
-
 def _median(runs: list[dict[str, Any]]) -> dict[str, Any]:
     ordered = sorted(runs, key=lambda d: d["user"] + d["sys"])
     med = dict(ordered[len(ordered) // 2])
@@ -163,7 +148,7 @@ def run(holes: int, repeat: int, before_rev: str | None, parts: bool) -> dict[st
     src_now = Path(__file__).resolve().parents[1] / "src"
     new, before = [], []
     with tempfile.TemporaryDirectory() as tmp:
-        src_before = _export_rev(before_rev, Path(tmp)) if before_rev else None
+        src_before = export_rev(before_rev, Path(tmp)) if before_rev else None
         if src_before is not None:
             _child(src_before, 1)  # fill its numba cache
         for _ in range(repeat):
@@ -228,25 +213,12 @@ def table(r: dict[str, Any]) -> str:
     return "\n".join(out)
 
 
-def _cpu_model() -> str:
-    txt = subprocess.run(["lscpu"], capture_output=True, text=True, check=False).stdout
-    for line in txt.splitlines():
-        if line.startswith("Model name"):
-            return line.split(":", 1)[1].strip()
-    return "unknown"
-
-
 def write_section(path: Path, body: str) -> None:
     title = "## Simulator: the tool-wear scenario command"
     head = (f"{title}\n\n`benchmarks/bench_scenario.py` ({dt.date.today().isoformat()}, "
-            f"{_cpu_model()}, 2 vCPU shared with other jobs, child pinned to one core, "
+            f"{cpu_model()}, 2 vCPU shared with other jobs, child pinned to one core, "
             "NUMBA_NUM_THREADS=1).\n\n")
-    section = head + body + "\n"
-    text = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n\n"
-    pattern = re.compile(re.escape(title) + r"\n.*?(?=\n## |\Z)", re.S)
-    text = pattern.sub(section.rstrip("\n") + "\n", text) if pattern.search(text) else (
-        text.rstrip("\n") + "\n\n" + section)
-    path.write_text(text, encoding="utf-8")
+    replace_section(path, title, head + body)
 
 
 def main(argv: list[str] | None = None) -> None:

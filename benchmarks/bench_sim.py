@@ -36,7 +36,6 @@ import contextlib
 import datetime as dt
 import json
 import os
-import re
 import resource
 import shutil
 import subprocess
@@ -54,6 +53,7 @@ import numpy as np
 import cnctwin.sim.servo as servo_mod
 import cnctwin.sim.simulation as sim_mod
 import cnctwin.sim.spindle as spindle_mod
+from _common import cpu_model, export_rev, pin_one_core, replace_section
 from cnctwin.sim._reference import servo_kernel_reference, spindle_kernel_reference
 from cnctwin.sim.cutting import drilling_load
 from cnctwin.sim.machine import Machine
@@ -86,14 +86,6 @@ def cutting_hook(ci: CuttingInput) -> CuttingOutput:
                          dt_s=ci.cycle_time_s)
     return CuttingOutput(spindle_torque_nm=load.torque_nm,
                          force_n={"Z1": load.thrust_n, "X1": load.fx_n, "Y1": load.fy_n})
-
-
-def _pin_one_core() -> str:
-    if hasattr(os, "sched_setaffinity"):
-        cpu = min(os.sched_getaffinity(0))
-        os.sched_setaffinity(0, {cpu})
-        return f"sched_setaffinity cpu {cpu}"
-    return "not pinned"
 
 
 def _maxrss_mb() -> float:
@@ -261,16 +253,6 @@ def _warm_up(m: Machine) -> None:
             simulate(drilling_program(1), m, cutting=cutting_hook)
 
 
-def _export_rev(rev: str, dest: Path) -> Path:
-    """``git archive`` the package source of commit ``rev`` into ``dest`` (read-only on the
-    repository); returns the ``src`` directory to put on PYTHONPATH."""
-    repo = Path(__file__).resolve().parents[1]
-    archive = subprocess.run(["git", "-C", str(repo), "archive", rev, "src"],
-                             capture_output=True, check=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
-    return dest / "src"
-
-
 def _child_run(src: Path, holes: int) -> dict[str, Any]:
     """One Parquet run of ``simulate()`` from the source tree ``src`` in a child process."""
     env = dict(os.environ, PYTHONPATH=str(src), NUMBA_NUM_THREADS="1")
@@ -287,7 +269,7 @@ def run(holes: int, baseline_holes: int, repeat: int = 3,
     prog = drilling_program(holes)
     arrow, parquet, before = [], [], []
     with tempfile.TemporaryDirectory() as tmp:
-        src = _export_rev(before_rev, Path(tmp)) if before_rev else None
+        src = export_rev(before_rev, Path(tmp)) if before_rev else None
         if src is not None:
             _child_run(src, 1)  # compile the old kernels into its numba cache
         for _ in range(repeat):  # interleaved, so that load changes hit all alike
@@ -428,32 +410,16 @@ def writer_table(rows: list[dict[str, Any]], wear_cycles: float) -> str:
     return "\n".join(out)
 
 
-def _cpu_model() -> str:
-    try:
-        txt = subprocess.run(["lscpu"], capture_output=True, text=True, check=False).stdout
-        for line in txt.splitlines():
-            if line.startswith("Model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return "unknown"
-
-
 def write_section(path: Path, body: str, pinned: str) -> None:
     head = (f"## Simulator\n\n`benchmarks/bench_sim.py` ({dt.date.today().isoformat()}, "
-            f"{_cpu_model()}, 2 vCPU shared with other jobs, one core: "
+            f"{cpu_model()}, 2 vCPU shared with other jobs, one core: "
             f"NUMBA_NUM_THREADS=1, {pinned}).\n\n")
-    section = head + body + "\n"
-    text = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n\n"
-    pattern = re.compile(r"## Simulator\n.*?(?=\n## |\Z)", re.S)
-    text = pattern.sub(section.rstrip("\n") + "\n", text) if pattern.search(text) else (
-        text.rstrip("\n") + "\n\n" + section)
-    path.write_text(text, encoding="utf-8")
+    replace_section(path, "## Simulator", head + body)
 
 
 def _child_main(holes: int) -> None:
     """One timed Parquet run, JSON on stdout (used with an older source on PYTHONPATH)."""
-    _pin_one_core()
+    pin_one_core()
     m = Machine.thesis_default()
     with tempfile.TemporaryDirectory() as tmp:
         simulate(drilling_program(1), m, cutting=cutting_hook,
@@ -481,7 +447,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.child:
         _child_main(args.holes)
         return
-    pinned = _pin_one_core()
+    pinned = pin_one_core()
     r = run(args.holes, args.baseline_holes or min(args.holes, 600), args.repeat,
             args.before_rev)
     body = table(r)
