@@ -19,10 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import minimize
 
 from cnctwin.exceptions import ConfigError
-from cnctwin.sim.tool import Drill, EndMill, Tap
+from cnctwin.sim.tool import Drill, EndMill, Tap, first_order_recursion
 
 __all__ = [
     "MATERIALS",
@@ -412,10 +411,7 @@ class CuttingLoad:
 
 def _ar1(noise: NDArray[np.float64], a: float) -> NDArray[np.float64]:
     """Unit-variance AR(1) filter of white noise (no state across calls)."""
-    from scipy.signal import lfilter
-
-    y = lfilter([math.sqrt(1.0 - a * a)], [1.0, -a], noise)
-    return np.asarray(y, dtype=np.float64)
+    return first_order_recursion(noise, a, b0=math.sqrt(1.0 - a * a))
 
 
 def drilling_load(
@@ -763,6 +759,8 @@ def fit_kienzle(
 
     def objective(x: NDArray[np.float64]) -> float:
         return float(np.max(np.abs(model(x) / pts[:, 2] - 1.0)))
+
+    from scipy.optimize import minimize  # here: 0.3 s of import the simulator does not need
 
     res = minimize(
         objective,

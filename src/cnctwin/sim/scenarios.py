@@ -88,8 +88,8 @@ from cnctwin.sim.sensors import (
     Dynamometer,
     ThermalCamera,
     dynamometer_csv_decimals,
-    dynamometer_csv_rows,
-    dynamometer_samples,
+    dynamometer_rows,
+    format_csv_fixed_bytes,
     thermal_camera_channel,
     write_thermal_camera_csv,
 )
@@ -404,20 +404,19 @@ class _DynamometerDAQ:
     def _sample(self, t: NDArray[np.float64], v: NDArray[np.float64]) -> None:
         sensor = dataclasses.replace(self.sensor,
                                      clock_offset_s=self.sessions[-1]["clock_offset_s"])
-        own, vals = dynamometer_samples(t, (v[0], v[1], v[2], v[3]), sensor=sensor,
-                                        rng=self.rng)
-        keep = own > self._last_own + 1e-12
-        if not keep.all():
-            own, vals = own[keep], vals[keep]
-        if not own.size:
+        rows = dynamometer_rows(t, (v[0], v[1], v[2], v[3]), sensor=sensor, rng=self.rng)
+        # samples already taken at the end of the previous chunk (own times increase)
+        rows = rows[int(np.searchsorted(rows[:, 0], self._last_own + 1e-12, side="right")):]
+        if not rows.shape[0]:
             return
-        self._last_own = float(own[-1])
+        self._last_own = float(rows[-1, 0])
         if self._fh is not None:
             # fixed point below the noise, straight to the binary file (session 3: no pandas,
-            # no str copy; the DAQ was 30 % of the wear run's time, benchmarks/bench_sim.py)
-            self._fh.write(dynamometer_csv_rows(own, vals, self._decimals).data)
+            # no str copy; the DAQ was 30 % of the wear run's time, benchmarks/bench_scenario.py)
+            self._fh.write(format_csv_fixed_bytes(rows, self._decimals).data)
         else:
-            self._frames.append(pd.DataFrame(vals, index=pd.Index(own, name="time_s"),
+            self._frames.append(pd.DataFrame(rows[:, 1:], index=pd.Index(rows[:, 0],
+                                                                        name="time_s"),
                                              columns=list(DYNAMOMETER_COLUMNS)))
 
     def _close_session(self) -> None:

@@ -32,8 +32,10 @@ __all__ = [
     "dynamometer_channel",
     "dynamometer_csv_decimals",
     "dynamometer_csv_rows",
+    "dynamometer_rows",
     "dynamometer_samples",
     "format_csv_fixed",
+    "format_csv_fixed_bytes",
     "thermal_camera_channel",
     "write_dynamometer_csv",
     "write_thermal_camera_csv",
@@ -163,12 +165,12 @@ def dynamometer_samples(
     sensor: Dynamometer,
     rng: np.random.Generator,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The arrays behind :func:`dynamometer_channel` (no DataFrame: the long scenarios' DAQ).
+    """The arrays behind :func:`dynamometer_channel` (no DataFrame).
 
     Parameters
     ----------
     time_s : ndarray
-        Recording time of the true signals [s], at least two samples.
+        Recording time of the true signals [s], at least two samples, increasing.
     true : tuple
         True ``fx_n, fy_n, fz_n`` [N] and ``mz_nm`` [Nm] on ``time_s``; ``None`` for zero.
     sensor, rng
@@ -181,8 +183,27 @@ def dynamometer_samples(
     values : ndarray, shape (m, 4)
         ``fx_n, fy_n, fz_n, mz_nm`` (columns :data:`DYNAMOMETER_COLUMNS`) with noise and drift.
     """
+    rows = dynamometer_rows(time_s, true, sensor=sensor, rng=rng)
+    return rows[:, 0], rows[:, 1:]
+
+
+def dynamometer_rows(
+    time_s: NDArray[np.float64],
+    true: tuple[ArrayLike | None, ArrayLike | None, ArrayLike | None, ArrayLike | None],
+    *,
+    sensor: Dynamometer,
+    rng: np.random.Generator,
+) -> NDArray[np.float64]:
+    """:func:`dynamometer_samples` as one ``(m, 5)`` array ``time_s, fx_n, fy_n, fz_n, mz_nm``
+    (the layout of the CSV rows: the long scenarios' DAQ formats it without a copy).
+
+    Each channel is the true signal linearly interpolated at the sample's recording time
+    ``t_rec = t_own (1 + drift_ppm 1e-6) + offset`` (``numpy.interp``'s formula, by a merge walk
+    over the increasing times), plus ``noise_std`` times a standard normal draw, plus the
+    charge-amplifier drift ``rate t_own``. Noise draws: one ``(m, 4)`` block from ``rng``.
+    """
     s = sensor
-    t = time_s
+    t = np.ascontiguousarray(time_s, dtype=np.float64)
     if t.size < 2:
         raise ConfigError("dynamometer_channel needs at least two true samples")
     t0_own = (t[0] - s.clock_offset_s) / (1.0 + s.clock_drift_ppm * 1e-6)
@@ -192,13 +213,53 @@ def dynamometer_samples(
     own = np.arange(k0, k1 + 1, dtype=np.float64) / s.fs_hz
     tr = _own_to_recording(own, s.clock_offset_s, s.clock_drift_ppm)
     noise = rng.standard_normal((own.size, 4))
-    values = np.empty((own.size, 4))
-    for j, (x_true, sd, drift) in enumerate(zip(
-            true, (s.force_noise_n,) * 3 + (s.torque_noise_nm,),
-            (s.force_drift_n_per_s,) * 3 + (s.torque_drift_nm_per_s,), strict=True)):
-        x = np.interp(tr, t, np.asarray(x_true, dtype=np.float64)) if x_true is not None else 0.0
-        values[:, j] = x + sd * noise[:, j] + drift * own
-    return own, values
+    ys = np.zeros((4, t.size))
+    has = np.zeros(4, dtype=np.bool_)
+    for j, x_true in enumerate(true):
+        if x_true is not None:
+            ys[j] = np.broadcast_to(np.asarray(x_true, dtype=np.float64), t.shape)
+            has[j] = True
+    sd = np.array([s.force_noise_n] * 3 + [s.torque_noise_nm])
+    drift = np.array([s.force_drift_n_per_s] * 3 + [s.torque_drift_nm_per_s])
+    rows = np.empty((own.size, 5))
+    _dynamometer_kernel(t, ys, has, tr, own, noise, sd, drift, rows)
+    return rows
+
+
+@njit(cache=True)
+def _dynamometer_kernel(
+    t: NDArray[np.float64], ys: NDArray[np.float64], has: NDArray[np.bool_],
+    tr: NDArray[np.float64], own: NDArray[np.float64], noise: NDArray[np.float64],
+    sd: NDArray[np.float64], drift: NDArray[np.float64], rows: NDArray[np.float64],
+) -> None:  # pragma: no cover - compiled
+    """rows[i] = own, then per channel interp(tr[i], t, ys[j]) + sd noise + drift own, with
+    ``numpy.interp``'s arithmetic (slope (y1 - y0) / (t1 - t0), value slope (x - t0) + y0,
+    exact at a knot; clamped outside) found by walking both increasing time axes."""
+    n = tr.size
+    m = t.size
+    p = 0
+    for i in range(n):
+        x = tr[i]
+        rows[i, 0] = own[i]
+        while p < m - 2 and t[p + 1] <= x:
+            p += 1
+        for j in range(4):
+            if not has[j]:
+                v = 0.0
+            elif x <= t[0]:
+                v = ys[j, 0]
+            elif x >= t[m - 1]:
+                v = ys[j, m - 1]
+            elif x == t[p]:
+                v = ys[j, p]
+            else:
+                slope = (ys[j, p + 1] - ys[j, p]) / (t[p + 1] - t[p])
+                v = slope * (x - t[p]) + ys[j, p]
+                if v != v:  # as numpy: try from the other knot, then the flat value
+                    v = slope * (x - t[p + 1]) + ys[j, p + 1]
+                    if v != v and ys[j, p] == ys[j, p + 1]:
+                        v = ys[j, p]
+            rows[i, j + 1] = v + sd[j] * noise[i, j] + drift[j] * own[i]
 
 
 def thermal_camera_channel(
@@ -284,7 +345,7 @@ def dynamometer_csv_rows(
     arr = np.empty((own_time_s.size, 5))
     arr[:, 0] = own_time_s
     arr[:, 1:] = values
-    return _csv_fixed_buffer(arr, decimals)
+    return format_csv_fixed_bytes(arr, decimals)
 
 
 def write_dynamometer_csv(
@@ -422,11 +483,12 @@ def format_csv_fixed(values: ArrayLike, decimals: ArrayLike) -> str:
     str
         The rows, each ended by ``\\n``.
     """
-    return bytes(_csv_fixed_buffer(values, decimals)).decode("ascii")
+    return bytes(format_csv_fixed_bytes(values, decimals)).decode("ascii")
 
 
-def _csv_fixed_buffer(values: ArrayLike, decimals: ArrayLike) -> NDArray[np.uint8]:
-    """:func:`format_csv_fixed` as a uint8 buffer (checked inputs, no string copy)."""
+def format_csv_fixed_bytes(values: ArrayLike, decimals: ArrayLike) -> NDArray[np.uint8]:
+    """:func:`format_csv_fixed` as a ``uint8`` array of ASCII bytes (write its ``.data`` to a
+    binary file: no string copies)."""
     arr = np.ascontiguousarray(values, dtype=np.float64)
     dec = np.ascontiguousarray(decimals, dtype=np.int64)
     if arr.ndim != 2 or dec.shape != (arr.shape[1],):

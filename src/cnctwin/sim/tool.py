@@ -13,8 +13,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
-from scipy.signal import lfilter
 
 from cnctwin.exceptions import ConfigError
 
@@ -24,6 +24,7 @@ __all__ = [
     "Tap",
     "ToolThermal",
     "WearCurve",
+    "first_order_recursion",
     "flank_wear_um",
     "tool_temperature",
 ]
@@ -279,5 +280,24 @@ def tool_temperature(
     a = math.exp(-dt_s / th.time_constant_s)
     y0 = 0.0 if initial_c is None else initial_c - th.ambient_temperature_c
     u = (1.0 - a) * th.heat_fraction * th.resistance_k_per_w * np.maximum(p, 0.0)
-    y, _ = lfilter([1.0], [1.0, -a], u, zi=[a * y0])
-    return np.asarray(y, dtype=np.float64) + th.ambient_temperature_c
+    return first_order_recursion(u, a, b0=1.0, y_prev=y0) + th.ambient_temperature_c
+
+
+@njit(cache=True)
+def _first_order_kernel(x: NDArray[np.float64], a: float, b0: float,
+                        y_prev: float) -> NDArray[np.float64]:  # pragma: no cover - compiled
+    y = np.empty(x.size)
+    z = a * y_prev
+    for i in range(x.size):
+        y[i] = b0 * x[i] + z
+        z = a * y[i]
+    return y
+
+
+def first_order_recursion(x: ArrayLike, a: float, *, b0: float = 1.0,
+                          y_prev: float = 0.0) -> NDArray[np.float64]:
+    """y[k] = b0 x[k] + a y[k-1] from ``y[-1] = y_prev``: ``scipy.signal.lfilter([b0],
+    [1, -a], x, zi=[a y_prev])`` with the same arithmetic (same bits), compiled, without
+    importing scipy.signal (0.3 s of the simulator's start-up)."""
+    return _first_order_kernel(np.ascontiguousarray(x, dtype=np.float64), float(a),
+                               float(b0), float(y_prev))
