@@ -244,7 +244,8 @@ def write_section(path: Path, body: str) -> None:
     title = "## Simulator: the tool-wear scenario command"
     head = (f"{title}\n\n`benchmarks/bench_scenario.py` ({dt.date.today().isoformat()}, "
             f"{cpu_model()}, 2 vCPU shared with other jobs, child pinned to one core, "
-            "NUMBA_NUM_THREADS=1).\n\n")
+            "NUMBA_NUM_THREADS=1). Where the time goes, what was tried and what is next: "
+            "docs/simulator.md section 6.\n\n")
     replace_section(path, title, head + body)
 
 

@@ -413,7 +413,8 @@ def writer_table(rows: list[dict[str, Any]], wear_cycles: float) -> str:
 def write_section(path: Path, body: str, pinned: str) -> None:
     head = (f"## Simulator\n\n`benchmarks/bench_sim.py` ({dt.date.today().isoformat()}, "
             f"{cpu_model()}, 2 vCPU shared with other jobs, one core: "
-            f"NUMBA_NUM_THREADS=1, {pinned}).\n\n")
+            f"NUMBA_NUM_THREADS=1, {pinned}). Where the time goes, what was tried and what "
+            "is next: docs/simulator.md section 6.\n\n")
     replace_section(path, "## Simulator", head + body)
 
 
