@@ -36,7 +36,9 @@ of recordings also holds hole tables and camera/dynamometer CSVs; give CSV recor
 def expand_recording_paths(paths: Sequence[str | os.PathLike[str]]) -> list[Path]:
     """Recording files of ``paths``: files as given, directories expanded (sorted, one level).
 
-    A directory that is itself a recording (a Parquet directory) is kept as one.
+    A directory that is itself a recording (a Parquet recording, a simulator chunk directory)
+    is kept as one, also one level down (a scenario's output directory); the simulator's truth
+    files beside it (``truth.json``, ``truth_per_cycle*.parquet``) are not recordings.
 
     Raises
     ------
@@ -49,13 +51,31 @@ def expand_recording_paths(paths: Sequence[str | os.PathLike[str]]) -> list[Path
         if not p.exists():
             raise ConfigError(f"recording path {p} does not exist; give a recording file or a "
                               "directory of recordings (cnctwin info FILE checks one)")
-        if p.is_dir() and not (p / "hf.parquet").exists() and not p.name.endswith(".parquet"):
-            found = sorted(c for c in p.iterdir()
-                           if c.suffix.lower() in RECORDING_SUFFIXES and not c.name.startswith("."))
-            out.extend(found)
+        if p.is_dir() and not _is_recording_dir(p) and not p.name.endswith(".parquet"):
+            for c in sorted(p.iterdir()):
+                if c.name.startswith("."):
+                    continue
+                if c.is_dir():
+                    if _is_recording_dir(c):  # e.g. a simulator scenario's chunk directory
+                        out.append(c)
+                elif c.suffix.lower() in RECORDING_SUFFIXES and c.name not in _SIDECARS and \
+                        not c.name.startswith("truth_per_cycle"):
+                    out.append(c)
         else:
             out.append(p)
     return out
+
+
+_SIDECARS = frozenset({"truth.json", "meta.json", "events.parquet", "lf.parquet"})
+"""Files of a simulator output directory that are not recordings (the truth beside a scenario's
+output, the parts of a chunk directory)."""
+
+
+def _is_recording_dir(p: Path) -> bool:
+    """A directory that is one recording: a simulator chunk directory (``meta.json`` +
+    ``hf_*`` files) or a cnctwin Parquet recording (``hf.parquet``)."""
+    return ((p / "meta.json").is_file() and any(p.glob("hf_0*.*"))) or (
+        p / "hf.parquet").is_file()
 
 
 @dataclass
