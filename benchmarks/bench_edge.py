@@ -36,6 +36,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from _common import cpu_model
 from cnctwin.edge import (
     AnomalyProcessor,
     EdgeRuntime,
@@ -49,17 +50,6 @@ from cnctwin.recording import Recording
 from cnctwin.spindle import SpindleModel, StreamingTorqueEstimator
 
 NEED = 500.0  # cycles/s per machine
-
-
-def _cpu_model() -> str:
-    try:
-        out = subprocess.run(["lscpu"], capture_output=True, text=True, check=False).stdout
-        for line in out.splitlines():
-            if line.startswith("Model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "?"
 
 
 def _measure(fn: Callable[[], Any], repeat: int) -> tuple[float, float]:
@@ -190,7 +180,7 @@ def main() -> None:
         print("mosquitto not found: MQTT row skipped (apt-get install mosquitto)")
     shutil.rmtree(tmp, ignore_errors=True)
     load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
-    print(f"machine: {_cpu_model()}, {os.cpu_count()} vCPU, pinned to 1; load average "
+    print(f"machine: {cpu_model()}, {os.cpu_count()} vCPU, pinned to 1; load average "
           f"{load[0]:.1f}/{load[1]:.1f}/{load[2]:.1f}; python {platform.python_version()}")
     print(f"input: simulated tool-wear run, {args.holes} holes, {n} cycles "
           f"({n / NEED:.1f} s of machine time), {len(rec.columns)} HF signals; "

@@ -32,6 +32,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from _common import cpu_model
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 SECTION = "## IO (Capture4Analysis)"
@@ -111,17 +113,6 @@ def _run_child(mode: str, path: Path, repeat: int) -> dict[str, float]:
     return result
 
 
-def _cpu_model() -> str:
-    try:
-        out = subprocess.run(["lscpu"], capture_output=True, text=True, check=True).stdout
-        for line in out.splitlines():
-            if line.startswith("Model name"):
-                return line.split(":", 1)[1].strip()
-    except (OSError, subprocess.CalledProcessError):
-        pass
-    return platform.processor() or "unknown CPU"
-
-
 def _update_markdown(text: str) -> None:
     path = ROOT / "BENCHMARKS.md"
     current = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
@@ -189,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
     lines = [
         SECTION,
         "",
-        f"`benchmarks/bench_io.py --mb {args.mb:g}` ({when}, {_cpu_model()}, 2 vCPU shared with "
+        f"`benchmarks/bench_io.py --mb {args.mb:g}` ({when}, {cpu_model()}, 2 vCPU shared with "
         f"other jobs, Python {platform.python_version()}). Synthetic file written by "
         "`Capture4AnalysisWriter` (`benchmarks/_gen.py`: 61 columns, chunks of 1..101 rows, "
         "6-decimal values with many zeros like the real file, one HFTimestamp per chunk, block/"

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import platform
-import subprocess
 import time
 from collections.abc import Callable
 from typing import Any
@@ -32,6 +31,7 @@ import numpy as np
 import orjson
 import pandas as pd
 
+from _common import cpu_model
 from cnctwin.web.app import plot_payload
 from cnctwin.web.decimate import envelope_decimate
 
@@ -43,17 +43,6 @@ def _best(fn: Callable[[], Any], repeat: int) -> tuple[float, Any]:
         out = fn()
         best = min(best, time.perf_counter() - t0)
     return best, out
-
-
-def _cpu() -> str:
-    try:
-        text = subprocess.run(["lscpu"], capture_output=True, text=True, check=True).stdout
-        for line in text.splitlines():
-            if line.startswith("Model name"):
-                return line.split(":", 1)[1].strip()
-    except (OSError, subprocess.CalledProcessError):
-        pass
-    return platform.processor() or "?"
 
 
 def main() -> None:
@@ -97,7 +86,7 @@ def main() -> None:
         ("baseline: pandas `resample(span/2000).agg(['min','max'])`", t_pd,
          f"{2 * len(agg)} values, no positions"),
     ]
-    print(f"machine: {_cpu()}, {platform.python_version()}, numpy {np.__version__}, "
+    print(f"machine: {cpu_model()}, {platform.python_version()}, numpy {np.__version__}, "
           f"pandas {pd.__version__}; {n / 1e6:g} M samples -> {px} px")
     print("| path | time | samples/s | vs envelope | output |")
     print("|---|---|---|---|---|")
