@@ -16,6 +16,7 @@ import json
 import math
 import signal
 import threading
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -56,11 +57,23 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    "CMD_SPEED|SP1, DES_POS|Z1, ..., CYCLE)")
     r.add_argument("--no-holes", action="store_true", help="skip the per-hole record")
     r.add_argument("--no-anomaly", action="store_true", help="skip the anomaly detector")
-    r.add_argument("--detector", choices=("physics", "tapping", "spectral"), default="physics",
+    r.add_argument("--detector", choices=("physics", "tapping", "spectral", "adaptive",
+                                          "physics-torque"), default="physics",
                    help="anomaly detector (cnctwin.usecases.anomaly): current against the twin, "
-                   "loose tap on extraction, or chatter band power")
+                   "loose tap on extraction, chatter band power; adaptive: wear-adaptive "
+                   "torque band around the teach-in profile of the first --learn-holes holes; "
+                   "physics-torque: the same around the Kienzle torque, from the first hole "
+                   "(no teach-in). Both need the hole processor (not --no-holes)")
     r.add_argument("--learn-s", type=float, default=10.0,
-                   help="teach-in time of the anomaly detector [s]")
+                   help="teach-in time of the anomaly detector [s] (physics, tapping, spectral)")
+    r.add_argument("--learn-holes", type=int, default=6,
+                   help="teach-in holes of --detector adaptive (6)")
+    r.add_argument("--material", default="aisi1045",
+                   help="Kienzle material for physics-torque (aisi1045, grey_cast_iron)")
+    r.add_argument("--drill-mm", type=float, default=8.5,
+                   help="drill diameter for physics-torque [mm] (8.5)")
+    r.add_argument("--point-angle-deg", type=float, default=140.0,
+                   help="drill point angle for physics-torque [deg] (140)")
     r.add_argument("--max-queue", type=int, default=200_000,
                    help="store-and-forward bound [messages]")
     r.add_argument("--idle-timeout-s", type=float, default=None,
@@ -158,14 +171,28 @@ def _build(args: argparse.Namespace) -> Any:
         procs.append(HoleProcessor(model))
     if not args.no_anomaly:
         from cnctwin.usecases.anomaly import (
+            Detector,
             PhysicsResidualDetector,
             SpectralDetector,
             TappingDetector,
         )
+        from cnctwin.usecases.monitoring import WearAdaptiveDetector
 
-        det = {"physics": PhysicsResidualDetector, "tapping": TappingDetector,
-               "spectral": SpectralDetector}[args.detector]()
-        procs.append(AnomalyProcessor(det, model=model, learn_s=args.learn_s))
+        if args.detector in ("adaptive", "physics-torque") and args.no_holes:
+            raise ConfigError(f"--detector {args.detector} needs the hole processor (the live "
+                              "hole number and progress): drop --no-holes")
+        makers: dict[str, Callable[[], Detector]] = {
+            "physics": PhysicsResidualDetector, "tapping": TappingDetector,
+            "spectral": SpectralDetector, "adaptive": WearAdaptiveDetector,
+            "physics-torque": lambda: WearAdaptiveDetector(expected="expected_torque_nm")}
+        det = makers[args.detector]()
+        kw: dict[str, Any] = {"learn_s": args.learn_s}
+        if args.detector == "adaptive":
+            kw["learn_holes"] = args.learn_holes
+        elif args.detector == "physics-torque":
+            kw = {"learn_s": 0.0, "material": args.material, "diameter_mm": args.drill_mm,
+                  "point_angle_deg": args.point_angle_deg}
+        procs.append(AnomalyProcessor(det, model=model, **kw))
     out: Path = args.out
     sinks: list[Any] = [JsonLinesSink(out / "results.jsonl")]
     if args.publish:

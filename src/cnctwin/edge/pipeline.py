@@ -69,6 +69,10 @@ class Chunk:
     derived : dict of str to numpy.ndarray
         Per-cycle values computed by processors (same length as ``cycles``; NaN where a value
         is not yet known, e.g. the held-back last sample of the torque estimator).
+    late : dict of str to (int, float)
+        Derived values of a cycle of the *previous* chunk that became known only with this
+        one: column -> (cycle, value) (the torque estimator's held-back sample), so that a
+        later processor holding that cycle back can complete it.
     """
 
     cycles: NDArray[np.int64]
@@ -80,6 +84,7 @@ class Chunk:
     machine: str = ""
     received_ns: int = 0
     derived: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    late: dict[str, tuple[int, float]] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.cycles.size)

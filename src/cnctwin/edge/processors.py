@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from cnctwin.edge.cut import CutTracker
 from cnctwin.edge.pipeline import Chunk, Result
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import CounterGap, Recording, RecordingMeta, empty_events
@@ -101,6 +102,8 @@ class TorqueProcessor:
         own = tau[off:] if k > off else np.empty(0)
         derived[:own.size] = own
         chunk.derived[self.column] = derived
+        if off and k >= off:  # the previous chunk's held-back cycle came out now
+            chunk.late[self.column] = (held[-1][0], float(tau[off - 1]))
         return [self._result(cyc[:k], tau, ii[:k], nn[:k])] if k else []
 
     def _flush(self) -> list[Result]:
@@ -151,6 +154,12 @@ class HoleProcessor:
         ``issues``) so memory stays bounded.
     min_speed_mm_s : float, default 0.05
         Z speed above which the axis counts as moving [mm/s].
+    live_context : bool, default True
+        Also derive the live hole context per cycle (:class:`cnctwin.edge.cut.CutTracker`)
+        for the processors after this one: ``chunk.derived`` gets ``HOLE|<z>`` (hole number,
+        -1 outside the material), ``CUT_PROGRESS|<z>`` (tip depth / hole depth),
+        ``CUT_DEPTH|<z>`` [mm], ``CUT_FEED|<z>`` [mm/min] and ``CUT_SPEED|<spindle>`` [rpm].
+        Needs ``CMD_SPEED|<spindle>``; without it no cycle counts as cutting.
     """
 
     name = "holes"
@@ -158,7 +167,8 @@ class HoleProcessor:
     def __init__(self, model: SpindleModel | None = None, *, spindle: str = "SP1",
                  z_axis: str = "Z1", xy_axes: tuple[str, str] = ("X1", "Y1"),
                  window_s: float = 0.6, set_size: int = 6, settle_s: float = 1.0,
-                 max_buffer_s: float = 300.0, min_speed_mm_s: float = 0.05) -> None:
+                 max_buffer_s: float = 300.0, min_speed_mm_s: float = 0.05,
+                 live_context: bool = True) -> None:
         self.model = model
         self.spindle, self.z_axis, self.xy_axes = spindle, z_axis, xy_axes
         self.window_s, self.set_size, self.settle_s = window_s, set_size, settle_s
@@ -183,6 +193,8 @@ class HoleProcessor:
         self._down_run = 0
         self._up_run = 0
         self.plunges = 0
+        self.live_context = live_context
+        self.cut: CutTracker | None = None
 
     def _z(self, chunk: Chunk) -> NDArray[np.float64] | None:
         for c in (f"DES_POS|{self.z_axis}", f"ENC_POS|{self.z_axis}"):
@@ -238,11 +250,32 @@ class HoleProcessor:
                 self._down_run = 0
                 if self._up_run >= 5:
                     self._in_plunge = False
+        if self.live_context:
+            self._context(chunk, z)
         if self._moved_up:
             self._pending = None
             out += self._evaluate(final=False)
         self._trim()
         return out
+
+    def _context(self, chunk: Chunk, z: NDArray[np.float64]) -> None:
+        """Live hole context of the chunk's cycles into ``chunk.derived``."""
+        if self.cut is None:
+            self.cut = CutTracker(cycle_time_s=chunk.cycle_time_s,
+                                  min_speed_mm_s=self.min_speed_mm_s, settle_s=self.settle_s,
+                                  first_hole=self.holes)
+        s = chunk.signals
+        enc = s.get(f"ENC_POS|{self.z_axis}", z)
+        nan = np.full(len(chunk), np.nan)
+        speed = s.get(f"CMD_SPEED|{self.spindle}", nan)
+        xy = tuple(s[f"DES_POS|{a}"] for a in self.xy_axes if f"DES_POS|{a}" in s)
+        ctx = self.cut.update(chunk.cycles, z, enc, speed, xy_des_mm=xy, events=chunk.events)
+        za = self.z_axis
+        chunk.derived[f"HOLE|{za}"] = ctx.hole
+        chunk.derived[f"CUT_PROGRESS|{za}"] = ctx.progress
+        chunk.derived[f"CUT_DEPTH|{za}"] = ctx.depth_mm
+        chunk.derived[f"CUT_FEED|{za}"] = ctx.feed_mm_min
+        chunk.derived[f"CUT_SPEED|{self.spindle}"] = ctx.speed_rpm
 
     def _buffer(self) -> Recording:
         cols = sorted({c for p in self._parts for c in p.signals})
@@ -285,9 +318,12 @@ class HoleProcessor:
             if not done:  # look again when X/Y moves or after settle_s
                 self._pending = last_cycle + round(self.settle_s / self._cycle_time_s)
                 break
+            payload = _row_payload(row)
             out.append(Result("hole", int(row["end_cycle"]),
-                              {"hole": int(row["hole"]), "row": _row_payload(row),
+                              {"hole": int(row["hole"]), "row": payload,
                                "units": HOLE_UNITS}))
+            if self.cut is not None:
+                self.cut.hole_done(payload)
             self.holes += 1
             cut_at = ext_cycle
         for msg in rows.attrs.get("issues", []):
@@ -343,6 +379,8 @@ class HoleProcessor:
             self._events = self._events.iloc[-5_000:]
 
     def gap(self, gap: CounterGap) -> list[Result]:
+        if self.cut is not None:
+            self.cut.gap()
         return []  # hole_record works on the cycle base; a gap inside a hole stays visible
 
     def finish(self) -> list[Result]:
@@ -374,8 +412,13 @@ class AnomalyProcessor:
 
     Inputs per cycle (the names :func:`cnctwin.usecases.anomaly.signal_stream` uses):
     ``current_a``, ``speed_rpm``, ``predicted_current_a`` (the calibrated twin at zero cutting
-    torque), ``z_error_mm`` (DES_POS - ENC_POS of Z), ``progress`` (NaN) and ``hole`` (-1),
-    plus ``torque_nm`` when the torque processor ran before.
+    torque), ``z_error_mm`` (DES_POS - ENC_POS of Z), ``torque_nm`` when the torque processor
+    ran before, and the hole context when the hole processor ran before (its live
+    :class:`~cnctwin.edge.cut.CutTracker`): ``hole`` (-1 outside the material) and ``progress``
+    (tip depth / hole depth, NaN outside); without the hole processor ``hole`` is -1 and
+    ``progress`` NaN. ``expected_torque_nm`` (the Kienzle torque of the cut,
+    :func:`cnctwin.usecases.monitoring.drilling_torque_nm` with the live feed, speed and tip
+    depth; NaN while the point enters) is given when the detector asks for it.
 
     Parameters
     ----------
@@ -386,82 +429,183 @@ class AnomalyProcessor:
         Twin for ``predicted_current_a`` (default the thesis parameter set).
     learn_s : float, default 10
         The first seconds of the stream are learned (teach-in on good data) [s].
+    learn_holes : int, optional
+        Instead of ``learn_s``: learn until the first cycle of hole ``learn_holes`` (the
+        teach-in of :class:`~cnctwin.usecases.monitoring.WearAdaptiveDetector` on the first
+        holes); needs the hole processor before this one.
     threshold : float, default 0
         Score above which an alarm is raised.
     refractory_s : float, default 1
         Crossings within this time after an alarm are not new alarms [s].
+    material : str, default 'aisi1045'
+        Kienzle constants (:data:`cnctwin.usecases.monitoring.KIENZLE_PARAMETERS`) of
+        ``expected_torque_nm``.
+    diameter_mm, point_angle_deg : float
+        Drill geometry of ``expected_torque_nm`` [mm], [deg].
+
+    Notes
+    -----
+    The cutting torque of a chunk's last cycle comes with the next chunk (the central
+    difference of the inertia term). When the detector uses ``torque_nm`` that cycle is held
+    back and scored with the next chunk (``chunk.late``): one cycle (2 ms) of latency, and the
+    detector sees exactly the batch torque. At a gap or the end of the stream the held cycle
+    is scored with the torque unknown (NaN: not judged by the torque detectors).
     """
 
     def __init__(self, detector: Detector | None = None, *, model: SpindleModel | None = None,
                  spindle: str = "SP1", z_axis: str = "Z1", learn_s: float = 10.0,
-                 threshold: float = 0.0, refractory_s: float = 1.0) -> None:
+                 learn_holes: int | None = None, threshold: float = 0.0,
+                 refractory_s: float = 1.0, material: str = "aisi1045",
+                 diameter_mm: float = 8.5, point_angle_deg: float = 140.0) -> None:
+        from cnctwin.usecases.monitoring import KIENZLE_PARAMETERS
+
         self.detector = detector if detector is not None else PhysicsResidualDetector()
         self.name = f"anomaly:{type(self.detector).__name__}"
         self.model = model if model is not None else SpindleModel.from_parameters(
             "thesis_spinner_840dsl")
         self.spindle, self.z_axis = spindle, z_axis
         self.learn_s, self.threshold, self.refractory_s = learn_s, threshold, refractory_s
+        if learn_holes is not None and learn_holes < 0:
+            raise ConfigError(f"learn_holes must be >= 0, not {learn_holes}")
+        self.learn_holes = learn_holes
+        if material not in KIENZLE_PARAMETERS:
+            raise ConfigError(f"material {material!r} unknown; choose one of "
+                              f"{sorted(KIENZLE_PARAMETERS)}")
+        if not (diameter_mm > 0 and 0 < point_angle_deg < 180):
+            raise ConfigError(f"drill diameter must be > 0 mm and the point angle in (0, 180) "
+                              f"deg; got {diameter_mm} mm, {point_angle_deg} deg")
+        self.material, self.diameter_mm = material, diameter_mm
+        self.point_angle_deg = point_angle_deg
         self.learned = 0
         self.scored = 0
         self.alarms = 0
         self._start: int | None = None
+        self._taught = learn_holes == 0
         self._above = False
         self._last_alarm: int | None = None
+        self._held: tuple[int, dict[str, float]] | None = None
+        self._ct = 0.002
+
+    def _expected(self, ctx: dict[str, NDArray[np.float64]]) -> NDArray[np.float64]:
+        """Kienzle torque of the live cut; NaN outside and while the point enters [Nm]."""
+        from cnctwin.usecases.monitoring import KIENZLE_PARAMETERS, drilling_torque_nm
+
+        depth = ctx["depth"]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            f = ctx["feed"] / np.abs(ctx["speed"])
+        ok = np.isfinite(depth) & np.isfinite(f) & (f > 0)
+        out = np.full(depth.size, np.nan)
+        if ok.any():
+            out[ok] = drilling_torque_nm(f[ok], diameter_mm=self.diameter_mm,
+                                         point_angle_deg=self.point_angle_deg,
+                                         depth_mm=depth[ok],
+                                         **KIENZLE_PARAMETERS[self.material])
+            cone = self.diameter_mm / 2.0 / math.tan(math.radians(self.point_angle_deg / 2.0))
+            out[ok & ~(depth >= cone)] = np.nan  # as expected_torque_stream: full engagement
+        return out
 
     def process(self, chunk: Chunk) -> list[Result]:
         s = chunk.signals
+        n_rows = len(chunk)
         i = s.get(f"CURRENT|{self.spindle}")
         n = s.get(f"CMD_SPEED|{self.spindle}")
         if i is None or n is None:
             raise ConfigError(f"the anomaly processor needs CURRENT|{self.spindle} and "
                               f"CMD_SPEED|{self.spindle}")
         des, enc = s.get(f"DES_POS|{self.z_axis}"), s.get(f"ENC_POS|{self.z_axis}")
-        zerr = des - enc if des is not None and enc is not None else np.zeros(len(chunk))
+        zerr = des - enc if des is not None and enc is not None else np.zeros(n_rows)
         pred = self.model.predict_current_a(0.0, n)
-        tq = chunk.derived.get(f"CUT_TORQUE|{self.spindle}")
+        d = chunk.derived
+        tq_col = f"CUT_TORQUE|{self.spindle}"
+        tq = d.get(tq_col)
+        hole = d.get(f"HOLE|{self.z_axis}")
         cols: dict[str, NDArray[np.float64]] = {
             "current_a": i, "speed_rpm": n, "predicted_current_a": pred, "z_error_mm": zerr,
-            "progress": np.full(len(chunk), np.nan), "hole": np.full(len(chunk), -1.0)}
+            "progress": d.get(f"CUT_PROGRESS|{self.z_axis}", np.full(n_rows, np.nan)),
+            "hole": hole if hole is not None else np.full(n_rows, -1.0)}
         if tq is not None:
             cols["torque_nm"] = tq
-        missing = [k for k in self.detector.inputs if k not in cols]
+        keys = list(self.detector.inputs)
+        needs_holes = "hole" in keys or "progress" in keys or self.learn_holes is not None
+        if needs_holes and hole is None:
+            raise ConfigError(f"{self.name} needs the live hole context (hole, progress): run "
+                              "the hole processor before the anomaly processor (not --no-holes)")
+        if "expected_torque_nm" in keys and hole is not None:
+            cols["expected_torque_nm"] = self._expected({
+                "depth": d[f"CUT_DEPTH|{self.z_axis}"], "feed": d[f"CUT_FEED|{self.z_axis}"],
+                "speed": d[f"CUT_SPEED|{self.spindle}"]})
+        missing = [k for k in keys if k not in cols]
         if missing:
             raise ConfigError(f"{self.name} needs inputs {missing} the edge stream lacks")
         if self._start is None:
             self._start = chunk.first_cycle
-        learn_until = self._start + round(self.learn_s / chunk.cycle_time_s)
-        keys = list(self.detector.inputs)
-        arrs = [cols[k].tolist() for k in keys]
-        cyc = chunk.cycles.tolist()
-        scores = np.full(len(chunk), np.nan)
+        self._ct = chunk.cycle_time_s
         out: list[Result] = []
         refr = round(self.refractory_s / chunk.cycle_time_s)
+        learn_until = self._start + round(self.learn_s / chunk.cycle_time_s)
+        if self._held is not None:  # the previous chunk's last cycle, its torque now known
+            c0, x0 = self._held
+            self._held = None
+            late = chunk.late.get(tq_col)
+            if late is not None and late[0] == c0:
+                x0["torque_nm"] = late[1]
+            self._one(c0, x0, learn_until, refr, out)
+        arrs = [cols[k].tolist() for k in keys]
+        cyc = chunk.cycles.tolist()
+        scores = np.full(n_rows, np.nan)
+        hold = "torque_nm" in keys and tq is not None and n_rows and not np.isfinite(tq[-1])
         for j, c in enumerate(cyc):
             x = {k: a[j] for k, a in zip(keys, arrs, strict=True)}
-            if c < learn_until:
-                self.detector.learn_one(x)
-                self.learned += 1
-                continue
-            sc = self.detector.score_one(x)
-            self.scored += 1
-            scores[j] = sc
-            above = sc > self.threshold
-            if above and not self._above and (self._last_alarm is None
-                                              or c - self._last_alarm >= refr):
-                self._last_alarm = c
-                self.alarms += 1
-                out.append(Result("alarm", c, {"detector": type(self.detector).__name__,
-                                               "cycle": c, "score": float(sc),
-                                               "threshold": self.threshold,
-                                               "current_a": x.get("current_a"),
-                                               "units": {"current_a": "A", "score": "-"}}))
-            self._above = bool(above)
+            if hold and j == n_rows - 1:
+                self._held = (c, x)
+                break
+            scores[j] = self._one(c, x, learn_until, refr, out)
         chunk.derived[f"ANOMALY_SCORE|{self.spindle}"] = scores
         return out
 
+    def _one(self, c: int, x: dict[str, float], learn_until: int, refr: int,
+             out: list[Result]) -> float:
+        """Learn or score one cycle; an alarm result into ``out``; the score (NaN: learned)."""
+        if self.learn_holes is not None:
+            if not self._taught and x.get("hole", -1.0) >= self.learn_holes:
+                self._taught = True
+            learning = not self._taught
+        else:
+            learning = c < learn_until
+        if learning:
+            self.detector.learn_one(x)
+            self.learned += 1
+            return math.nan
+        sc = self.detector.score_one(x)
+        self.scored += 1
+        above = sc > self.threshold
+        if above and not self._above and (self._last_alarm is None
+                                          or c - self._last_alarm >= refr):
+            self._last_alarm = c
+            self.alarms += 1
+            out.append(Result("alarm", c, {"detector": type(self.detector).__name__,
+                                           "cycle": c, "score": float(sc),
+                                           "threshold": self.threshold,
+                                           "current_a": x.get("current_a"),
+                                           "hole": int(x["hole"]) if "hole" in x else None,
+                                           "units": {"current_a": "A", "score": "-"}}))
+        self._above = bool(above)
+        return float(sc)
+
+    def _release(self) -> list[Result]:
+        out: list[Result] = []
+        if self._held is not None and self._start is not None:
+            c0, x0 = self._held
+            self._held = None
+            x0["torque_nm"] = math.nan
+            self._one(c0, x0, self._start + round(self.learn_s / self._ct),
+                      round(self.refractory_s / self._ct), out)
+        return out
+
     def gap(self, gap: CounterGap) -> list[Result]:
+        out = self._release()
         self._above = False
-        return []
+        return out
 
     def finish(self) -> list[Result]:
-        return []
+        return self._release()
