@@ -6,6 +6,7 @@ Layers (pure pieces first, orchestration last):
 * :mod:`~cnctwin.edge.model_file`: the calibrated spindle model as a JSON/TOML file.
 * :mod:`~cnctwin.edge.pipeline`: ``Chunk``, ``Result`` and the Source/Processor/Sink protocols.
 * :mod:`~cnctwin.edge.sources`: replay of any recording file, live Databus over MQTT.
+* :mod:`~cnctwin.edge.cut`: the live hole context (hole number, tip depth, progress) per cycle.
 * :mod:`~cnctwin.edge.processors`: cutting torque, per-hole record, anomaly detectors.
 * :mod:`~cnctwin.edge.forward`: the bounded on-disk queue of store-and-forward.
 * :mod:`~cnctwin.edge.sinks`: MQTT (store-and-forward), the store, JSON lines.
