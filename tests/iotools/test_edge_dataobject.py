@@ -70,10 +70,31 @@ def test_assembler_duplicates_and_columns() -> None:
                                              "content": [{"value": [10, 11]}]}]))
     rec = asm.recording(clear=True)
     assert rec.cycles.tolist() == [1, 2, 3]
-    assert rec.signal("ENC1_POS|X1").tolist() == [1.0, 2.5, 3.0]
+    # cycle 2 arrived twice: the first arrival is kept (as the Capture4Analysis and flat-CSV
+    # readers do), the repeat is flagged with its values differing
+    assert rec.signal("ENC1_POS|X1").tolist() == [1.0, 2.0, 3.0]
     assert rec.signal("LOAD|SP1").iloc[0] != rec.signal("LOAD|SP1").iloc[0]  # NaN
-    assert any("arrived twice" in i for i in rec.meta.issues)
+    dup = [i for i in rec.meta.issues if "arrived twice" in i]
+    assert len(dup) == 1 and "1 duplicate" in dup[0] and "DIFFERENT" in dup[0]
+    assert "kept the first" in dup[0]
     assert len(asm) == 0
+
+
+def test_duplicate_cycle_consistent_with_the_other_readers(tmp_path: Path) -> None:
+    # the same cycles repeated by an out-of-order message: first arrival kept, like
+    # read_flat_csv ("kept the first of each cycle") and Capture4Analysis ("first arrival")
+    p = tmp_path / "stream.jsonl"
+    p.write_text("\n".join(json.dumps(m) for m in (
+        msg([3, 4], [3.0, 4.0], ts="2094-01-01T07:18:06.358"),
+        msg([1, 2], [1.0, 2.0]),
+        msg([4, 5], [4.0, 5.0], ts="2094-01-01T07:18:06.360"),
+    )) + "\n", encoding="utf-8")
+    rec = read_edge_dataobject(p)
+    assert rec.cycles.tolist() == [1, 2, 3, 4, 5]
+    assert rec.signal("ENC1_POS|X1").tolist() == [1.0, 2.0, 3.0, 4.0, 5.0]
+    dup = [i for i in rec.meta.issues if "duplicate" in i]
+    assert len(dup) == 1 and "identical" in dup[0] and "e.g. 4" in dup[0]
+    assert any("out of cycle order" in i for i in rec.meta.issues)
 
 
 def test_wrap_between_messages() -> None:

@@ -332,8 +332,10 @@ class EdgeDataobjectAssembler:
     def recording(self, *, clear: bool = False) -> Recording:
         """All messages fed so far as one recording.
 
-        Rows are ordered by cycle; a cycle that arrives twice keeps the later message's row
-        (listed in ``meta.issues``). Columns missing in some messages are NaN there.
+        Rows are ordered by cycle; a cycle that arrives twice keeps its first arrival, like
+        the Capture4Analysis and flat-CSV readers (the duplicate is listed in
+        ``meta.issues``, with whether its values were identical). Columns missing in some
+        messages are NaN there.
 
         Parameters
         ----------
@@ -369,10 +371,17 @@ class EdgeDataobjectAssembler:
         colsets = {tuple(c.columns) for c in self._chunks}
         if len(colsets) > 1:
             issues.append("messages carry different datapoints; missing ones are NaN")
-        if hf.index.has_duplicates:
-            issues.append(f"{int(hf.index.duplicated().sum())} cycles arrived twice; the "
-                          "later message's values are kept")
-            hf = hf[~hf.index.duplicated(keep="last")]
+        dup = hf.index.duplicated(keep="first")
+        if dup.any():
+            kept = hf[~dup]
+            again = hf[dup]
+            same = bool(np.array_equal(again.to_numpy(dtype=np.float64),
+                                       kept.loc[again.index].to_numpy(dtype=np.float64),
+                                       equal_nan=True))
+            issues.append(f"{int(dup.sum())} duplicate HF rows (cycles that arrived twice, "
+                          f"e.g. {int(again.index[0])}, {'identical' if same else 'DIFFERENT'} "
+                          "values): kept the first arrival")
+            hf = kept
         raw = hf.index.to_numpy()
         if raw.size > 1 and (np.diff(raw) < 0).any():
             issues.append("messages arrived out of cycle order; rows sorted by cycle")
