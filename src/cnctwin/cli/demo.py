@@ -651,6 +651,9 @@ def run_demo(out_dir: str | Path = "out/demo", *, seed: int = 0, quick: bool = F
         summary += (f"\n  {name:9s} Kt {ch.model.kt_nm_per_a:.4f} Nm/A, B "
                     f"{ch.model.b_nm_per_rpm:.3e} Nm/rpm, tau_f {ch.model.tau_f_nm:.4f} Nm; "
                     f"max validation error {v['error_pct'].max():.2f} % (vs dynamometer)")
+    summary += ("\n  next: open the report in a browser, or look at a simulated wear run in the "
+                "dashboard:\n    cnctwin simulate tool_wear_run --out out/wear --option n_holes=60"
+                " && cnctwin web --recording out/wear")
     con.print(summary)
     return path
 
