@@ -138,7 +138,11 @@ const cnctwin = (() => {
     const limit = new URLSearchParams(location.search).get("limit");
     if (limit) q.set("limit", limit);
     const es = new EventSource(`/api/live/stream?${q}`);
-    es.addEventListener("end", () => { es.close(); state.textContent = "stream ended (limit reached)"; });
+    es.addEventListener("end", () => {
+      es.close();
+      redraw();  // the last data now, not on a next animation frame that may never come
+      state.textContent = "stream ended (limit reached)";
+    });
     es.onopen = () => { state.textContent = "connected"; };
     es.onerror = () => { state.textContent = "disconnected – retrying"; };
     es.addEventListener("torque", (ev) => {
