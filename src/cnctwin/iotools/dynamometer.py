@@ -36,6 +36,7 @@ import numpy as np
 import pandas as pd
 
 from cnctwin.exceptions import CnctwinWarning, ConfigError, FormatError
+from cnctwin.iotools._text import read_utf8_text
 from cnctwin.recording import ExternalChannel, Recording
 
 __all__ = [
@@ -161,13 +162,7 @@ def read_dynamometer_csv(
     """
     p = Path(path)
     spath = str(p)
-    if not p.exists():
-        raise FormatError("file not found", path=spath)
-    try:
-        text = p.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise FormatError(f"not UTF-8 text ({exc.reason})", path=spath,
-                          position=f"byte {exc.start}") from None
+    text = read_utf8_text(p)
     delim, decimal = _sniff(text)
     reader = csv.reader(io.StringIO(text), delimiter=delim)
     try:

@@ -35,6 +35,7 @@ import numpy as np
 import pandas as pd
 
 from cnctwin.exceptions import FormatError
+from cnctwin.iotools._text import read_utf8_text
 from cnctwin.recording import ExternalChannel
 
 __all__ = ["read_thermal_camera_csv"]
@@ -132,13 +133,7 @@ def read_thermal_camera_csv(
     """
     p = Path(path)
     spath = str(p)
-    if not p.exists():
-        raise FormatError("file not found", path=spath)
-    try:
-        text = p.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise FormatError(f"not UTF-8 text ({exc.reason})", path=spath,
-                          position=f"byte {exc.start}") from None
+    text = read_utf8_text(p)
     lines = text.splitlines()
     header_line = None
     delim = ","
