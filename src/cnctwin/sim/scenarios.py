@@ -609,9 +609,10 @@ class DrillingProcess(_Process):
         self.speed_rpm = speed_rpm
         self.hole_depth_mm = hole_depth_mm
         self.walk_direction_rad = walk_direction_rad
-        self.temperature_c = (cfg.tool_thermal.ambient_temperature_c
-                              if initial_tool_temperature_c is None
-                              else float(initial_tool_temperature_c))
+        self.initial_temperature_c = (cfg.tool_thermal.ambient_temperature_c
+                                      if initial_tool_temperature_c is None
+                                      else float(initial_tool_temperature_c))
+        self.temperature_c = self.initial_temperature_c
         self._acc: dict[int, list[float]] = {}
         # chisel-edge skid direction per hole (uniform): own stream, drawn once per new hole
         self._dir_rng = np.random.default_rng(int(self.rng.integers(2**32)))
@@ -646,10 +647,9 @@ class DrillingProcess(_Process):
         idx = np.flatnonzero(depth > 0.0)
         power = np.zeros(depth.size)
         if idx.size:
-            base = drilling_load(depth[idx], n[idx], feed[idx], drill=cfg.drill,
-                                 material=self.material, wear_um=wear[idx],
-                                 hardness_factor=np.broadcast_to(hard, depth.shape)[idx],
-                                 spindle_angle_rad=angle[idx], model=cfg.drilling, dt_s=dt)
+            sub = {**kw, "wear_um": wear[idx], "spindle_angle_rad": angle[idx],
+                   "hardness_factor": np.broadcast_to(hard, depth.shape)[idx]}
+            base = drilling_load(depth[idx], n[idx], feed[idx], rng=None, **sub)
             power[idx] = np.abs(base.torque_nm * n[idx]) * 2.0 * math.pi / 60.0
         temp = tool_temperature(power, dt_s=dt, thermal=cfg.tool_thermal,
                                 initial_c=self.temperature_c)
@@ -1363,9 +1363,7 @@ def tool_wear_run(
     res.truth["holes"] = rows
     res.truth["fault_onsets_s"] = hook.onsets
     res.truth["final_wear_um"] = float(flank_wear_um(start_hole + n_holes - 1, curve=cfg.wear))
-    res.truth["initial_tool_temperature_c"] = (th.ambient_temperature_c
-                                               if initial_tool_temperature_c is None
-                                               else float(initial_tool_temperature_c))
+    res.truth["initial_tool_temperature_c"] = hook.initial_temperature_c
     res.truth["final_tool_temperature_c"] = hook.temperature_c
     res.truth["dynamometer_sessions"] = daq.sessions if daq is not None else []
     res.truth["n_cycles"] = sim.trajectory["n_cycles"]
