@@ -83,10 +83,10 @@ from cnctwin.sim.programs import air_cut_sweep as air_cut_program
 from cnctwin.sim.programs import warm_up as warm_up_program
 from cnctwin.sim.recorder import Capture4AnalysisSink, ParquetChunkSink, RecordingSink
 from cnctwin.sim.sensors import (
-    DYNAMOMETER_COLUMNS,
     DYNAMOMETER_CSV_HEADER,
     Dynamometer,
     ThermalCamera,
+    dynamometer_channel_from_rows,
     dynamometer_csv_decimals,
     dynamometer_rows,
     format_csv_fixed_bytes,
@@ -355,7 +355,7 @@ class _DynamometerDAQ:
         self.sessions: list[dict[str, Any]] = []
         self.channels: list[ExternalChannel] = []
         self.paths: list[Path] = []
-        self._frames: list[pd.DataFrame] = []
+        self._rows: list[NDArray[np.float64]] = []
         self._fh: IO[bytes] | None = None
         self._decimals = dynamometer_csv_decimals(fs_hz=sensor.fs_hz,
                                                   force_noise_n=sensor.force_noise_n,
@@ -394,7 +394,7 @@ class _DynamometerDAQ:
         self._open = True
         self._last = None
         self._last_own = -math.inf
-        self._frames = []
+        self._rows = []
         if self.out is not None:
             p = self.out / name
             self._fh = p.open("wb")
@@ -415,9 +415,7 @@ class _DynamometerDAQ:
             # no str copy; the DAQ was 30 % of the wear run's time, benchmarks/bench_scenario.py)
             self._fh.write(format_csv_fixed_bytes(rows, self._decimals).data)
         else:
-            self._frames.append(pd.DataFrame(rows[:, 1:], index=pd.Index(rows[:, 0],
-                                                                        name="time_s"),
-                                             columns=list(DYNAMOMETER_COLUMNS)))
+            self._rows.append(rows)
 
     def _close_session(self) -> None:
         if not self._open:
@@ -426,13 +424,10 @@ class _DynamometerDAQ:
         if self._fh is not None:
             self._fh.close()
             self._fh = None
-        elif self._frames:
-            data = pd.concat(self._frames)
-            self.channels.append(ExternalChannel(
-                name="dynamometer", data=data,
-                units={"fx_n": "N", "fy_n": "N", "fz_n": "N", "mz_nm": "N*m"},
-                fs_hz=self.sensor.fs_hz, source="cnctwin.sim"))
-        self._frames = []
+        elif self._rows:
+            self.channels.append(dynamometer_channel_from_rows(self._rows,
+                                                               fs_hz=self.sensor.fs_hz))
+        self._rows = []
 
     def close(self) -> None:
         """End the last session."""

@@ -12,6 +12,7 @@ clock parameters go into ``truth.json``. CSV writers match the readers
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -22,18 +23,18 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from cnctwin.exceptions import ConfigError
+from cnctwin.iotools.dynamometer import DYNAMOMETER_COLUMNS
 from cnctwin.recording import ExternalChannel
 
 __all__ = [
-    "DYNAMOMETER_COLUMNS",
     "DYNAMOMETER_CSV_HEADER",
     "Dynamometer",
     "ThermalCamera",
     "dynamometer_channel",
+    "dynamometer_channel_from_rows",
     "dynamometer_csv_decimals",
     "dynamometer_csv_rows",
     "dynamometer_rows",
-    "dynamometer_samples",
     "format_csv_fixed",
     "format_csv_fixed_bytes",
     "thermal_camera_channel",
@@ -42,10 +43,11 @@ __all__ = [
 ]
 
 
-DYNAMOMETER_COLUMNS: tuple[str, str, str, str] = ("fx_n", "fy_n", "fz_n", "mz_nm")
-"""Value columns of a dynamometer channel and its CSV file (after ``time_s``)."""
+_COLUMNS: tuple[str, ...] = tuple(DYNAMOMETER_COLUMNS)
+"""Value columns of a dynamometer channel and its CSV file (after ``time_s``): the reader's
+canonical columns, in its order (``fx_n, fy_n, fz_n, mz_nm``)."""
 
-DYNAMOMETER_CSV_HEADER: bytes = ("time_s," + ",".join(DYNAMOMETER_COLUMNS) + "\n").encode()
+DYNAMOMETER_CSV_HEADER: bytes = ("time_s," + ",".join(_COLUMNS) + "\n").encode()
 """Header line of the dynamometer CSV (what :func:`cnctwin.iotools.read_dynamometer_csv` reads)."""
 
 
@@ -146,26 +148,32 @@ def dynamometer_channel(
     s = sensor if sensor is not None else Dynamometer()
     g = rng if rng is not None else np.random.default_rng(0)
     t = np.asarray(time_s, dtype=np.float64)
-    own, values = dynamometer_samples(t, (fx_n, fy_n, fz_n, mz_nm), sensor=s, rng=g)
-    data = pd.DataFrame(values, index=pd.Index(own, name="time_s"),
-                        columns=list(DYNAMOMETER_COLUMNS))
-    return ExternalChannel(
-        name="dynamometer",
-        data=data,
-        units={"fx_n": "N", "fy_n": "N", "fz_n": "N", "mz_nm": "N*m"},
-        fs_hz=s.fs_hz,
-        source=source,
-    )
+    rows = dynamometer_rows(t, (fx_n, fy_n, fz_n, mz_nm), sensor=s, rng=g)
+    return dynamometer_channel_from_rows([rows], fs_hz=s.fs_hz, source=source)
 
 
-def dynamometer_samples(
+def dynamometer_channel_from_rows(
+    rows: Sequence[NDArray[np.float64]], *, fs_hz: float, source: str = "cnctwin.sim",
+) -> ExternalChannel:
+    """The ``"dynamometer"`` channel of sampled rows (:func:`dynamometer_rows`, one array per
+    piece, in time order): columns ``fx_n, fy_n, fz_n`` [N], ``mz_nm`` [N*m] indexed by the own
+    ``time_s``; not aligned."""
+    arr = np.concatenate(list(rows)) if len(rows) != 1 else rows[0]
+    data = pd.DataFrame(arr[:, 1:], index=pd.Index(arr[:, 0], name="time_s"),
+                        columns=list(_COLUMNS))
+    return ExternalChannel(name="dynamometer", data=data, units=dict(DYNAMOMETER_COLUMNS),
+                           fs_hz=fs_hz, source=source)
+
+
+def dynamometer_rows(
     time_s: NDArray[np.float64],
     true: tuple[ArrayLike | None, ArrayLike | None, ArrayLike | None, ArrayLike | None],
     *,
     sensor: Dynamometer,
     rng: np.random.Generator,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The arrays behind :func:`dynamometer_channel` (no DataFrame).
+) -> NDArray[np.float64]:
+    """The dynamometer's samples as one ``(m, 5)`` array ``time_s, fx_n, fy_n, fz_n, mz_nm``
+    (the layout of the CSV rows: the long scenarios' DAQ formats it without a copy).
 
     Parameters
     ----------
@@ -176,27 +184,9 @@ def dynamometer_samples(
     sensor, rng
         As in :func:`dynamometer_channel`.
 
-    Returns
-    -------
-    own_time_s : ndarray, shape (m,)
-        Sample times on the sensor's own clock, ``k / fs_hz`` [s].
-    values : ndarray, shape (m, 4)
-        ``fx_n, fy_n, fz_n, mz_nm`` (columns :data:`DYNAMOMETER_COLUMNS`) with noise and drift.
-    """
-    rows = dynamometer_rows(time_s, true, sensor=sensor, rng=rng)
-    return rows[:, 0], rows[:, 1:]
-
-
-def dynamometer_rows(
-    time_s: NDArray[np.float64],
-    true: tuple[ArrayLike | None, ArrayLike | None, ArrayLike | None, ArrayLike | None],
-    *,
-    sensor: Dynamometer,
-    rng: np.random.Generator,
-) -> NDArray[np.float64]:
-    """:func:`dynamometer_samples` as one ``(m, 5)`` array ``time_s, fx_n, fy_n, fz_n, mz_nm``
-    (the layout of the CSV rows: the long scenarios' DAQ formats it without a copy).
-
+    Notes
+    -----
+    Sample times on the sensor's own clock are ``k / fs_hz``.
     Each channel is the true signal linearly interpolated at the sample's recording time
     ``t_rec = t_own (1 + drift_ppm 1e-6) + offset`` (``numpy.interp``'s formula, by a merge walk
     over the increasing times), plus ``noise_std`` times a standard normal draw, plus the
@@ -340,7 +330,7 @@ def dynamometer_csv_rows(
     own_time_s: NDArray[np.float64], values: NDArray[np.float64],
     decimals: tuple[int, int, int, int, int],
 ) -> NDArray[np.uint8]:
-    """The data lines of a dynamometer CSV (``time_s`` then :data:`DYNAMOMETER_COLUMNS`) as
+    """The data lines of a dynamometer CSV (``time_s`` then ``fx_n, fy_n, fz_n, mz_nm``) as
     ASCII bytes, for writing to a binary file (:func:`format_csv_fixed` formats them)."""
     arr = np.empty((own_time_s.size, 5))
     arr[:, 0] = own_time_s
@@ -359,7 +349,7 @@ def write_dynamometer_csv(
     forces, 5 for torque); the simulator's DAQ passes its sensor's noise.
     """
     p = Path(path)
-    df = channel.data.reindex(columns=list(DYNAMOMETER_COLUMNS)).fillna(0.0)
+    df = channel.data.reindex(columns=list(_COLUMNS)).fillna(0.0)
     dec = decimals if decimals is not None else dynamometer_csv_decimals(fs_hz=channel.fs_hz)
     rows = dynamometer_csv_rows(df.index.to_numpy(dtype=np.float64),
                                 df.to_numpy(dtype=np.float64), dec)
