@@ -3,10 +3,6 @@ and a private mosquitto broker that a test can stop and restart on the same port
 
 from __future__ import annotations
 
-import os
-import shutil
-import socket
-import subprocess
 import threading
 import time
 from collections.abc import Iterator
@@ -19,6 +15,7 @@ import cnctwin
 from cnctwin.edge import load_spindle_model, save_spindle_model
 from cnctwin.recording import Recording
 from cnctwin.spindle import SpindleModel
+from tests._services import Broker, require_mosquitto
 
 
 @pytest.fixture(scope="session")
@@ -49,52 +46,9 @@ def spindle_model(tmp_path_factory: pytest.TempPathFactory) -> SpindleModel:
     return load_spindle_model(p)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-class Broker:
-    """A mosquitto process on a fixed free loopback port; stop() and start() again."""
-
-    def __init__(self, exe: str) -> None:
-        self.exe = exe
-        self.port = _free_port()
-        self.proc: subprocess.Popen[bytes] | None = None
-
-    def start(self) -> None:
-        self.proc = subprocess.Popen([self.exe, "-p", str(self.port)],
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        for _ in range(100):  # up to 5 s
-            try:
-                with socket.create_connection(("127.0.0.1", self.port), timeout=0.2):
-                    return
-            except OSError:
-                time.sleep(0.05)
-        pytest.fail(f"mosquitto did not listen on 127.0.0.1:{self.port} within 5 s")
-
-    def stop(self) -> None:
-        if self.proc is None:
-            return
-        self.proc.terminate()
-        try:
-            self.proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(timeout=5)
-        self.proc = None
-
-
 @pytest.fixture()
 def broker() -> Iterator[Broker]:
-    exe = shutil.which("mosquitto") or (
-        "/usr/sbin/mosquitto" if os.path.exists("/usr/sbin/mosquitto") else None)
-    if exe is None:
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail("mosquitto is required in CI for the live MQTT tests")
-        pytest.skip("install mosquitto (apt-get install mosquitto) to run live MQTT tests")
-    b = Broker(exe)
+    b = Broker(require_mosquitto())
     b.start()
     try:
         yield b

@@ -31,16 +31,11 @@ from cnctwin.recording import Recording
 from cnctwin.spindle import SpindleModel
 from cnctwin.usecases.holes import hole_records
 from cnctwin.usecases.thermal import ToolThermalModel, simulate_tool_temperature
+from tests._services import free_port
 
 from ._memsink import MemorySink
 
 WINDOW = 50  # cycles: 10 Hz on the 2 ms cycle
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class _KeepServing:
@@ -101,7 +96,7 @@ def test_unit_ids_are_the_unece_codes() -> None:
 
 def test_opcua_matches_batch(wear_recording: Recording, spindle_model: SpindleModel) -> None:
     rec = wear_recording
-    port = _free_port()
+    port = free_port()
     url = f"opc.tcp://127.0.0.1:{port}/cnctwin"
     thermal = ToolThermalModel(tau_s=20.0, c_eff_j_per_k=150.0, ambient_c=22.0)
     sink = OpcUaSink(url, machine="mill-1", publish_hz=10.0, thermal=thermal)
@@ -204,7 +199,7 @@ def test_opcua_matches_batch(wear_recording: Recording, spindle_model: SpindleMo
 @pytest.mark.parametrize("hz", [0.0, -1.0, float("nan"), 1000.0])
 def test_bad_publish_rate(hz: float) -> None:
     with pytest.raises(ConfigError, match="publish_hz"):
-        OpcUaSink(f"opc.tcp://127.0.0.1:{_free_port()}/x", machine="m", publish_hz=hz)
+        OpcUaSink(f"opc.tcp://127.0.0.1:{free_port()}/x", machine="m", publish_hz=hz)
 
 
 def test_bad_endpoint_and_port_in_use() -> None:
@@ -225,5 +220,5 @@ def test_cli_bad_rate(tmp_path: Path, wear_run: dict[str, Any],
     mfile = save_spindle_model(spindle_model, tmp_path / "m.json", source="test")
     code = main(["edge", "run", "--source", str(wear_run["path"]), "--model", str(mfile),
                  "--out", str(tmp_path / "out"), "--quiet", "--opcua",
-                 f"opc.tcp://127.0.0.1:{_free_port()}/x", "--opcua-publish-hz", "0"])
+                 f"opc.tcp://127.0.0.1:{free_port()}/x", "--opcua-publish-hz", "0"])
     assert code == 2

@@ -11,12 +11,7 @@ from __future__ import annotations
 
 import io
 import json
-import os
-import shutil
-import socket
-import subprocess
 import threading
-import time
 import zipfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -25,6 +20,7 @@ from typing import Any
 import pytest
 
 from cnctwin.iotools.mqtt import MqttRecorder, subscribe_data_recorder
+from tests._services import Broker, require_mosquitto
 
 pytestmark = pytest.mark.mqtt
 META_TOPIC = "ie/m/j/simatic/v1/s7c1/dp"
@@ -50,40 +46,14 @@ def bulk(seq: int) -> bytes:
     ]}).encode()
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.fixture(scope="module")
 def broker() -> Iterator[int]:
-    exe = shutil.which("mosquitto") or (
-        "/usr/sbin/mosquitto" if os.path.exists("/usr/sbin/mosquitto") else None)
-    if exe is None:
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail("mosquitto is required in CI for the live MQTT tests")
-        pytest.skip("install mosquitto (apt-get install mosquitto) to run live MQTT tests")
-    port = _free_port()
-    proc = subprocess.Popen([exe, "-p", str(port)], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+    b = Broker(require_mosquitto())
+    b.start()
     try:
-        for _ in range(100):  # up to 5 s
-            try:
-                with socket.create_connection(("127.0.0.1", port), timeout=0.2):
-                    break
-            except OSError:
-                time.sleep(0.05)
-        else:
-            pytest.fail(f"mosquitto did not listen on 127.0.0.1:{port} within 5 s")
-        yield port
+        yield b.port
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=5)
+        b.stop()
 
 
 def _publisher(port: int) -> Any:

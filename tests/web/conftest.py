@@ -4,8 +4,6 @@ the wear run, and the CI rule for the headless browser."""
 
 from __future__ import annotations
 
-import os
-import shutil
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -18,22 +16,6 @@ from cnctwin.spindle import SpindleModel
 
 pytest.importorskip("fastapi", reason="the dashboard needs the web extra: "
                     "pip install 'cnctwin[web]'")
-
-
-def require_tool(name: str, *, install: str) -> str:
-    """Path of an executable; a skip (a failure under ``CI=true``) saying how to install it.
-
-    The same rule as the mosquitto/PostgreSQL fixtures (tests/edge/conftest.py,
-    tests/store/conftest.py): CI must run every test.
-    """
-    path = shutil.which(name) or (f"/usr/bin/{name}" if Path(f"/usr/bin/{name}").exists()
-                                  else None)
-    if path is None:
-        msg = f"{name} is required for this test: {install}"
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail(msg)
-        pytest.skip(msg)
-    return path
 
 
 @pytest.fixture(scope="session")

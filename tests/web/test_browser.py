@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import re
-import socket
 import subprocess
 import sys
 import time
@@ -16,15 +15,9 @@ from typing import Any
 
 import pytest
 
-from tests.web.conftest import require_tool
+from tests._services import free_port, require_tool
 
 pytestmark = pytest.mark.browser
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +35,7 @@ def live_dir(wear12: dict[str, Any], model_file: Path,
 @pytest.fixture(scope="module")
 def server(wear12: dict[str, Any], c4a_file: Path, model_file: Path, live_dir: Path,
            tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
-    port = _free_port()
+    port = free_port()
     live = live_dir
     log = (tmp_path_factory.mktemp("srv") / "server.log").open("w")
     proc = subprocess.Popen(
