@@ -85,13 +85,17 @@ def _read(files: list[Path]) -> list[Any]:
 
 
 def _holes(files: list[Path], set_size: int = 6) -> tuple[list[Any], pd.DataFrame]:
+    recs = _read(files)
+    return recs, _holes_of(recs, set_size=set_size)
+
+
+def _holes_of(recs: list[Any], set_size: int = 6) -> pd.DataFrame:
     from cnctwin.usecases.holes import hole_records
 
-    recs = _read(files)
     holes = hole_records(recs, set_size=set_size)
     if holes.empty:
         raise ConfigError("no hole found (no plunge of the Z axis in the recordings)")
-    return recs, holes
+    return holes
 
 
 def _table(df: pd.DataFrame, title: str) -> None:
@@ -204,69 +208,35 @@ def _cmd_wear(args: argparse.Namespace) -> int:
     return 0
 
 
-def _stream(recs: list[Any], holes: pd.DataFrame | None, detector: str) -> pd.DataFrame:
-    from cnctwin.usecases.anomaly import signal_stream
-
-    return signal_stream(recs, holes, cutting_only=holes is not None and detector in
-                         ("envelope", "adaptive", "physics-torque", "physics", "spectral"))
-
-
 def _cmd_anomalies(args: argparse.Namespace) -> int:
-    from cnctwin.usecases.anomaly import (
-        EnvelopeDetector,
-        PhysicsResidualDetector,
-        SpectralDetector,
-        TappingDetector,
-        backtest,
-    )
     from cnctwin.usecases.figures import plot_anomaly_scores
-    from cnctwin.usecases.monitoring import WearAdaptiveDetector
+    from cnctwin.usecases.holes import hole_records
+    from cnctwin.usecases.replay import replay_detector
 
     recs = _read(args.files)
+    holes: pd.DataFrame | None
     if args.detector == "tapping":
-        from cnctwin.usecases.holes import hole_records
-
         try:
             holes = hole_records(recs)
         except Exception:
             holes = pd.DataFrame(columns=["hole", "cut_start_cycle", "cut_end_cycle"])
     else:
         try:
-            _, holes = _holes(args.files)
+            holes = _holes_of(recs)
         except ConfigError:
             if args.detector in ("envelope", "adaptive", "physics-torque"):  # need the holes
                 raise
             holes = None
             print("note: no hole found; scoring every sample (not only the cuts)")
-    data = _stream(recs, holes, args.detector)
-    if data.empty:
-        raise ConfigError("nothing to score: no cutting samples in the recordings")
-    for issue in data.attrs.get("issues", []):
+    rep = replay_detector(recs, holes, detector=args.detector, learn_until_s=args.learn_s,
+                          threshold=args.threshold, material=args.material,
+                          drill_mm=args.drill_mm, scores=bool(args.out))
+    for issue in rep.issues:
         print(f"note: {issue}")
-    if args.detector == "physics-torque":
-        from cnctwin.usecases.monitoring import expected_torque_stream
-
-        assert holes is not None
-        data["expected_torque_nm"] = expected_torque_stream(
-            data, holes, material=args.material, diameter_mm=args.drill_mm)
-    det = {
-        "envelope": lambda: EnvelopeDetector(),
-        "adaptive": lambda: WearAdaptiveDetector(),
-        "physics-torque": lambda: WearAdaptiveDetector(expected="expected_torque_nm"),
-        "physics": lambda: PhysicsResidualDetector(),
-        # default band 20-240 Hz at 500 Hz, scaled with the sampling rate (UMich: 10 Hz)
-        "spectral": lambda: SpectralDetector(fs_hz=recs[0].fs_hz, band_hz=(
-            0.04 * recs[0].fs_hz, 0.48 * recs[0].fs_hz)),
-        "tapping": lambda: TappingDetector(),
-    }[args.detector]()
-    t = data["time_s"].to_numpy()
-    learn_s = args.learn_s if args.learn_s is not None else (
-        t[0] - 1.0 if args.detector == "physics-torque" else t[0] + (t[-1] - t[0]) / 3.0)
-    res = backtest(det, data, time_s=t, learn_until_s=learn_s, threshold=args.threshold)
-    hole_at = np.interp(res.alarms_s, t, data["hole"].to_numpy()) if res.alarms_s else []
-    alarms = pd.DataFrame({"alarm_s": res.alarms_s,
-                           "hole": np.round(np.asarray(hole_at)).astype(int)})
-    _table(pd.DataFrame([("detector", repr(det)), ("teach-in until [s]", f"{learn_s:.1f}"),
+    res = rep.result
+    alarms = pd.DataFrame({"alarm_s": res.alarms_s, "hole": rep.alarm_holes})
+    _table(pd.DataFrame([("detector", repr(rep.detector)),
+                         ("teach-in until [s]", f"{rep.learn_until_s:.1f}"),
                          ("scored [s]", f"{res.monitored_s:.1f}"),
                          ("alarms", str(len(res.alarms_s)))], columns=["quantity", "value"]),
            "anomaly replay")
@@ -274,11 +244,7 @@ def _cmd_anomalies(args: argparse.Namespace) -> int:
         _table(alarms, "alarms")
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
-        d2 = det.clone()
-        learn = t < learn_s
-        d2.learn_many(data.loc[learn])
-        scores = d2.score_many(data.loc[~learn])
-        plot_anomaly_scores(t[~learn], scores, threshold=args.threshold,
+        plot_anomaly_scores(rep.score_time_s, rep.score, threshold=args.threshold,
                             alarms_s=res.alarms_s, title=f"{args.detector} detector").savefig(
             args.out / f"anomalies_{args.detector}.png", dpi=110)
         alarms.to_csv(args.out / "alarms.csv", index=False)

@@ -12,7 +12,7 @@ why a view is empty, and turns tables into JSON-ready rows.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -191,52 +191,21 @@ def anomalies(recs: Sequence[Recording], holes: pd.DataFrame, *, detector: str =
               learn_s: float | None = None, threshold: float = 0.0) -> dict[str, Any]:
     """Replay recordings through a detector: teach on the first part, score the rest.
 
-    The same steps as ``cnctwin anomalies``: :func:`~cnctwin.usecases.anomaly.signal_stream`
-    then :func:`~cnctwin.usecases.anomaly.backtest`; the scores are those of a clone taught on
-    the same rows.
+    The replay of ``cnctwin anomalies`` (:func:`~cnctwin.usecases.replay.replay_detector`)
+    with the scores of a clone taught on the same rows, for the detectors the page offers
+    (:data:`DETECTORS`).
     """
-    from cnctwin.usecases.anomaly import (
-        Detector,
-        EnvelopeDetector,
-        PhysicsResidualDetector,
-        SpectralDetector,
-        TappingDetector,
-        backtest,
-        signal_stream,
-    )
+    from cnctwin.usecases.replay import replay_detector
 
     if detector not in DETECTORS:
         raise ConfigError(f"detector {detector!r} is not known; use one of "
                           f"{', '.join(DETECTORS)}")
-    have_holes = not holes.empty
-    if detector == "envelope" and not have_holes:
-        raise ConfigError("the envelope detector needs holes (progress through each cut); "
-                          "this recording has none: use detector=physics")
-    data = signal_stream(list(recs), holes if have_holes else None,
-                         cutting_only=have_holes and detector in ("envelope", "physics",
-                                                                  "spectral"))
-    if data.empty:
-        raise ConfigError("nothing to score: no cutting samples in the recordings")
-    fs = recs[0].fs_hz
-    makers: dict[str, Callable[[], Detector]] = {
-        "envelope": EnvelopeDetector, "physics": PhysicsResidualDetector,
-        "tapping": TappingDetector,
-        "spectral": lambda: SpectralDetector(fs_hz=fs, band_hz=(0.04 * fs, 0.48 * fs)),
-    }
-    det = makers[detector]()
-    t = data["time_s"].to_numpy(dtype=np.float64)
-    learn_until = learn_s if learn_s is not None else t[0] + (t[-1] - t[0]) / 3.0
-    res = backtest(det, data, time_s=t, learn_until_s=learn_until, threshold=threshold)
-    clone = det.clone()
-    learn = t < learn_until
-    clone.learn_many(data.loc[learn])
-    scores = clone.score_many(data.loc[~learn])
-    hole_at = (np.interp(res.alarms_s, t, data["hole"].to_numpy(dtype=np.float64))
-               if res.alarms_s else np.empty(0))
+    rep = replay_detector(recs, holes, detector=detector, learn_until_s=learn_s,
+                          threshold=threshold, scores=True)
+    res = rep.result
     return {
-        "detector": repr(det), "learn_until_s": learn_until, "threshold": threshold,
-        "monitored_s": res.monitored_s, "alarms_s": res.alarms_s,
-        "alarm_holes": np.round(hole_at).astype(int).tolist(),
-        "score_time_s": t[~learn], "score": np.asarray(scores, dtype=np.float64),
-        "issues": list(data.attrs.get("issues", [])),
+        "detector": repr(rep.detector), "learn_until_s": rep.learn_until_s,
+        "threshold": threshold, "monitored_s": res.monitored_s, "alarms_s": res.alarms_s,
+        "alarm_holes": rep.alarm_holes, "score_time_s": rep.score_time_s, "score": rep.score,
+        "issues": rep.issues,
     }
