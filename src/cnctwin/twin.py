@@ -543,7 +543,7 @@ class TwinChain:
 
     Parameters
     ----------
-    machine : cnctwin.sim.machine.Machine, optional
+    machine : cnctwin.machine.Machine, optional
         Machine description; only names are read (spindle axis, Z axis). No datasheet value
         is used unless passed explicitly (``poles``).
     friction_model : {'linear', 'stribeck'} or callable, default 'linear'

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from cnctwin.exceptions import ConfigError
-from cnctwin.sim.machine import FeedAxis, Machine, dynamic_response_adaptation_times
-from cnctwin.sim.spindle import SpindleMotor
+from cnctwin.machine import FeedAxis, Machine, dynamic_response_adaptation_times
+from cnctwin.machine import SpindleMotor
 
 
 def test_thesis_default_layout() -> None:

@@ -14,7 +14,7 @@ import pytest
 from numpy.typing import NDArray
 
 from cnctwin.exceptions import ConfigError
-from cnctwin.sim.machine import FeedAxis, Machine
+from cnctwin.machine import FeedAxis, Machine
 from cnctwin.sim.servo import N_KERNEL_OUTPUTS, ServoState, simulate_servo
 
 TC = 0.002

@@ -48,7 +48,7 @@ from cnctwin.exceptions import ConfigError, SignalNotFoundError
 from cnctwin.recording import Recording
 
 if TYPE_CHECKING:
-    from cnctwin.sim.machine import FeedAxis, Machine
+    from cnctwin.machine import FeedAxis, Machine
     from cnctwin.sim.tool import Drill
 
 __all__ = [
@@ -248,7 +248,7 @@ def feed_axis_dynamic_stiffness(
 
     Parameters
     ----------
-    axis : cnctwin.sim.machine.FeedAxis
+    axis : cnctwin.machine.FeedAxis
         Axis description (inertia, pitch, speed-controller gains, Kv, friction).
     frequency_hz : array-like
         Frequencies [Hz].
@@ -343,7 +343,7 @@ def hole_runout(
         Hole record (needs ``speed_rpm``).
     point_length_mm : float
         Axial length of the drill point (D/2)/tan(sigma/2) [mm]; default 8.5 mm, 140 deg.
-    machine : cnctwin.sim.machine.Machine, optional
+    machine : cnctwin.machine.Machine, optional
         Axis description: adds force estimates (amplitude x :func:`feed_axis_dynamic_stiffness`).
     drill : cnctwin.sim.tool.Drill, optional
         With ``machine``: tool-tip estimates from the drill's tip stiffness and run-out.

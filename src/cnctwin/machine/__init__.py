@@ -1,0 +1,41 @@
+"""The machine description layer: what a machine is, and the one file that keeps it.
+
+Below the analyses and the simulator: :mod:`cnctwin.machine.description` holds the
+description types (:class:`Machine`, :class:`FeedAxis`, :class:`SpindleMotor`),
+:mod:`cnctwin.machine.file` the machine file (:func:`load_machine`, :func:`save_machine`)
+that ``cnctwin calibrate`` writes and every other part reads.
+"""
+
+from cnctwin.machine.description import (
+    KV_UNIT_PER_S,
+    FeedAxis,
+    Machine,
+    SpindleMotor,
+    dynamic_response_adaptation_times,
+)
+from cnctwin.machine.file import (
+    SCHEMA,
+    SCHEMA_VERSION,
+    MachineFile,
+    ParameterRecord,
+    Provenance,
+    load_machine,
+    parameter_unit,
+    save_machine,
+)
+
+__all__ = [
+    "KV_UNIT_PER_S",
+    "SCHEMA",
+    "SCHEMA_VERSION",
+    "FeedAxis",
+    "Machine",
+    "MachineFile",
+    "ParameterRecord",
+    "Provenance",
+    "SpindleMotor",
+    "dynamic_response_adaptation_times",
+    "load_machine",
+    "parameter_unit",
+    "save_machine",
+]
