@@ -720,7 +720,7 @@ class TwinChain:
     # ------------------------------------------------------------------ calibration
     def calibrate(
         self,
-        air_cut: Recording,
+        air_cut: Recording | Sequence[Recording],
         calibration_cut: Recording,
         *,
         warm_up: Recording | None = None,
@@ -730,8 +730,9 @@ class TwinChain:
 
         Parameters
         ----------
-        air_cut : Recording
-            Air-cut sweep (constant-speed plateaus, thesis §3.2.2).
+        air_cut : Recording or sequence of Recording
+            Air-cut sweep (constant-speed plateaus, thesis §3.2.2); several recordings are
+            pooled plateau by plateau (the inertia comes from the first).
         calibration_cut : Recording
             Recording of one cut with the dynamometer channel (thesis: steel, 2400 rpm,
             0.16 mm/rev).
@@ -747,35 +748,40 @@ class TwinChain:
         """
         o = self.options
         sp = self.spindle
-        plateaus = speed_plateaus(air_cut, spindle=sp)
-        stats = air_cut_statistics(air_cut, plateaus, spindle=sp)
+        air_cuts = [air_cut] if isinstance(air_cut, Recording) else list(air_cut)
+        if not air_cuts:
+            raise ConfigError("calibrate needs at least one air-cut recording")
+        gamma = None
+        if o.temperature_compensation and warm_up is not None:
+            gamma = thermal_drift_from_warm_up(warm_up, spindle=sp)
+        parts = [self._air_cut_plateaus(rec, gamma) for rec in air_cuts]
+        stats = pd.concat([q[0] for q in parts], ignore_index=True)
+        segs = [seg for q in parts for seg in q[1]]
+        raw_means = np.concatenate([q[2] for q in parts])
+        gamma_factor = np.concatenate([q[3] for q in parts])
+        order = np.argsort(stats["speed_rpm"].abs().to_numpy(), kind="stable")
+        stats = stats.iloc[order].reset_index(drop=True)
+        segs = [segs[k] for k in order]
+        raw_means, gamma_factor = raw_means[order], gamma_factor[order]
         fw = field_weakening_onset_rpm(stats, spindle=sp)
         region: LinearRegion | None = None
-        p_sorted = plateaus.assign(_n=plateaus["speed_rpm"].abs()).sort_values(
-            "_n", kind="stable")
-        segs = plateau_segments(air_cut, p_sorted, spindle=sp)
+        fs_air = air_cuts[0].fs_hz
         if isinstance(o.region, tuple):
             lo, hi = float(o.region[0]), float(o.region[1])
         else:
             fn = REGION_MODELS[o.region] if isinstance(o.region, str) else o.region
-            region = fn(stats, segs, fs_hz=air_cut.fs_hz, poles=o.poles, fw_rpm=fw)
+            region = fn(stats, segs, fs_hz=fs_air, poles=o.poles, fw_rpm=fw)
             lo, hi = region.lo_rpm, region.hi_rpm
         fit_lo = o.fit_from_rpm if o.fit_from_rpm is not None else lo
         hi = fit_lo + o.fit_to_fraction * (hi - fit_lo)
         ffn = FRICTION_MODELS[o.friction_model] if isinstance(o.friction_model, str) \
             else o.friction_model
-        means = stats["current_a"].to_numpy()
+        means = raw_means
         poles = o.poles if o.poles is not None else (region.poles if region else None)
         if o.ripple_free and poles is not None:
             means = ripple_free_means(stats["speed_rpm"].to_numpy(), segs, poles=poles,
-                                      fs_hz=air_cut.fs_hz)
-        gamma = None
-        if o.temperature_compensation and warm_up is not None:
-            gamma = thermal_drift_from_warm_up(warm_up, spindle=sp)
-            e = friction_energy(air_cut, spindle=sp)
-            mid = np.searchsorted(air_cut.cycles,
-                                  ((stats["start_cycle"] + stats["end_cycle"]) // 2).to_numpy())
-            means = means / (1.0 + gamma * e[np.clip(mid, 0, e.size - 1)])
+                                      fs_hz=fs_air)
+        means = means / gamma_factor
         friction = ffn(stats["speed_rpm"].abs().to_numpy(), means, fit_lo, hi)
         t_ref = self._air_cut_temperature(stats, lo, hi)
         # Kt from the calibration cut (Eq. 4.3)
@@ -791,7 +797,7 @@ class TwinChain:
         kt_ref, cal = self._kt(rec, regions.iloc[region_index], friction, t_ref, j)
         if o.acceleration_term:
             model0 = self._model(kt_ref, friction, 0.0, t_ref)
-            j = self._inertia(air_cut, model0)
+            j = self._inertia(air_cuts[0], model0)
             kt_ref, cal = self._kt(rec, regions.iloc[region_index], friction, t_ref, j)
         coeff = None
         if o.temperature_compensation and warm_up is not None:
@@ -808,6 +814,26 @@ class TwinChain:
             thermal_drift_per_energy=gamma,
         )
         return self
+
+    def _air_cut_plateaus(
+        self, rec: Recording, gamma: float | None
+    ) -> tuple[pd.DataFrame, list[NDArray[np.float64]], NDArray[np.float64],
+               NDArray[np.float64]]:
+        """Plateau statistics, raw samples, means and the thermal factor of one air cut."""
+        sp = self.spindle
+        plateaus = speed_plateaus(rec, spindle=sp)
+        stats = air_cut_statistics(rec, plateaus, spindle=sp)
+        p_sorted = plateaus.assign(_n=plateaus["speed_rpm"].abs()).sort_values(
+            "_n", kind="stable")
+        segs = plateau_segments(rec, p_sorted, spindle=sp)
+        means = stats["current_a"].to_numpy(dtype=np.float64)
+        factor = np.ones(means.size)
+        if gamma is not None:
+            e = friction_energy(rec, spindle=sp)
+            mid = np.searchsorted(rec.cycles,
+                                  ((stats["start_cycle"] + stats["end_cycle"]) // 2).to_numpy())
+            factor = 1.0 + gamma * e[np.clip(mid, 0, e.size - 1)]
+        return stats, list(segs), means, factor
 
     def _model(self, kt: float, friction: FrictionCurve, j: float,
                t_ref: float) -> SpindleModel:
