@@ -7,8 +7,7 @@ from pathlib import Path
 import pytest
 
 from cnctwin.exceptions import ConfigError
-from cnctwin.machine import FeedAxis, Machine, dynamic_response_adaptation_times
-from cnctwin.machine import SpindleMotor
+from cnctwin.machine import FeedAxis, Machine, SpindleMotor, dynamic_response_adaptation_times
 
 
 def test_thesis_default_layout() -> None:
