@@ -58,6 +58,7 @@ __all__ = [
     "REGION_MODELS",
     "CutEstimate",
     "FrictionCurve",
+    "ThermalFrictionFit",
     "TwinChain",
     "TwinChainOptions",
     "TwinChainResult",
@@ -65,7 +66,9 @@ __all__ = [
     "field_weakening_onset_rpm",
     "find_cuts",
     "fit_friction_stribeck",
+    "fit_friction_thermal",
     "friction_energy",
+    "has_repeated_speeds",
     "ripple_free_means",
     "temperature_coefficient_from_warm_up",
     "thermal_drift_from_warm_up",
@@ -173,6 +176,136 @@ def fit_friction_stribeck(
     line = fit_friction(x, y - sol[2] * np.exp(-x / ns))
     return FrictionCurve(line, stribeck_a=float(sol[2]), stribeck_speed_rpm=ns,
                          model="stribeck")
+
+
+@dataclass(frozen=True)
+class ThermalFrictionFit:
+    """Friction curve referred to the start of the sweep, with the self-heating drift.
+
+    Attributes
+    ----------
+    curve : FrictionCurve
+        The air-cut current at zero dissipated energy (the state the sweep started in).
+    viscous_drift_per_energy : float
+        Relative change of the viscous term per dissipated energy ``E`` [1/(A rpm s)].
+    coulomb_drift_per_energy : float
+        Relative change of the Coulomb term per ``E`` [1/(A rpm s)].
+    """
+
+    curve: FrictionCurve
+    viscous_drift_per_energy: float
+    coulomb_drift_per_energy: float
+
+
+def has_repeated_speeds(speed_rpm: ArrayLike, energy: ArrayLike, *, rel_tol: float = 0.005,
+                        min_speeds: int = 3) -> bool:
+    """True if at least ``min_speeds`` speeds were held twice at different heating states.
+
+    Parameters
+    ----------
+    speed_rpm, energy : array-like
+        Plateau speeds [rpm] and the friction energy dissipated before each
+        (:func:`friction_energy`) [A rpm s].
+    rel_tol : float, default 0.005
+        Speeds within this relative distance count as the same.
+    min_speeds : int, default 3
+        How many repeated speeds are needed.
+    """
+    n = np.abs(np.asarray(speed_rpm, dtype=np.float64))
+    e = np.asarray(energy, dtype=np.float64)
+    order = np.argsort(n, kind="stable")
+    n, e = n[order], e[order]
+    count = 0
+    k = 0
+    while k < n.size:
+        j = k
+        while j + 1 < n.size and n[j + 1] - n[k] <= rel_tol * max(n[k], 1.0):
+            j += 1
+        if j > k and np.ptp(e[k:j + 1]) > 0:
+            count += 1
+        k = j + 1
+    return count >= min_speeds
+
+
+def fit_friction_thermal(
+    speed_rpm: ArrayLike,
+    current_a: ArrayLike,
+    energy: ArrayLike,
+    lo_rpm: float,
+    hi_rpm: float,
+    *,
+    decay_grid_rpm: Sequence[float] = tuple(np.geomspace(100.0, 2000.0, 40)),
+) -> ThermalFrictionFit:
+    """Friction curve and its self-heating drift from an air cut that revisits its speeds.
+
+    Parameters
+    ----------
+    speed_rpm, current_a : array-like
+        Plateau speeds [rpm] and mean currents [A].
+    energy : array-like
+        Friction energy dissipated before each plateau (:func:`friction_energy`) [A rpm s].
+    lo_rpm, hi_rpm : float
+        Speed range used [rpm].
+    decay_grid_rpm : sequence of float
+        Candidate Stribeck decay speeds [rpm].
+
+    Returns
+    -------
+    ThermalFrictionFit
+
+    Raises
+    ------
+    IdentificationError
+        Fewer than 8 plateaus in the range, or no speed held twice at different energies.
+
+    Notes
+    -----
+    ``I = a n (1 + g_B E) + b (1 + g_f E) + s exp(-n/n_s)``: the friction heat warms the
+    bearings, whose viscous (grease) and Coulomb terms change by different relative amounts
+    per kelvin; while the heat stays in the rotor (the first minutes, its time constant to
+    the stator being ~10 min) the temperature rise is proportional to the dissipated energy.
+    A sweep that goes up and back down holds each speed at two energies, which separates the
+    drift from the curve's shape; a one-way sweep cannot (the drift then tilts the line,
+    B about 1 % low, see :func:`thermal_drift_from_warm_up`). Linear in ``a, b, s, a g_B,
+    b g_f`` for each ``n_s`` of the grid.
+    """
+    n = np.abs(np.asarray(speed_rpm, dtype=np.float64))
+    i = np.abs(np.asarray(current_a, dtype=np.float64))
+    e = np.asarray(energy, dtype=np.float64)
+    m = np.isfinite(n) & np.isfinite(i) & np.isfinite(e) & (n >= lo_rpm) & (n <= hi_rpm)
+    x, y, en = n[m], i[m], e[m]
+    if x.size < 8:
+        raise IdentificationError(
+            f"the thermal friction fit needs at least 8 plateaus in [{lo_rpm:.0f}, "
+            f"{hi_rpm:.0f}] rpm, got {x.size}")
+    if not has_repeated_speeds(x, en):
+        raise IdentificationError(
+            "the thermal friction fit needs speeds held twice (a sweep up and back down)")
+    best: tuple[float, float, NDArray[np.float64], NDArray[np.float64]] | None = None
+    for ns in decay_grid_rpm:
+        a_mat = np.column_stack([x, np.ones_like(x), np.exp(-x / ns), x * en, en])
+        sol, *_ = np.linalg.lstsq(a_mat, y, rcond=None)
+        if sol[2] < 0:
+            continue
+        rss = float(np.sum((a_mat @ sol - y) ** 2))
+        if best is None or rss < best[0]:
+            best = (rss, float(ns), sol, a_mat)
+    if best is None:
+        raise IdentificationError("the thermal friction fit found no non-negative Stribeck term")
+    rss, ns, sol, a_mat = best
+    dof = x.size - a_mat.shape[1]
+    s2 = rss / dof if dof > 0 else float("nan")
+    cov = s2 * np.linalg.pinv(a_mat.T @ a_mat)
+    ss_tot = float(np.sum((y - y.mean()) ** 2))
+    line = FrictionFit(
+        slope_a_per_rpm=float(sol[0]), offset_a=float(sol[1]),
+        r2=1.0 - rss / ss_tot if ss_tot > 0 else float("nan"),
+        norm_residuals=float(np.sqrt(rss)), n_points=int(x.size),
+        slope_std=float(np.sqrt(cov[0, 0])), offset_std=float(np.sqrt(cov[1, 1])),
+        lo_rpm=float(x.min()), hi_rpm=float(x.max()))
+    curve = FrictionCurve(line, stribeck_a=float(sol[2]), stribeck_speed_rpm=ns,
+                          model="stribeck+thermal")
+    return ThermalFrictionFit(curve, float(sol[3] / sol[0]), float(sol[4] / sol[1]))
 
 
 FrictionModel = Callable[[ArrayLike, ArrayLike, float, float], FrictionCurve]
@@ -522,6 +655,10 @@ class TwinChainResult:
         (|predicted - measured| / |measured| x 100, where a dynamometer is present).
     cutting_torque : list of pandas.Series
         Estimated cutting torque per HF cycle of each recording [Nm].
+    thermal_friction : ThermalFrictionFit or None
+        The self-heating drift of the friction terms, where the air cut held its speeds
+        twice (:func:`fit_friction_thermal`); the friction curve is then referred to the
+        start of the sweep.
     """
 
     air_cut_stats: pd.DataFrame
@@ -535,6 +672,7 @@ class TwinChainResult:
     thermal_drift_per_energy: float | None = None
     validation: pd.DataFrame = field(default_factory=pd.DataFrame)
     cutting_torque: list[pd.Series] = field(default_factory=list)
+    thermal_friction: ThermalFrictionFit | None = None
 
 
 # ====================================================================== the chain
@@ -725,6 +863,7 @@ class TwinChain:
         *,
         warm_up: Recording | None = None,
         region_index: int = 0,
+        reference_torque_nm: float | None = None,
     ) -> TwinChain:
         """Identify the spindle from an air-cut sweep and one cut with a dynamometer.
 
@@ -740,6 +879,9 @@ class TwinChain:
             Long constant-speed run (thesis §4.2) for the temperature coefficient.
         region_index : int, default 0
             Which cutting region of ``calibration_cut`` to use.
+        reference_torque_nm : float, optional
+            Mean cutting torque of the calibration window known otherwise (a torque
+            measured or computed for that cut) [Nm]; replaces the dynamometer channel.
 
         Returns
         -------
@@ -759,10 +901,11 @@ class TwinChain:
         segs = [seg for q in parts for seg in q[1]]
         raw_means = np.concatenate([q[2] for q in parts])
         gamma_factor = np.concatenate([q[3] for q in parts])
+        energy = np.concatenate([q[4] for q in parts])
         order = np.argsort(stats["speed_rpm"].abs().to_numpy(), kind="stable")
         stats = stats.iloc[order].reset_index(drop=True)
         segs = [segs[k] for k in order]
-        raw_means, gamma_factor = raw_means[order], gamma_factor[order]
+        raw_means, gamma_factor, energy = raw_means[order], gamma_factor[order], energy[order]
         fw = field_weakening_onset_rpm(stats, spindle=sp)
         region: LinearRegion | None = None
         fs_air = air_cuts[0].fs_hz
@@ -782,11 +925,25 @@ class TwinChain:
             means = ripple_free_means(stats["speed_rpm"].to_numpy(), segs, poles=poles,
                                       fs_hz=fs_air)
         means = means / gamma_factor
-        friction = ffn(stats["speed_rpm"].abs().to_numpy(), means, fit_lo, hi)
+        speeds = stats["speed_rpm"].abs().to_numpy()
+        thermal: ThermalFrictionFit | None = None
+        if (o.temperature_compensation and gamma is None and o.friction_model == "stribeck"
+                and has_repeated_speeds(speeds[(speeds >= fit_lo) & (speeds <= hi)],
+                                        energy[(speeds >= fit_lo) & (speeds <= hi)])):
+            thermal = fit_friction_thermal(speeds, means, energy, fit_lo, hi)
+            friction = thermal.curve
+        else:
+            friction = ffn(speeds, means, fit_lo, hi)
         t_ref = self._air_cut_temperature(stats, lo, hi)
         # Kt from the calibration cut (Eq. 4.3)
-        rec = align_dynamometer(calibration_cut, dynamometer=self.dynamometer,
-                                torque_column=self.torque_column, spindle=sp)
+        rec = calibration_cut
+        if reference_torque_nm is None:
+            if self.dynamometer not in rec.external:
+                raise IdentificationError(
+                    f"the calibration cut has no {self.dynamometer!r} channel; attach the "
+                    "dynamometer recording or give the cut's mean torque")
+            rec = align_dynamometer(rec, dynamometer=self.dynamometer,
+                                    torque_column=self.torque_column, spindle=sp)
         regions = find_cuts(rec, spindle=sp, z_axis=self.z_axis)
         if len(regions) <= region_index:
             raise IdentificationError(
@@ -794,11 +951,13 @@ class TwinChain:
                 f"index {region_index}; check cutting_regions thresholds"
             )
         j = 0.0
-        kt_ref, cal = self._kt(rec, regions.iloc[region_index], friction, t_ref, j)
+        kt_ref, cal = self._kt(rec, regions.iloc[region_index], friction, t_ref, j,
+                               reference_torque_nm)
         if o.acceleration_term:
             model0 = self._model(kt_ref, friction, 0.0, t_ref)
             j = self._inertia(air_cuts[0], model0)
-            kt_ref, cal = self._kt(rec, regions.iloc[region_index], friction, t_ref, j)
+            kt_ref, cal = self._kt(rec, regions.iloc[region_index], friction, t_ref, j,
+                                   reference_torque_nm)
         coeff = None
         if o.temperature_compensation and warm_up is not None:
             coeff, _ = temperature_coefficient_from_warm_up(warm_up, spindle=sp)
@@ -812,14 +971,75 @@ class TwinChain:
             calibration=cal,
             warm_up_coeff_per_k=coeff,
             thermal_drift_per_energy=gamma,
+            thermal_friction=thermal,
         )
         return self
+
+    def calibration_windows(
+        self,
+        calibration_cut: Recording,
+        *,
+        region_index: int = 0,
+        reference_torque_nm: float | None = None,
+    ) -> pd.DataFrame:
+        """Kt from each consecutive averaging window of the calibration cut.
+
+        The first window is the one :meth:`calibrate` used; the following ones continue
+        back to back (``window_s`` each) to the end of the cutting region. Their spread shows
+        how much Kt depends on where in the cut it is read (drill entry, tool heating, the
+        speed loop's response), a component of its uncertainty that one window cannot show.
+
+        Parameters
+        ----------
+        calibration_cut : Recording
+            The recording :meth:`calibrate` was given.
+        region_index : int, default 0
+            The cutting region.
+        reference_torque_nm : float, optional
+            As in :meth:`calibrate`.
+
+        Returns
+        -------
+        pandas.DataFrame
+            One row per window: the :class:`CutEstimate` fields and ``kt_nm_per_a`` (referred
+            to the model's reference temperature) [Nm/A].
+        """
+        res = self.results
+        rec = calibration_cut
+        if reference_torque_nm is None:
+            rec = align_dynamometer(rec, dynamometer=self.dynamometer,
+                                    torque_column=self.torque_column, spindle=self.spindle)
+        regions = find_cuts(rec, spindle=self.spindle, z_axis=self.z_axis)
+        region = regions.iloc[region_index]
+        m = res.spindle_model
+        t_ref = m.reference_temperature_c if m.reference_temperature_c is not None \
+            else float("nan")
+        rows: list[dict[str, Any]] = []
+        start: int | None = None
+        while True:
+            try:
+                w = self._window_means(rec, region, res.friction, m.j_kgm2,
+                                       with_torque=reference_torque_nm is None,
+                                       start_cycle=start)
+            except IdentificationError:
+                break
+            if reference_torque_nm is not None:
+                w["torque_nm"] = float(reference_torque_nm)
+            i_cut = abs(w["current_a"]) - w["air_current_a"]
+            kt = (abs(w["torque_nm"]) + w["accel_torque_nm"]) / i_cut if i_cut > 0 \
+                else float("nan")
+            if (self.options.temperature_compensation and np.isfinite(t_ref)
+                    and np.isfinite(w["temperature_c"])):
+                kt = kt / (1.0 + self.options.kt_temp_coeff_per_k * (w["temperature_c"] - t_ref))
+            rows.append({**w, "kt_nm_per_a": kt})
+            start = w["end_cycle"] + 1
+        return pd.DataFrame(rows)
 
     def _air_cut_plateaus(
         self, rec: Recording, gamma: float | None
     ) -> tuple[pd.DataFrame, list[NDArray[np.float64]], NDArray[np.float64],
-               NDArray[np.float64]]:
-        """Plateau statistics, raw samples, means and the thermal factor of one air cut."""
+               NDArray[np.float64], NDArray[np.float64]]:
+        """Plateau statistics, raw samples, means, thermal factor and energy of one air cut."""
         sp = self.spindle
         plateaus = speed_plateaus(rec, spindle=sp)
         stats = air_cut_statistics(rec, plateaus, spindle=sp)
@@ -827,13 +1047,12 @@ class TwinChain:
             "_n", kind="stable")
         segs = plateau_segments(rec, p_sorted, spindle=sp)
         means = stats["current_a"].to_numpy(dtype=np.float64)
-        factor = np.ones(means.size)
-        if gamma is not None:
-            e = friction_energy(rec, spindle=sp)
-            mid = np.searchsorted(rec.cycles,
-                                  ((stats["start_cycle"] + stats["end_cycle"]) // 2).to_numpy())
-            factor = 1.0 + gamma * e[np.clip(mid, 0, e.size - 1)]
-        return stats, list(segs), means, factor
+        e = friction_energy(rec, spindle=sp)
+        mid = np.searchsorted(rec.cycles,
+                              ((stats["start_cycle"] + stats["end_cycle"]) // 2).to_numpy())
+        energy = e[np.clip(mid, 0, e.size - 1)]
+        factor = 1.0 + gamma * energy if gamma is not None else np.ones(means.size)
+        return stats, list(segs), means, factor, energy
 
     def _model(self, kt: float, friction: FrictionCurve, j: float,
                t_ref: float) -> SpindleModel:
@@ -868,8 +1087,10 @@ class TwinChain:
         return max(float(j), 0.0)
 
     def _kt(self, rec: Recording, region: pd.Series, friction: FrictionCurve, t_ref: float,
-            j: float) -> tuple[float, CutEstimate]:
-        w = self._window_means(rec, region, friction, j, with_torque=True)
+            j: float, torque_nm: float | None = None) -> tuple[float, CutEstimate]:
+        w = self._window_means(rec, region, friction, j, with_torque=torque_nm is None)
+        if torque_nm is not None:
+            w["torque_nm"] = float(torque_nm)
         i_cut = abs(w["current_a"]) - w["air_current_a"]
         if i_cut <= 1e-3 * max(abs(w["current_a"]), 1e-9) or not abs(w["torque_nm"]) > 0:
             raise IdentificationError(
@@ -886,7 +1107,8 @@ class TwinChain:
 
     # ------------------------------------------------------------------ windows
     def _window_means(self, rec: Recording, region: pd.Series, friction: FrictionCurve,
-                      j: float, *, with_torque: bool) -> dict[str, Any]:
+                      j: float, *, with_torque: bool, start_cycle: int | None = None,
+                      ) -> dict[str, Any]:
         o = self.options
         sp = self.spindle
         fs = rec.fs_hz
@@ -896,7 +1118,9 @@ class TwinChain:
         cur = rec.signal(f"CURRENT|{sp}").to_numpy(dtype=np.float64)
         speed, _ = spindle_speed_rpm(rec, sp)
         start = r0
-        if o.window_start == "engaged":
+        if start_cycle is not None:
+            start = int(np.searchsorted(cyc, start_cycle))
+        elif o.window_start == "engaged":
             seg = np.abs(cur[r0:r1])
             base = float(np.median(np.abs(cur[max(0, r0 - round(0.3 * fs)):r0]))) \
                 if r0 > 0 else 0.0

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as _dt
+import json
 import math
 import os
 import tempfile
@@ -43,8 +44,6 @@ from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
 from typing import Any
-
-import tomli_w
 
 from cnctwin.exceptions import ConfigError
 from cnctwin.machine.description import FeedAxis, Machine, SpindleMotor
@@ -483,17 +482,22 @@ def _parse_value(key: str, raw: Any, records: dict[str, ParameterRecord], source
     return value
 
 
+def _sig(x: float, digits: int) -> float:
+    return float(f"{x:.{digits}g}")
+
+
 def _record_dict(rec: ParameterRecord, unit: str) -> dict[str, Any]:
-    d: dict[str, Any] = {"value": rec.value}
+    d: dict[str, Any] = {"value": _sig(rec.value, 7) if isinstance(rec.value, float)
+                         else rec.value}
     if rec.uncertainty is not None:
-        d["uncertainty"] = rec.uncertainty
+        d["uncertainty"] = _sig(rec.uncertainty, 3)
     d["unit"] = unit
     if not rec.identified:
         d["identified"] = False
     if rec.reason:
         d["reason"] = rec.reason
     if rec.valid_range is not None:
-        d["valid_range"] = list(rec.valid_range)
+        d["valid_range"] = [_sig(x, 6) for x in rec.valid_range]
         if rec.valid_quantity:
             d["valid_quantity"] = rec.valid_quantity
     if rec.provenance is not None:
@@ -536,6 +540,38 @@ def _validate_spindle(sp: SpindleMotor, source: str) -> None:
         if not lo <= v <= hi:
             raise ConfigError(f"{source}: spindle.{name} = {v!r} is out of range; allowed "
                               f"{lo:g} ... {hi:g} {parameter_unit('spindle.' + name)}")
+
+
+def _literal(v: Any) -> str:
+    """A TOML literal for a scalar, list or inline table."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int | float):
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v, ensure_ascii=False)
+    if isinstance(v, list | tuple):
+        return "[" + ", ".join(_literal(x) for x in v) + "]"
+    if isinstance(v, Mapping):
+        return "{ " + ", ".join(f"{k} = {_literal(x)}" for k, x in v.items()) + " }"
+    raise ConfigError(f"cannot write {v!r} to a machine file")
+
+
+def _dumps(doc: Mapping[str, Any]) -> str:
+    """The document as TOML, one line per parameter (records as inline tables)."""
+    lines = []
+    for k, v in doc.items():
+        if not isinstance(v, Mapping) or k == "axis_map":
+            lines.append(f"{k} = {_literal(v)}" if k != "axis_map" else "")
+    if "axis_map" in doc:
+        lines.append("\n[axis_map]")
+        lines += [f"{json.dumps(k)} = {_literal(v)}" for k, v in doc["axis_map"].items()]
+    lines.append("\n[spindle]")
+    lines += [f"{k} = {_literal(v)}" for k, v in doc.get("spindle", {}).items()]
+    for name, table in doc.get("axes", {}).items():
+        lines.append(f"\n[axes.{name}]")
+        lines += [f"{k} = {_literal(v)}" for k, v in table.items()]
+    return "\n".join(x for x in lines if x != "") + "\n"
 
 
 def load_machine(path: str | PathLike[str]) -> MachineFile:
@@ -587,7 +623,7 @@ def save_machine(machine_file: MachineFile, path: str | PathLike[str]) -> Path:
     p = Path(path)
     text = ("# cnctwin machine description (schema cnctwin.machine). Values not listed take\n"
             "# the documented defaults of cnctwin.machine.Machine; see docs/machine-file.md.\n"
-            + tomli_w.dumps(machine_file.to_dict()))
+            + _dumps(machine_file.to_dict()))
     # check that what is written reads back before it replaces anything
     MachineFile.from_dict(tomllib.loads(text), source=str(p))
     p.parent.mkdir(parents=True, exist_ok=True)

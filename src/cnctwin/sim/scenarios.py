@@ -116,6 +116,7 @@ __all__ = [
     "loose_tap",
     "milling_square_circle",
     "random_loop_overrides",
+    "random_spindle_overrides",
     "run_scenario",
     "tool_wear_run",
     "warm_up",
@@ -327,6 +328,33 @@ def random_loop_overrides(
             float(a.speed_kp_nm_s_per_rad * rng.uniform(0.7, 1.4)), 4)
         out[p + "coulomb_n"] = round(float(rng.uniform(80.0, 220.0)), 2)
     return out
+
+
+def random_spindle_overrides(seed: int) -> dict[str, float]:
+    """Randomly drawn spindle parameters (for calibration tests), as overrides.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the draw.
+
+    Returns
+    -------
+    dict
+        ``Machine.with_overrides`` keys: Kt U(0.8, 1.3) Nm/A, viscous friction
+        U(5e-5, 1.2e-4) Nm/rpm, Coulomb friction U(0.2, 0.5) Nm, Stribeck torque U(0.05, 0.25)
+        Nm and speed U(250, 600) rpm, inertia U(0.010, 0.025) kg m^2: motor spindles of the
+        thesis machine's class around its values (thesis Eq. 4.4: 1.04, 8.42e-5, 0.35) [E].
+    """
+    rng = np.random.default_rng([seed, 0x5B1D])
+    return {
+        "spindle.kt_nm_per_a": round(float(rng.uniform(0.8, 1.3)), 5),
+        "spindle.viscous_friction_nm_per_rpm": float(f"{rng.uniform(5e-5, 1.2e-4):.5g}"),
+        "spindle.coulomb_friction_nm": round(float(rng.uniform(0.2, 0.5)), 5),
+        "spindle.stribeck_torque_nm": round(float(rng.uniform(0.05, 0.25)), 4),
+        "spindle.stribeck_speed_rpm": round(float(rng.uniform(250.0, 600.0)), 1),
+        "spindle.inertia_kg_m2": round(float(rng.uniform(0.010, 0.025)), 5),
+    }
 
 
 # ----------------------------------------------------------------------------- streaming helpers
@@ -984,6 +1012,7 @@ def air_cut_sweep(
     n_speeds: int = 126,
     max_speed_rpm: float = 18000.0,
     min_speed_rpm: float | None = None,
+    speeds_rpm: Sequence[float] | None = None,
     dwell_s: float = 3.0,
     settle_s: float = 0.5,
     fmt: str = "c4a",
@@ -1003,7 +1032,11 @@ def air_cut_sweep(
     """
     cfg = ScenarioConfig.build(overrides, machine=machine)
     o = _prepare(out)
-    if n_speeds == 126 and max_speed_rpm == 18000.0 and min_speed_rpm is None:
+    if speeds_rpm is not None:
+        speeds = np.asarray(speeds_rpm, dtype=np.float64)
+        if speeds.ndim != 1 or speeds.size == 0 or not np.all(speeds > 0):
+            raise ConfigError(f"speeds_rpm must be a list of positive speeds, not {speeds_rpm!r}")
+    elif n_speeds == 126 and max_speed_rpm == 18000.0 and min_speed_rpm is None:
         speeds = np.asarray(AIR_CUT_SPEEDS_RPM)
     else:
         lo = min_speed_rpm if min_speed_rpm is not None else max_speed_rpm / n_speeds

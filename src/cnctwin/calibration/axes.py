@@ -1,0 +1,245 @@
+"""Calibrate the feed axes of one's own machine: position loop and friction per axis.
+
+:func:`calibrate_axes` runs :func:`cnctwin.servo.identify_axis` (thesis chapter 3.1) on the
+user's production recordings and maps what it identified onto the machine file's keys:
+
+============================  ===============================================  =============
+machine file key              identification                                   NC datum
+============================  ===============================================  =============
+``kv_m_min_per_mm``           ``kv_m_min_mm``                                  MD32200
+``ffw_weight``                ``ffw_weight`` (needs CTRL_POS and VEL_FFW)      MD32610
+``jerk_filter_type``          chosen setpoint-filter model                     MD32402
+``jerk_time_s``               ``jerk_time_s`` (moving average / PT2)           MD32410
+``equiv_speedctrl_time_s``    ``speed_loop_equiv_time_s`` (T + delay)          MD32810
+``coulomb_n``                 ``coulomb_torque`` or ``coulomb_current`` x Kt   -
+``viscous_n_per_mm_s``        ``viscous_torque`` or ``viscous_current`` x Kt   -
+============================  ===============================================  =============
+
+Friction is identified at the motor (current or torque) and referred to the slide with the
+axis' torque constant and screw lead (``kt_nm_per_a``, ``screw_pitch_mm``, ``gear_ratio`` of
+the machine description, which the user states; they are not identifiable from these
+signals). Several recordings are pooled per parameter by the inverse-variance weighted mean.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cnctwin.exceptions import IdentificationError
+from cnctwin.machine import FeedAxis, Machine, ParameterRecord, Provenance
+from cnctwin.recording import Recording
+from cnctwin.servo import AxisIdentification, identify_axis
+
+__all__ = ["JERK_FILTER_MD32402", "AxesCalibration", "calibrate_axes", "moving_axes"]
+
+JERK_FILTER_MD32402: dict[str, int] = {"none": 0, "pt2": 1, "moving_average": 2,
+                                       "double_moving_average": 4}
+"""Setpoint-filter model -> MD32402 AX_JERK_MODE."""
+
+_DIRECT = {
+    "kv_m_min_per_mm": "kv_m_min_mm",
+    "ffw_weight": "ffw_weight",
+    "jerk_time_s": "jerk_time_s",
+    "equiv_speedctrl_time_s": "speed_loop_equiv_time_s",
+}
+
+_BOUNDS = {"ffw_weight": (0.0, 1.0), "jerk_time_s": (0.0, 0.1),
+           "equiv_speedctrl_time_s": (0.0, 0.05), "kv_m_min_per_mm": (0.05, 20.0)}
+
+
+@dataclass
+class AxesCalibration:
+    """What the axis calibration identified.
+
+    Attributes
+    ----------
+    records : dict
+        Machine-file key (``axes.X1.kv_m_min_per_mm``) -> :class:`ParameterRecord`; keys the
+        identification refused carry ``identified=False`` and the reason.
+    identifications : dict
+        Axis -> one :class:`~cnctwin.servo.AxisIdentification` per recording.
+    notes : list of str
+        Findings worth reading (unit mismatches, assumptions).
+    """
+
+    records: dict[str, ParameterRecord] = field(default_factory=dict)
+    identifications: dict[str, list[AxisIdentification]] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+def moving_axes(rec: Recording, *, min_travel: float = 0.05) -> list[str]:
+    """Axes whose DES_POS and ENC_POS are recorded and whose setpoint moves.
+
+    Parameters
+    ----------
+    rec : Recording
+    min_travel : float, default 0.05
+        Smallest setpoint travel that counts as moving [mm or deg].
+    """
+    out = []
+    for ax in rec.axes:
+        if not (rec.has("DES_POS", ax) and rec.has("ENC_POS", ax)):
+            continue
+        v = rec.signal("DES_POS", ax).to_numpy(dtype=np.float64)
+        v = v[np.isfinite(v)]
+        if v.size and float(np.ptp(v)) >= min_travel:
+            out.append(ax)
+    return out
+
+
+def _pool(values: list[tuple[float, float]]) -> tuple[float, float]:
+    """Inverse-variance weighted mean and its standard uncertainty (spread-inflated)."""
+    v = np.array([x for x, _ in values])
+    s = np.array([u if (u == u and u > 0) else np.nan for _, u in values])
+    if v.size == 1:
+        return float(v[0]), float(s[0]) if s[0] == s[0] else float("nan")
+    if np.all(np.isfinite(s)):
+        w = 1.0 / s**2
+        mean = float(np.sum(w * v) / np.sum(w))
+        u = 1.0 / math.sqrt(float(np.sum(w)))
+    else:
+        mean, u = float(np.mean(v)), float("nan")
+    spread = float(np.std(v, ddof=1) / math.sqrt(v.size))
+    return mean, float(np.nanmax([u, spread]))
+
+
+def calibrate_axes(
+    recordings: Sequence[Recording],
+    *,
+    machine: Machine | None = None,
+    axes: Sequence[str] | None = None,
+    recording_names: Sequence[str] = (),
+    n_bootstrap: int = 200,
+) -> AxesCalibration:
+    """Identify the position loop and friction of feed axes from production recordings.
+
+    Parameters
+    ----------
+    recordings : sequence of Recording
+        Recordings with at least DES_POS and ENC_POS of the axes (CTRL_POS, CMD_SPEED,
+        VEL_FFW, CURRENT, TORQUE make more identifiable).
+    machine : Machine, optional
+        The machine description (torque constant and lead for the friction at the slide);
+        default the thesis machine.
+    axes : sequence of str, optional
+        Axes to calibrate; default every axis that moves in some recording.
+    recording_names : sequence of str
+        Names for messages and the provenance.
+    n_bootstrap : int, default 200
+        Bootstrap resamples of the regressions.
+
+    Returns
+    -------
+    AxesCalibration
+
+    Raises
+    ------
+    IdentificationError
+        An axis asked for is in no recording, or no axis moves in any recording.
+    """
+    m = machine or Machine.thesis_default()
+    names = list(recording_names) or [
+        (r.meta.source_files[0] if r.meta.source_files else f"recording {k}")
+        for k, r in enumerate(recordings)]
+    per_rec = [[a for a in moving_axes(r) if a != m.spindle_name] for r in recordings]
+    wanted = list(axes) if axes else sorted({a for lst in per_rec for a in lst})
+    unknown = [a for a in wanted if a not in m.axis_names]
+    if unknown:
+        raise IdentificationError(
+            f"axis {', '.join(unknown)} is not in the machine description (axes: "
+            f"{', '.join(m.axis_names)}); add a table [axes.{unknown[0]}] to the machine file "
+            "(with rotary = true for a rotary axis) or choose the axes with --axis")
+    if not wanted:
+        raise IdentificationError(
+            f"no feed axis moves in {', '.join(names)} (DES_POS and ENC_POS with travel); "
+            "record a production job or a test program that moves the axes")
+    out = AxesCalibration()
+    for ax in wanted:
+        idents: list[AxisIdentification] = []
+        used: list[str] = []
+        reasons: list[str] = []
+        for name, rec, mov in zip(names, recordings, per_rec, strict=True):
+            if ax not in mov:
+                continue
+            try:
+                idents.append(identify_axis(rec, ax, n_bootstrap=n_bootstrap))
+                used.append(name)
+            except IdentificationError as exc:
+                reasons.append(f"{name}: {exc}")
+        if not idents:
+            if axes:
+                raise IdentificationError(
+                    f"axis {ax} does not move in any of {', '.join(names)}"
+                    + (f" ({'; '.join(reasons)})" if reasons else "")
+                    + "; name a recorded axis with --axis or record one where it moves")
+            continue
+        out.identifications[ax] = idents
+        for i in idents:
+            out.notes += [f"{ax}: {n}" for n in i.notes]
+        prov = Provenance.now("cnctwin calibrate axes (cnctwin.servo.identify_axis)", used)
+        base = m.axis(ax) if ax in m.axis_names else None
+        for key, param in _DIRECT.items():
+            est = [(i.params[param].value, i.params[param].stderr) for i in idents
+                   if param in i.params]
+            full = f"axes.{ax}.{key}"
+            if est:
+                v, u = _pool(est)
+                lo, hi = _BOUNDS.get(key, (-math.inf, math.inf))
+                if not lo <= v <= hi:
+                    edge = min(max(v, lo), hi)
+                    if u == u and abs(v - edge) <= 3.0 * u:
+                        out.notes.append(f"{ax}: {key} = {v:.5g} +- {u:.2g} lies beyond its "
+                                         f"physical bound {edge:g} within 3 standard "
+                                         f"uncertainties; {edge:g} is written")
+                        v = edge
+                    else:
+                        out.records[full] = ParameterRecord(
+                            float(getattr(base, key)) if base is not None else edge,
+                            identified=False,
+                            reason=f"identified {v:.5g}, outside {lo:g} ... {hi:g}: the "
+                                   "recording does not fit the loop model")
+                        continue
+                out.records[full] = ParameterRecord(v, u if u == u else None, prov)
+            else:
+                why = "; ".join(sorted({i.not_identified.get(param, f"{param} not identified")
+                                        for i in idents}))
+                default = getattr(base, key) if base is not None else float("nan")
+                if default == default:
+                    out.records[full] = ParameterRecord(float(default), identified=False,
+                                                        reason=why)
+        jtypes = [i.jerk_type for i in idents if i.jerk_type]
+        if jtypes:
+            jt = max(set(jtypes), key=jtypes.count)
+            out.records[f"axes.{ax}.jerk_filter_type"] = ParameterRecord(
+                float(JERK_FILTER_MD32402[jt]), None, prov)
+        _friction(out, ax, idents, base, prov)
+    return out
+
+
+def _friction(out: AxesCalibration, ax: str, idents: list[AxisIdentification],
+              base: FeedAxis | None, prov: Provenance) -> None:
+    """Friction at the slide from the motor-side fit (torque preferred, else current x Kt)."""
+    if base is None:
+        return
+    per_force = base.motor_torque_per_load_force
+    kt = base.kt_nm_per_a
+    for key, stem in (("coulomb_n", "coulomb"), ("viscous_n_per_mm_s", "viscous")):
+        full = f"axes.{ax}.{key}"
+        for code, scale in (("torque", 1.0 / per_force), ("current", kt / per_force)):
+            est = [(i.params[f"{stem}_{code}"].value * scale,
+                    i.params[f"{stem}_{code}"].stderr * scale)
+                   for i in idents if f"{stem}_{code}" in i.params]
+            if est:
+                v, u = _pool(est)
+                out.records[full] = ParameterRecord(v, u if u == u else None, prov)
+                break
+        else:
+            why = "; ".join(sorted({i.not_identified.get(f"coulomb_{c}", "")
+                                    for i in idents for c in ("torque", "current")} - {""}))
+            out.records[full] = ParameterRecord(
+                float(getattr(base, key)), identified=False,
+                reason=why or "no constant-velocity runs with CURRENT or TORQUE")

@@ -1,0 +1,318 @@
+"""Calibrate the spindle of one's own machine: friction, torque constant, inertia, with uncertainty.
+
+:func:`calibrate_spindle` runs the :class:`~cnctwin.twin.TwinChain` (thesis chapters 3.2 and 4:
+air-cut plateaus -> friction line, one reference cut -> Kt; the improved method by default) on
+the user's recordings, checks first that they can support each parameter, and states every
+value with a standard uncertainty and its provenance, ready for the machine file
+(:mod:`cnctwin.machine.file`).
+
+Uncertainty budget (standard uncertainties, combined in quadrature; GUM, JCGM 100:2008 §5):
+
+* statistical: the friction regression's standard errors (thesis Eq. 4.2) and the spread of
+  Kt over the consecutive averaging windows of the reference cut (standard error of their mean);
+* model form: the standard deviation of B, tau_f and Kt over fit variants the method could as
+  well have used (upper end of the fit range at 60 / 80 / 100 % of the linear region, lower end
+  moved up), which shows the curvature the straight line does not model (bearing self-heating
+  during the sweep, viscous roll-off, Stribeck residue);
+* reference: the torque reference's own relative uncertainty, as the user states it (a
+  dynamometer's calibration certificate; 0 if not given, and the report says it is not
+  included).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from cnctwin.exceptions import IdentificationError
+from cnctwin.machine import ParameterRecord, Provenance
+from cnctwin.recording import Recording
+from cnctwin.spindle import SpindleModel
+from cnctwin.twin import TwinChain, TwinChainResult
+
+__all__ = [
+    "METHODS",
+    "SpindleCalibration",
+    "calibrate_spindle",
+    "check_air_cut_plateaus",
+]
+
+METHODS: dict[str, str] = {
+    "improved": "improved method (Stribeck friction from 300 rpm, engaged 1 s window, local "
+                "air baseline, temperature referral, J from run-ups; docs/validation-spindle.md)",
+    "thesis": "thesis method (I = a n + b over the linear region, Eq. 4.2; Kt from the first "
+              "0.6 s of the reference cut, Eq. 4.3)",
+}
+"""Method name -> what it does (for the provenance and the report)."""
+
+_MIN_PLATEAUS = {"improved": 6, "thesis": 3}
+_RANGE_RPM = (500.0, 7000.0)
+
+
+@dataclass
+class SpindleCalibration:
+    """The calibrated spindle and how far to trust it.
+
+    Attributes
+    ----------
+    method : str
+        ``"improved"`` or ``"thesis"``.
+    model : SpindleModel
+        Kt [Nm/A], B [Nm/rpm], tau_f [Nm], J [kg m^2] at ``model.reference_temperature_c``.
+    uncertainty : dict
+        Parameter (``kt_nm_per_a``, ``b_nm_per_rpm``, ``tau_f_nm``) -> standard uncertainty
+        [its unit] (J is identified without one).
+    budget : pandas.DataFrame
+        Per parameter the components (``statistical``, ``model_form``, ``reference``) and
+        ``combined`` standard uncertainty [unit of the parameter], ``value``, ``unit``.
+    records : dict
+        Machine-file key (``spindle.kt_nm_per_a`` ...) -> :class:`ParameterRecord`.
+    result : TwinChainResult
+        Everything the chain identified (plateau statistics, fit, calibration window).
+    windows : pandas.DataFrame
+        The reference cut's consecutive windows and the Kt of each
+        (:meth:`~cnctwin.twin.TwinChain.calibration_windows`).
+    variants : pandas.DataFrame
+        The fit variants behind the model-form uncertainty.
+    reference_torque_source : str
+        ``"dynamometer"`` or ``"given"``.
+    notes : list of str
+        What a user should know (what was not identified and why, what is not included).
+    """
+
+    method: str
+    model: SpindleModel
+    uncertainty: dict[str, float]
+    budget: pd.DataFrame
+    records: dict[str, ParameterRecord]
+    result: TwinChainResult
+    windows: pd.DataFrame
+    variants: pd.DataFrame
+    reference_torque_source: str
+    notes: list[str] = field(default_factory=list)
+
+
+def check_air_cut_plateaus(
+    stats: pd.DataFrame,
+    *,
+    method: str = "improved",
+    lo_rpm: float = _RANGE_RPM[0],
+    hi_rpm: float = _RANGE_RPM[1],
+    source: str = "the air cuts",
+) -> None:
+    """Refuse air cuts that cannot support the friction fit, saying what to record next.
+
+    Parameters
+    ----------
+    stats : pandas.DataFrame
+        Plateau statistics (``speed_rpm``; :func:`~cnctwin.spindle.air_cut_statistics`).
+    method : {'improved', 'thesis'}
+        The improved fit has three coefficients and a decay speed (>= 6 plateaus); the thesis
+        line two (>= 3).
+    lo_rpm, hi_rpm : float
+        Speed range the plateaus must lie in [rpm] (the linear region of a motor spindle
+        lies inside it; thesis §4.1: 1100-5000 rpm).
+    source : str
+        Named in the message.
+
+    Raises
+    ------
+    IdentificationError
+        "need at least N constant-speed plateaus between lo and hi rpm; found k at ...".
+    """
+    need = _MIN_PLATEAUS[method]
+    n = stats["speed_rpm"].abs().to_numpy(dtype=np.float64) if len(stats) else np.array([])
+    inside = np.sort(n[(n >= lo_rpm) & (n <= hi_rpm)])
+    if inside.size >= need:
+        return
+    found = "none" if inside.size == 0 else (
+        f"{inside.size} at " + ", ".join(f"{v:.0f}" for v in inside[:8]) + " rpm")
+    raise IdentificationError(
+        f"{source}: need at least {need} constant-speed plateaus between {lo_rpm:.0f} and "
+        f"{hi_rpm:.0f} rpm for the {method} friction fit; found {found}. Record an air cut "
+        f"(no contact) with the spindle held at {need} or more speeds spread over that range, "
+        "3 s or more each (e.g. S500 M3 / G4 F3 / S1000 M3 / G4 F3 ...)")
+
+
+def _chain(method: str, **kw: Any) -> TwinChain:
+    if method == "improved":
+        return TwinChain.improved_method(**kw)
+    if method == "thesis":
+        return TwinChain.thesis_method(**kw)
+    raise IdentificationError(f"unknown method {method!r}; choose one of {sorted(METHODS)}")
+
+
+def _variant_options(method: str) -> list[dict[str, Any]]:
+    if method == "improved":
+        return [{"fit_to_fraction": 0.6}, {"fit_to_fraction": 1.0}, {"fit_from_rpm": 600.0}]
+    return [{"fit_to_fraction": 0.6}, {"fit_to_fraction": 0.8}]
+
+
+def calibrate_spindle(
+    air_cuts: Sequence[Recording],
+    reference: Recording,
+    *,
+    method: str = "improved",
+    reference_torque_nm: float | None = None,
+    reference_uncertainty_pct: float = 0.0,
+    warm_up: Recording | None = None,
+    spindle: str = "SP1",
+    recording_names: Sequence[str] = (),
+) -> SpindleCalibration:
+    """Identify Kt, B, tau_f (and J) of a motor spindle from air cuts and one reference cut.
+
+    Parameters
+    ----------
+    air_cuts : sequence of Recording
+        Air-cut recordings with constant-speed plateaus (thesis §3.2.2).
+    reference : Recording
+        One cut whose torque is known: with the dynamometer attached as external channel
+        ``"dynamometer"`` (column ``mz_nm``), or with ``reference_torque_nm``.
+    method : {'improved', 'thesis'}, default 'improved'
+        :meth:`TwinChain.improved_method` or :meth:`TwinChain.thesis_method`.
+    reference_torque_nm : float, optional
+        Mean cutting torque of the reference cut [Nm], instead of a dynamometer.
+    reference_uncertainty_pct : float, default 0
+        Relative standard uncertainty of the torque reference [%] (calibration certificate).
+    warm_up : Recording, optional
+        A long constant-speed run for the temperature referral (improved method).
+    spindle : str, default 'SP1'
+        Spindle axis name.
+    recording_names : sequence of str
+        Names of the air cuts, then the reference (and the warm-up), for messages and the
+        provenance (default: ``meta.source_files``).
+
+    Returns
+    -------
+    SpindleCalibration
+
+    Raises
+    ------
+    IdentificationError
+        Too few plateaus (what to record next), no cut in the reference, no torque reference.
+    SignalNotFoundError
+        A recording lacks the spindle current or speed.
+    """
+    if method not in METHODS:
+        raise IdentificationError(f"unknown method {method!r}; choose one of {sorted(METHODS)}")
+    from cnctwin.analysis.segments import speed_plateaus
+    from cnctwin.spindle import air_cut_statistics
+
+    stats = pd.concat([air_cut_statistics(r, speed_plateaus(r, spindle=spindle),
+                                          spindle=spindle) for r in air_cuts],
+                      ignore_index=True)
+    n_air = len(air_cuts)
+    air_names = list(recording_names)[:n_air]
+    check_air_cut_plateaus(stats, method=method, source="the air cut" + (
+        f"s {', '.join(air_names)}" if len(air_names) > 1 else
+        (f" {air_names[0]}" if air_names else "s")))
+    chain = _chain(method, spindle=spindle)
+    cal_kw: dict[str, Any] = {"warm_up": warm_up, "reference_torque_nm": reference_torque_nm}
+    chain.calibrate(air_cuts, reference, **cal_kw)
+    res = chain.results
+    model = res.spindle_model
+    windows = chain.calibration_windows(reference, reference_torque_nm=reference_torque_nm)
+    full = windows[(windows["end_cycle"] - windows["start_cycle"] + 1)
+                   >= 0.5 * chain.options.window_s * reference.fs_hz]
+    # --- variants (model form)
+    rows = [{"variant": "chosen", "kt_nm_per_a": model.kt_nm_per_a,
+             "b_nm_per_rpm": model.b_nm_per_rpm, "tau_f_nm": model.tau_f_nm,
+             "fit_lo_rpm": res.fit_range_rpm[0], "fit_hi_rpm": res.fit_range_rpm[1]}]
+    for opts in _variant_options(method):
+        try:
+            v = _chain(method, spindle=spindle, **opts).calibrate(air_cuts, reference, **cal_kw)
+        except IdentificationError:
+            continue
+        vm = v.results.spindle_model
+        rows.append({"variant": ", ".join(f"{k}={val}" for k, val in opts.items()),
+                     "kt_nm_per_a": vm.kt_nm_per_a, "b_nm_per_rpm": vm.b_nm_per_rpm,
+                     "tau_f_nm": vm.tau_f_nm, "fit_lo_rpm": v.results.fit_range_rpm[0],
+                     "fit_hi_rpm": v.results.fit_range_rpm[1]})
+    variants = pd.DataFrame(rows)
+
+    def spread(col: str) -> float:
+        x = variants[col].to_numpy(dtype=np.float64)
+        return float(np.std(x, ddof=1)) if x.size > 1 else 0.0
+
+    kt = model.kt_nm_per_a
+    k_w = full["kt_nm_per_a"].to_numpy(dtype=np.float64)
+    k_w = k_w[np.isfinite(k_w)]
+    u_kt_win = float(np.std(k_w, ddof=1) / math.sqrt(k_w.size)) if k_w.size > 1 else 0.0
+    cal = res.calibration
+    i_cut = abs(cal.current_a) - cal.air_current_a
+    line = res.friction.line
+    u_air = math.hypot(line.offset_std, line.slope_std * abs(cal.speed_rpm)) \
+        if np.isfinite(line.offset_std) else 0.0
+    u_kt_stat = math.hypot(u_kt_win, kt * u_air / i_cut if i_cut > 0 else 0.0)
+    u_kt_ref = kt * reference_uncertainty_pct / 100.0
+    u_kt_model = spread("kt_nm_per_a")
+    u_kt = math.sqrt(u_kt_stat**2 + u_kt_model**2 + u_kt_ref**2)
+    rel_kt = u_kt / kt
+    b, tf = model.b_nm_per_rpm, model.tau_f_nm
+    u_b_stat = kt * line.slope_std if np.isfinite(line.slope_std) else 0.0
+    u_tf_stat = kt * line.offset_std if np.isfinite(line.offset_std) else 0.0
+    budget_rows = []
+    unc: dict[str, float] = {}
+    for name, value, stat, model_form, unit in (
+        ("kt_nm_per_a", kt, u_kt_stat, u_kt_model, "Nm/A"),
+        ("b_nm_per_rpm", b, u_b_stat, spread("b_nm_per_rpm"), "Nm/rpm"),
+        ("tau_f_nm", tf, u_tf_stat, spread("tau_f_nm"), "Nm"),
+    ):
+        ref = abs(value) * rel_kt if name != "kt_nm_per_a" else u_kt_ref
+        # B and tau_f are a/b times Kt: Kt's whole uncertainty carries over (reference incl.)
+        comb = math.sqrt(stat**2 + model_form**2 + ref**2)
+        unc[name] = comb
+        budget_rows.append({"parameter": name, "value": value, "unit": unit,
+                            "statistical": stat, "model_form": model_form,
+                            "reference": ref, "combined": comb})
+    notes: list[str] = []
+    if reference_uncertainty_pct == 0.0:
+        notes.append("the torque reference's own uncertainty is not included; give "
+                     "--torque-uncertainty-pct from the dynamometer's calibration certificate")
+    if warm_up is None and method == "improved" and res.thermal_friction is None:
+        notes.append("the air cut did not hold its speeds twice and no warm-up was given: the "
+                     "bearings' self-heating during the sweep is not referred out (it tilts B "
+                     "by about 1-2 %); record the sweep up and back down through the linear "
+                     "region")
+    budget = pd.DataFrame(budget_rows)
+    names = list(recording_names) or [
+        f for r in (*air_cuts, reference) for f in r.meta.source_files[:1]]
+    prov = Provenance.now(f"cnctwin calibrate spindle --method {method}", names)
+    fit_range = (float(res.fit_range_rpm[0]), float(res.fit_range_rpm[1]))
+    n_cal = abs(cal.speed_rpm)
+    t_ref = model.reference_temperature_c
+    records: dict[str, ParameterRecord] = {
+        "spindle.kt_nm_per_a": ParameterRecord(
+            kt, unc["kt_nm_per_a"], prov, valid_range=(n_cal, n_cal),
+            valid_quantity="speed_rpm"),
+        "spindle.viscous_friction_nm_per_rpm": ParameterRecord(
+            b, unc["b_nm_per_rpm"], prov, valid_range=fit_range, valid_quantity="speed_rpm"),
+        "spindle.coulomb_friction_nm": ParameterRecord(
+            tf, unc["tau_f_nm"], prov, valid_range=fit_range, valid_quantity="speed_rpm"),
+    }
+    fr = res.friction
+    if fr.stribeck_a > 0 and np.isfinite(fr.stribeck_speed_rpm):
+        records["spindle.stribeck_torque_nm"] = ParameterRecord(fr.stribeck_a * kt, None, prov)
+        records["spindle.stribeck_speed_rpm"] = ParameterRecord(fr.stribeck_speed_rpm, None, prov)
+    if model.j_kgm2 > 0:
+        records["spindle.inertia_kg_m2"] = ParameterRecord(model.j_kgm2, None, prov)
+    else:
+        records["spindle.inertia_kg_m2"] = ParameterRecord(
+            0.015, identified=False,
+            reason="not identified: the air cuts' run-ups did not give J (the thesis method "
+                   "does not identify it); record run-ups between plateaus with the improved "
+                   "method")
+        notes.append("inertia J not identified (default kept)")
+    if t_ref is not None and np.isfinite(t_ref):
+        for key in ("spindle.kt_ref_temperature_c", "spindle.friction_ref_temperature_c"):
+            records[key] = ParameterRecord(float(t_ref), None, prov)
+    return SpindleCalibration(
+        method=method, model=model, uncertainty=unc, budget=budget, records=records,
+        result=res, windows=windows, variants=variants,
+        reference_torque_source="given" if reference_torque_nm is not None else "dynamometer",
+        notes=notes)

@@ -1,0 +1,183 @@
+"""``cnctwin calibrate spindle|axes``: the twin of one's own machine from its recordings.
+
+Each subcommand reads the user's recordings, identifies what they support, writes the
+values with their uncertainty and provenance into the machine file (created if needed,
+replaced atomically) and prints a short summary. Data that cannot support a parameter is an
+error saying what to record next; nothing is written then.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from cnctwin.exceptions import CnctwinError, ConfigError, SignalNotFoundError
+
+__all__ = ["register"]
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add ``calibrate spindle`` and ``calibrate axes`` to the command line."""
+    p = sub.add_parser(
+        "calibrate",
+        help="calibrate the twin of your machine from its recordings into a machine file",
+        description="Identify the spindle (friction, torque constant, inertia) or the feed "
+        "axes' position loops from your own recordings and write them, with uncertainty "
+        "and provenance, into the machine file (TOML) that simulate, edge, web and fleet read.",
+    )
+    csub = p.add_subparsers(dest="what", metavar="WHAT", required=True)
+    s = csub.add_parser(
+        "spindle",
+        help="friction and torque constant from air cuts and one reference cut",
+        description="Friction (B, tau_f) from the air cuts' constant-speed plateaus and the "
+        "torque constant Kt from one reference cut with a dynamometer or a known torque "
+        "(thesis chapters 3.2 and 4). Record the air cut up and back down through "
+        "500-5000 rpm (3 s per speed) so the bearings' self-heating can be fitted out.",
+    )
+    s.add_argument("--air-cut", nargs="+", type=Path, required=True, metavar="FILE",
+                   help="air-cut recording(s): spindle at constant speeds, no contact")
+    s.add_argument("--reference", type=Path, required=True, metavar="FILE",
+                   help="recording of one cut whose torque is known")
+    g = s.add_mutually_exclusive_group()
+    g.add_argument("--dynamometer", type=Path, metavar="CSV",
+                   help="dynamometer CSV of the reference cut (its own clock; aligned on the "
+                   "current)")
+    g.add_argument("--torque-nm", type=float, metavar="VALUE",
+                   help="mean cutting torque of the reference cut [Nm], if no dynamometer")
+    s.add_argument("--torque-uncertainty-pct", type=float, default=0.0, metavar="PCT",
+                   help="relative standard uncertainty of the torque reference [%%] "
+                   "(calibration certificate); default 0 = not included")
+    s.add_argument("--warm-up", type=Path, metavar="FILE",
+                   help="optional long constant-speed run from cold (thermal referral)")
+    s.add_argument("--machine", type=Path, required=True, metavar="FILE",
+                   help="machine file to update (created if missing)")
+    s.add_argument("--method", choices=("improved", "thesis"), default="improved",
+                   help="improved (default) or the thesis' own method")
+    s.add_argument("--spindle", default="SP1", help="spindle axis name (default SP1)")
+    s.add_argument("--report", type=Path, metavar="HTML",
+                   help="HTML report (default: beside the machine file)")
+    s.set_defaults(func=_cmd_spindle)
+    a = csub.add_parser(
+        "axes",
+        help="Kv, feedforward, jerk filter, speed loop and friction per feed axis",
+        description="Identify each feed axis' position loop (Kv MD32200, FFW weight MD32610, "
+        "jerk filter MD32402/32410, equivalent speed-loop time MD32810) and its friction from "
+        "production recordings (thesis chapter 3.1).",
+    )
+    a.add_argument("files", nargs="+", type=Path, metavar="FILE", help="recordings")
+    a.add_argument("--machine", type=Path, required=True, metavar="FILE",
+                   help="machine file to update (created if missing)")
+    a.add_argument("--axis", action="append", default=[], metavar="NAME",
+                   help="axis to calibrate (repeatable; default every moving axis)")
+    a.set_defaults(func=_cmd_axes)
+
+
+def _read(path: Path) -> Any:
+    from cnctwin.iotools import read_recording
+
+    if not path.exists():
+        raise ConfigError(f"{path}: no such file")
+    return read_recording(path)
+
+
+def _load_or_new(path: Path) -> Any:
+    from cnctwin.machine import MachineFile, load_machine
+
+    return load_machine(path) if path.exists() else MachineFile()
+
+
+def _cmd_spindle(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    from cnctwin.calibration import calibrate_spindle
+    from cnctwin.calibration.report import spindle_calibration_report
+    from cnctwin.iotools.dynamometer import attach_external, read_dynamometer_csv
+    from cnctwin.machine import save_machine
+
+    console = Console(stderr=True)
+    mf = _load_or_new(args.machine)  # a damaged machine file stops here, before any work
+    if args.torque_uncertainty_pct < 0:
+        raise ConfigError("--torque-uncertainty-pct must be >= 0")
+    with console.status("reading the recordings"):
+        air = [_read(p) for p in args.air_cut]
+        ref = _read(args.reference)
+        if args.dynamometer is not None:
+            if not args.dynamometer.exists():
+                raise ConfigError(f"{args.dynamometer}: no such file")
+            ref = attach_external(ref, read_dynamometer_csv(args.dynamometer), replace=True)
+        warm = _read(args.warm_up) if args.warm_up is not None else None
+    if args.torque_nm is None and "dynamometer" not in ref.external:
+        raise ConfigError(f"{args.reference}: the reference cut has no dynamometer channel; "
+                          "give --dynamometer CSV or --torque-nm VALUE")
+    names = [str(p) for p in (*args.air_cut, args.reference)]
+    with console.status(f"calibrating the spindle ({args.method} method)"):
+        try:
+            cal = calibrate_spindle(
+                air, ref, method=args.method, reference_torque_nm=args.torque_nm,
+                reference_uncertainty_pct=args.torque_uncertainty_pct, warm_up=warm,
+                spindle=args.spindle, recording_names=names)
+        except SignalNotFoundError as exc:
+            raise SignalNotFoundError(
+                f"{exc}; the spindle calibration needs CURRENT|{args.spindle} and the spindle "
+                f"speed in every recording ({', '.join(names)}); check --spindle") from None
+        except CnctwinError as exc:
+            msg = str(exc)
+            if any(n in msg for n in names):
+                raise
+            raise ConfigError(f"{args.reference}: {msg}") from None
+    report = args.report or args.machine.with_name(args.machine.stem + ".spindle-report.html")
+    spindle_calibration_report(cal, ref, report, spindle=args.spindle,
+                               reference_torque_nm=args.torque_nm,
+                               machine_path=str(args.machine))
+    save_machine(mf.with_records(cal.records), args.machine)
+    table = Table(title=f"spindle ({args.method} method)")
+    for col in ("parameter", "value", "std. uncertainty", "unit"):
+        table.add_column(col, justify="left" if col == "parameter" else "right")
+    for _, r in cal.budget.iterrows():
+        table.add_row(str(r["parameter"]), f"{r['value']:.5g}", f"{r['combined']:.2g}",
+                      str(r["unit"]))
+    if cal.model.j_kgm2 > 0:
+        table.add_row("j_kgm2", f"{cal.model.j_kgm2:.4g}", "-", "kg m^2")
+    out = Console()
+    out.print(table)
+    for note in cal.notes:
+        out.print(f"note: {note}")
+    out.print(f"wrote {args.machine} and {report}")
+    return 0
+
+
+def _cmd_axes(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    from cnctwin.calibration.axes import calibrate_axes
+    from cnctwin.machine import save_machine
+
+    console = Console(stderr=True)
+    mf = _load_or_new(args.machine)
+    with console.status("reading the recordings"):
+        recs = [_read(p) for p in args.files]
+    with console.status("identifying the position loops"):
+        cal = calibrate_axes(recs, machine=mf.machine, axes=args.axis or None,
+                             recording_names=[str(p) for p in args.files])
+    save_machine(mf.with_records(cal.records), args.machine)
+    table = Table(title="feed axes")
+    for col in ("parameter", "value", "std. uncertainty", "unit", "note"):
+        table.add_column(col, justify="left" if col in ("parameter", "note") else "right")
+    from cnctwin.machine import parameter_unit
+
+    for key, rec in cal.records.items():
+        axis = key.split(".")[1]
+        rot = mf.machine.axis(axis).rotary if axis in mf.machine.axis_names else False
+        table.add_row(key, f"{rec.value:.5g}" if rec.identified else "-",
+                      f"{rec.uncertainty:.2g}" if rec.uncertainty is not None else "-",
+                      parameter_unit(key, rotary=rot),
+                      "" if rec.identified else f"not identified: {rec.reason}")
+    out = Console()
+    out.print(table)
+    for note in cal.notes:
+        out.print(f"note: {note}")
+    out.print(f"wrote {args.machine}")
+    return 0
