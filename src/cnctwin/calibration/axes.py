@@ -226,13 +226,28 @@ def _friction(out: AxesCalibration, ax: str, idents: list[AxisIdentification],
     if base is None:
         return
     per_force = base.motor_torque_per_load_force
-    kt = base.kt_nm_per_a
+    load_unit = "Nm" if base.rotary else "N"
+
+    def scale(unit: str) -> float | None:
+        """Factor from the fitted effort's unit to load force (torque on rotary axes)."""
+        u = unit.split("/")[0].strip()
+        if u == load_unit:
+            return 1.0
+        if u == "Nm":
+            return 1.0 / per_force
+        if u == "A":
+            return base.kt_nm_per_a / per_force
+        return None
+
     for key, stem in (("coulomb_n", "coulomb"), ("viscous_n_per_mm_s", "viscous")):
         full = f"axes.{ax}.{key}"
-        for code, scale in (("torque", 1.0 / per_force), ("current", kt / per_force)):
-            est = [(i.params[f"{stem}_{code}"].value * scale,
-                    i.params[f"{stem}_{code}"].stderr * scale)
-                   for i in idents if f"{stem}_{code}" in i.params]
+        for code in ("torque", "current"):
+            est = []
+            for i in idents:
+                e = i.params.get(f"{stem}_{code}")
+                f = scale(e.unit) if e is not None else None
+                if e is not None and f is not None:
+                    est.append((e.value * f, e.stderr * f))
             if est:
                 v, u = _pool(est)
                 out.records[full] = ParameterRecord(v, u if u == u else None, prov)

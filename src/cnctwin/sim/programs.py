@@ -13,6 +13,8 @@ Every function returns program text that :func:`cnctwin.sim.gcode.parse_program`
 * :func:`air_cut_sweep`: the spindle run at 126 speeds up to 18000 rpm (thesis Sect. 3.2.2).
 * :func:`warm_up`: constant-speed run (thesis Sect. 4.2: 5000 and 7000 rpm for > 20 min).
 * :func:`tapping_program`: rigid tapping (thesis Sect. 5.4), M8 x 1.25 by default.
+* :func:`axis_test`: each feed axis back and forth in air at several feeds, for the
+  identification of its position loop and friction (``cnctwin calibrate axes``).
 
 Values the thesis does not give are marked as assumptions in the parameter descriptions.
 """
@@ -30,6 +32,7 @@ from cnctwin.sim.gcode import ISO_COARSE_PITCH_MM
 __all__ = [
     "AIR_CUT_SPEEDS_RPM",
     "air_cut_sweep",
+    "axis_test",
     "circle_path",
     "drilling_validation_program",
     "hole_pattern",
@@ -407,6 +410,54 @@ def air_cut_sweep(
             raise ConfigError(f"speed {n} rpm above max_speed_rpm {max_speed_rpm}")
         lines += [f"S{_fmt(float(n))} M3", f"G4 F{_fmt(dwell_s)}"]
     lines += ["M5", "M30"]
+    return "\n".join(lines) + "\n"
+
+
+def axis_test(
+    axes: Sequence[str] = ("X1", "Y1", "Z1"),
+    *,
+    stroke_mm: float = 60.0,
+    feeds_mm_min: Sequence[float] = (500.0, 1000.0, 2000.0, 4000.0, 8000.0),
+    dwell_s: float = 0.3,
+    words: dict[str, str] | None = None,
+) -> str:
+    """Air moves of each feed axis back and forth at several feeds (no cutting).
+
+    A program a user can run on the machine to calibrate the feed axes: each stroke has a
+    long constant-velocity stretch in both directions at every feed (friction, Kv from the
+    steady following error), and starts and stops with the jerk-limited setpoint (jerk
+    filter, speed loop).
+
+    Parameters
+    ----------
+    axes : sequence of str, default ('X1', 'Y1', 'Z1')
+        Machine axes to move; the program word is the axis name's letter (X1 -> X).
+    stroke_mm : float, default 60
+        Stroke from the start position [mm] (moves between 0 and ``stroke_mm``).
+    feeds_mm_min : sequence of float
+        Feeds [mm/min], each run once forward and once back.
+    dwell_s : float, default 0.3
+        Dwell at each end (G4) [s].
+    words : dict, optional
+        Axis name -> program word, where it is not the first letter.
+
+    Returns
+    -------
+    str
+        Program text (G90 G94 G60 exact stop, G1 moves).
+    """
+    _check_positive(stroke_mm=stroke_mm, dwell_s=dwell_s)
+    if not feeds_mm_min or min(feeds_mm_min) <= 0:
+        raise ConfigError(f"feeds_mm_min must be positive feeds, not {feeds_mm_min!r}")
+    lines = [f"; axis test: {', '.join(axes)} back and forth over {_fmt(stroke_mm)} mm at "
+             f"F{', F'.join(_fmt(f) for f in feeds_mm_min)} mm/min", "G90 G94 G60"]
+    for ax in axes:
+        w = (words or {}).get(ax, ax[0])
+        lines.append(f"G0 {w}0")
+        for f in feeds_mm_min:
+            lines += [f"G1 {w}{_fmt(stroke_mm)} F{_fmt(f)}", f"G4 F{_fmt(dwell_s)}",
+                      f"G1 {w}0 F{_fmt(f)}", f"G4 F{_fmt(dwell_s)}"]
+    lines.append("M30")
     return "\n".join(lines) + "\n"
 
 

@@ -80,6 +80,7 @@ from cnctwin.sim.programs import (
     tapping_program,
 )
 from cnctwin.sim.programs import air_cut_sweep as air_cut_program
+from cnctwin.sim.programs import axis_test as axis_test_program
 from cnctwin.sim.programs import warm_up as warm_up_program
 from cnctwin.sim.recorder import Capture4AnalysisSink, ParquetChunkSink, RecordingSink
 from cnctwin.sim.sensors import (
@@ -112,6 +113,7 @@ __all__ = [
     "ScenarioResult",
     "TappingProcess",
     "air_cut_sweep",
+    "axis_test",
     "drilling_validation",
     "loose_tap",
     "milling_square_circle",
@@ -905,18 +907,18 @@ def _sink_files(sink: Any, path: Path | None) -> list[Path]:
 
 
 def _collect(res: ScenarioResult, sim: Any, sink: Any, path: Path | None,
-             daq: _DynamometerDAQ, tp: _TruthParquet | None) -> None:
+             daq: _DynamometerDAQ | None, tp: _TruthParquet | None) -> None:
     """Keep a finished simulation in ``res``: the in-memory recording with its first
     dynamometer session attached and its per-cycle truth, or the files written."""
     if sim.recording is not None:
         rec = sim.recording
-        if daq.channels:
+        if daq is not None and daq.channels:
             rec.external["dynamometer"] = daq.channels[0]
         res.recordings.append(rec)
         res.per_cycle.append(sim.truth["per_cycle"])
     if path is not None:
         res.recording_paths.append(path)
-        res.paths += _sink_files(sink, path) + daq.paths
+        res.paths += _sink_files(sink, path) + (daq.paths if daq is not None else [])
         if tp is not None and tp.close() is not None:
             res.paths.append(tp.path)
 
@@ -1567,6 +1569,65 @@ def milling_square_circle(
     return res
 
 
+def axis_test(
+    out: str | Path | None = None,
+    *,
+    seed: int = 0,
+    overrides: Mapping[str, Any] | None = None,
+    machine: Machine | None = None,
+    randomize_loop: bool = False,
+    axes: Sequence[str] = ("X1", "Y1", "Z1"),
+    stroke_mm: float = 60.0,
+    feeds_mm_min: Sequence[float] = (500.0, 1000.0, 2000.0, 4000.0, 8000.0),
+    fmt: str = "c4a",
+    max_file_mb: float | None = None,
+    chunk_cycles: int = 50_000,
+    progress: ProgressFn | None = None,
+) -> ScenarioResult:
+    """Feed axes back and forth in air at several feeds (:func:`~cnctwin.sim.programs.axis_test`).
+
+    The calibration program for ``cnctwin calibrate axes``: constant-velocity strokes in both
+    directions at every feed (friction, steady following error) with jerk-limited starts and
+    stops (jerk filter, speed loop). No cutting, spindle off.
+
+    Parameters
+    ----------
+    out : str or path, optional
+        Output directory; ``None`` keeps ``result.recording`` in memory.
+    seed : int
+        Seed of every random stream (and of the loop draw with ``randomize_loop``).
+    overrides : mapping, optional
+        Dotted overrides (``axes.Y1.coulomb_n``).
+    machine : Machine, optional
+        Base machine; overrides apply on top.
+    randomize_loop : bool, default False
+        Draw the X/Y loop parameters with :func:`random_loop_overrides` first.
+    axes, stroke_mm, feeds_mm_min
+        As :func:`~cnctwin.sim.programs.axis_test`.
+
+    Returns
+    -------
+    ScenarioResult
+        Truth: the machine (all loop and friction parameters), the feeds.
+    """
+    drawn = random_loop_overrides(seed) if randomize_loop else {}
+    cfg = ScenarioConfig.build({**drawn, **dict(overrides or {})}, machine=machine)
+    o = _prepare(out)
+    text = axis_test_program(axes, stroke_mm=stroke_mm, feeds_mm_min=feeds_mm_min)
+    prog = parse_program(text)
+    res = ScenarioResult("axis_test", truth={
+        **_base_truth("axis_test", seed, overrides, cfg), "loop_overrides": drawn,
+        "axes": list(axes), "stroke_mm": stroke_mm, "feeds_mm_min": list(feeds_mm_min)})
+    _write_program(o, "axis_test.mpf", text, res.paths)
+    sink, path = _make_sink(o, "axis_test", fmt, max_file_mb)
+    hook = _NoLoad(surface_z_mm=0.0, faults=(), rng=np.random.default_rng(seed), truth=None,
+                   daq=None, progress=_Progress(progress, "axis test"))
+    sim = _simulate(prog, cfg, seed=seed, hook=hook, sink=sink, chunk_cycles=chunk_cycles)
+    _collect(res, sim, sink, path, None, None)
+    _write_truth(o, res.truth, res.paths)
+    return res
+
+
 SCENARIOS: dict[str, Callable[..., ScenarioResult]] = {
     "air_cut_sweep": air_cut_sweep,
     "warm_up": warm_up,
@@ -1574,6 +1635,7 @@ SCENARIOS: dict[str, Callable[..., ScenarioResult]] = {
     "tool_wear_run": tool_wear_run,
     "loose_tap": loose_tap,
     "milling_square_circle": milling_square_circle,
+    "axis_test": axis_test,
 }
 """Scenario name -> function."""
 
