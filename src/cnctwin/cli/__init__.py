@@ -18,6 +18,7 @@ __all__ = ["main"]
 # Modules that contribute subcommands, in help order. Each has ``register(subparsers)``.
 _COMMAND_MODULES: tuple[str, ...] = ("cnctwin.cli.io", "cnctwin.cli.store", "cnctwin.cli.sim",
                                       "cnctwin.cli.servo", "cnctwin.cli.calibrate",
+                                      "cnctwin.cli.twin",
                                       "cnctwin.cli.usecases",
                                       "cnctwin.cli.demo", "cnctwin.cli.edge",
                                       "cnctwin.cli.web")

@@ -27,7 +27,16 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         description="Run a thesis scenario of the physics simulator. Writes Capture4Analysis "
         "JSON, external-sensor CSVs and truth.json (every true parameter) to --out.",
     )
-    p.add_argument("name", choices=sorted(SCENARIOS), help="scenario")
+    p.add_argument("name", nargs="?", choices=sorted(SCENARIOS),
+                   help="scenario (or --program for your own part program)")
+    p.add_argument("--program", type=Path, metavar="PART.mpf",
+                   help="simulate this part program (supported G-code subset) instead of a "
+                   "scenario; prints the cycle time and the peak loads against the drive limits")
+    p.add_argument("--machine", type=Path, metavar="FILE",
+                   help="machine file (cnctwin calibrate) to simulate; default the thesis machine")
+    p.add_argument("--material", default=None,
+                   help="with --program: workpiece material (aisi1045, grey_cast_iron, al7050); "
+                   "default air (no cutting load)")
     p.add_argument("--out", type=Path, required=True, help="output directory")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument(
@@ -75,21 +84,54 @@ def _parse_pairs(items: list[str], what: str) -> dict[str, Any]:
 def _cmd_simulate(args: argparse.Namespace) -> int:
     from rich.progress import Progress
 
-    from cnctwin.sim.scenarios import run_scenario
+    from cnctwin.sim.scenarios import part_program, run_scenario
 
+    if (args.name is None) == (args.program is None):
+        raise ConfigError("give a scenario NAME or --program PART.mpf (one of them)")
+    if args.material is not None and args.program is None:
+        raise ConfigError("--material goes with --program")
+    machine = None
+    if args.machine is not None:
+        from cnctwin.machine import load_machine
+
+        machine = load_machine(args.machine).machine
     overrides = _parse_pairs(args.overrides, "--set")
     options = _parse_pairs(args.options, "--option")
     if args.fmt is not None:
         options["fmt"] = args.fmt
+    label = args.name or args.program.name
     with Progress(transient=True) as bar:
-        task = bar.add_task(args.name, total=1.0)
+        task = bar.add_task(label, total=1.0)
 
         def progress(fraction: float, text: str) -> None:
-            bar.update(task, completed=fraction, description=f"{args.name}: {text}")
+            bar.update(task, completed=fraction, description=f"{label}: {text}")
 
-        res = run_scenario(
-            args.name, args.out, seed=args.seed, overrides=overrides, progress=progress, **options
-        )
+        if args.program is not None:
+            if not args.program.exists():
+                raise ConfigError(f"{args.program}: no such file")
+            res = part_program(args.out, program=args.program, seed=args.seed,
+                               overrides=overrides, machine=machine, material=args.material,
+                               progress=progress, **options)
+        else:
+            res = run_scenario(args.name, args.out, seed=args.seed, overrides=overrides,
+                               progress=progress, machine=machine, **options)
     for p in res.paths:
         print(p)
+    if args.program is not None:
+        _print_limits(res.truth["limits"])
     return 0
+
+
+def _print_limits(lim: dict[str, Any]) -> None:
+    import sys
+
+    sp = lim["spindle"]
+    parts = [f"cycle time {lim['cycle_time_s']:.2f} s"]
+    for key, unit in (("torque_nm", "Nm"), ("power_w", "W"), ("current_a", "A")):
+        if key in sp:
+            v = sp[key]
+            parts.append(f"peak spindle {key.rsplit('_', 1)[0]} {v['peak']:.4g} {unit} "
+                         f"(line {v['line']})")
+    print("; ".join(parts))
+    for w in lim["warnings"]:
+        print(f"warning: {w}", file=sys.stderr)

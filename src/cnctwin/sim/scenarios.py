@@ -45,6 +45,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -54,7 +55,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from cnctwin.exceptions import ConfigError
+from cnctwin.exceptions import ConfigError, GCodeError
 from cnctwin.recording import ExternalChannel, Recording
 from cnctwin.sim.cutting import (
     MATERIALS,
@@ -115,8 +116,10 @@ __all__ = [
     "air_cut_sweep",
     "axis_test",
     "drilling_validation",
+    "drive_limits_check",
     "loose_tap",
     "milling_square_circle",
+    "part_program",
     "random_loop_overrides",
     "random_spindle_overrides",
     "run_scenario",
@@ -1628,6 +1631,193 @@ def axis_test(
     return res
 
 
+_DRILL_WORDS = ("CYCLE81", "CYCLE82", "CYCLE83", "G81", "G82", "G83")
+
+
+def _line_of_offset(text: str, offset: int) -> int:
+    """1-based program line of a byte offset (the block events' ``seek_offset``)."""
+    return text.encode("utf-8")[: max(offset, 0)].count(b"\n") + 1
+
+
+def drive_limits_check(rec: Recording, machine: Machine, program_text: str) -> dict[str, Any]:
+    """Peak spindle and axis loads of a simulated program against the drives' limits.
+
+    Parameters
+    ----------
+    rec : Recording
+        The simulated recording (CURRENT, TORQUE, POWER per axis; block events).
+    machine : Machine
+        Its description (current limits, rated torque and current, base speed).
+    program_text : str
+        The program (to name the line of the block where a limit is exceeded).
+
+    Returns
+    -------
+    dict
+        ``cycle_time_s``, ``spindle`` peaks (``torque_nm``, ``power_w``, ``current_a`` with the
+        line where each peaks) and ``limits``, per feed axis the peak current, and
+        ``warnings``: one line per exceeded limit naming the program line and block.
+
+    Notes
+    -----
+    Limits: the current limit (peak), the rated (S1) current and torque, and the S1 power
+    ``rated torque x base speed`` of the spindle (a motor spindle's constant-power range
+    starts at its base speed); the feed drives' current limit.
+    """
+    sp = machine.spindle
+    name = machine.spindle_name
+    blocks = rec.events[rec.events["kind"] == "block"].sort_values("cycle", kind="stable")
+    bc = blocks["cycle"].to_numpy(dtype=np.int64)
+
+    def where(idx: int) -> dict[str, Any]:
+        cyc = int(rec.cycles[idx])
+        k = int(np.searchsorted(bc, cyc, side="right")) - 1
+        if k < 0:
+            return {"cycle": cyc, "time_s": float(rec.time_s[idx]), "line": None, "block": None}
+        row = blocks.iloc[k]
+        return {"cycle": cyc, "time_s": float(rec.time_s[idx]),
+                "line": _line_of_offset(program_text, int(row["seek_offset"])),
+                "block": str(row["gcode"])}
+
+    p_s1 = sp.rated_torque_nm * sp.base_speed_rpm * 2.0 * math.pi / 60.0
+    out: dict[str, Any] = {"cycle_time_s": float(rec.n_cycles * machine.cycle_time_s),
+                           "spindle": {}, "axes": {}, "warnings": [],
+                           "limits": {"spindle_current_limit_a": sp.current_limit_a,
+                                      "spindle_rated_current_a": sp.rated_current_a,
+                                      "spindle_rated_torque_nm": sp.rated_torque_nm,
+                                      "spindle_s1_power_w": p_s1}}
+    checks = [("CURRENT", "current_a", sp.current_limit_a, "current limit"),
+              ("TORQUE", "torque_nm", sp.rated_torque_nm, "rated torque"),
+              ("POWER", "power_w", p_s1, "S1 power")]
+    for code, key, limit, what in checks:
+        if not rec.has(code, name):
+            continue
+        v = np.abs(rec.signal(code, name).to_numpy(dtype=np.float64))
+        if not np.isfinite(v).any():
+            continue
+        i = int(np.nanargmax(v))
+        out["spindle"][key] = {"peak": float(v[i]), **where(i)}
+        if v[i] > limit:
+            w = where(i)
+            out["warnings"].append(
+                f"line {w['line']} ({w['block']}): spindle {key.rsplit('_', 1)[0]} "
+                f"{v[i]:.4g} exceeds the {what} {limit:.4g} at t = {w['time_s']:.2f} s")
+    for ax in machine.axes:
+        if not rec.has("CURRENT", ax.name):
+            continue
+        v = np.abs(rec.signal("CURRENT", ax.name).to_numpy(dtype=np.float64))
+        if not np.isfinite(v).any():
+            continue
+        i = int(np.nanargmax(v))
+        out["axes"][ax.name] = {"current_a": {"peak": float(v[i]), **where(i)},
+                                "current_limit_a": ax.current_limit_a}
+        if v[i] > ax.current_limit_a:
+            w = where(i)
+            out["warnings"].append(
+                f"line {w['line']} ({w['block']}): {ax.name} current {v[i]:.4g} A exceeds the "
+                f"current limit {ax.current_limit_a:.4g} A at t = {w['time_s']:.2f} s")
+    return out
+
+
+def part_program(
+    out: str | Path | None = None,
+    *,
+    program: str | Path,
+    seed: int = 0,
+    overrides: Mapping[str, Any] | None = None,
+    machine: Machine | None = None,
+    material: str | None = None,
+    surface_z_mm: float = 0.0,
+    fmt: str = "c4a",
+    max_file_mb: float | None = None,
+    chunk_cycles: int = 50_000,
+    progress: ProgressFn | None = None,
+) -> ScenarioResult:
+    """Any part program of the supported G-code subset on a machine description.
+
+    Parameters
+    ----------
+    out : str or path, optional
+        Output directory; ``None`` keeps ``result.recording`` in memory.
+    program : str or path
+        The program file (``.mpf``).
+    seed : int
+        Seed of every random stream.
+    overrides : mapping, optional
+        Dotted overrides on top of ``machine``.
+    machine : Machine, optional
+        The machine (e.g. loaded from a machine file); default the thesis machine.
+    material : str, optional
+        Workpiece material (``aisi1045``, ``grey_cast_iron``, ``al7050``): with it, a
+        program with a drilling cycle drills and any other cuts by milling below
+        ``surface_z_mm``; without it the program runs in air (no process load).
+    surface_z_mm : float, default 0
+        Workpiece top surface [mm].
+
+    Returns
+    -------
+    ScenarioResult
+        Truth ``limits``: :func:`drive_limits_check` (cycle time, peaks and the warnings
+        naming the program line where a limit is exceeded).
+
+    Raises
+    ------
+    GCodeError
+        An unsupported word or cycle, naming the line and the word.
+    """
+    path = Path(program)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read the program: {exc}") from None
+    try:
+        prog = parse_program(text)
+    except GCodeError as exc:
+        raise ConfigError(f"{path}: {exc}; the supported subset is listed in "
+                          "docs/simulator.md") from None
+    cfg = ScenarioConfig.build(overrides, machine=machine)
+    o = _prepare(out)
+    stem = path.stem
+    upper = text.upper()
+    hook: _Process
+    pf = _Progress(progress, stem)
+    rng = np.random.default_rng([seed, 1])
+    if material is None:
+        kind = "air"
+        hook = _NoLoad(surface_z_mm=surface_z_mm, faults=(), rng=rng, truth=None, daq=None,
+                       progress=pf)
+    else:
+        if material not in cfg.materials:
+            raise ConfigError(f"unknown material {material!r}; known: {sorted(cfg.materials)}")
+        mat = cfg.materials[material]
+        if any(w in upper for w in _DRILL_WORDS):
+            kind = "drilling"
+            speeds = [float(v) for v in re.findall(r"\bS(\d+(?:\.\d*)?)", upper)] or [1.0]
+            feeds = [float(v) for v in re.findall(r"\bF(\d*\.?\d+)", upper)] or [0.1]
+            hook = DrillingProcess(cfg, material=mat, feed_mm_per_rev=feeds[0],
+                                   speed_rpm=max(speeds), hole_depth_mm=20.0,
+                                   surface_z_mm=surface_z_mm, faults=(), rng=rng, truth=None,
+                                   daq=None, progress=pf)
+        else:
+            if mat.milling is None:
+                raise ConfigError(f"material {material!r} has no milling coefficients; the "
+                                  "program has no drilling cycle, so it mills: choose al7050")
+            kind = "milling"
+            hook = MillingProcess(cfg, material=mat, surface_z_mm=surface_z_mm, faults=(),
+                                  rng=rng, truth=None, daq=None, progress=pf)
+    res = ScenarioResult("part_program", truth={
+        **_base_truth("part_program", seed, overrides, cfg), "program": str(path),
+        "process": kind, "material": material})
+    _write_program(o, path.name, text, res.paths)
+    sink, rpath = _make_sink(o, stem, fmt, max_file_mb)
+    sim = _simulate(prog, cfg, seed=seed, hook=hook, sink=sink, chunk_cycles=chunk_cycles)
+    _collect(res, sim, sink, rpath, None, None)
+    rec = res.recording
+    res.truth["limits"] = drive_limits_check(rec, cfg.machine, text)
+    _write_truth(o, res.truth, res.paths)
+    return res
+
+
 SCENARIOS: dict[str, Callable[..., ScenarioResult]] = {
     "air_cut_sweep": air_cut_sweep,
     "warm_up": warm_up,
@@ -1637,7 +1827,7 @@ SCENARIOS: dict[str, Callable[..., ScenarioResult]] = {
     "milling_square_circle": milling_square_circle,
     "axis_test": axis_test,
 }
-"""Scenario name -> function."""
+"""Scenario name -> function (:func:`part_program` runs a user's program instead)."""
 
 
 def run_scenario(
@@ -1647,9 +1837,12 @@ def run_scenario(
     seed: int = 0,
     overrides: Mapping[str, Any] | None = None,
     progress: ProgressFn | None = None,
+    machine: Machine | None = None,
     **options: Any,
 ) -> ScenarioResult:
     """Run a scenario by name (:data:`SCENARIOS`); ``options`` go to the scenario function.
+
+    ``machine`` is the base machine (e.g. from a machine file), ``overrides`` apply on top.
 
     Raises
     ------
@@ -1667,4 +1860,6 @@ def run_scenario(
     bad = sorted(set(options) - set(valid))
     if bad:
         raise ConfigError(f"scenario {name!r} has no option(s) {bad}; options: {valid}")
+    if machine is not None:
+        options["machine"] = machine
     return fn(out, seed=seed, overrides=overrides, progress=progress, **options)
