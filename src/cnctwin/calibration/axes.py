@@ -10,7 +10,9 @@ machine file key              identification                                   N
 ``ffw_weight``                ``ffw_weight`` (needs CTRL_POS and VEL_FFW)      MD32610
 ``jerk_filter_type``          chosen setpoint-filter model                     MD32402
 ``jerk_time_s``               ``jerk_time_s`` (moving average / PT2)           MD32410
-``equiv_speedctrl_time_s``    ``speed_loop_equiv_time_s`` (T + delay)          MD32810
+``ffw_mode``                  speed/torque FFW, dead-time or PT1 balancing     MD32620
+``equiv_speedctrl_time_s``    balancing time DES_POS -> CTRL_POS (speed FFW)   MD32810
+``equiv_currctrl_time_s``     balancing time (torque FFW)                      MD32800
 ``coulomb_n``                 ``coulomb_torque`` or ``coulomb_current`` x Kt   -
 ``viscous_n_per_mm_s``        ``viscous_torque`` or ``viscous_current`` x Kt   -
 ============================  ===============================================  =============
@@ -18,11 +20,13 @@ machine file key              identification                                   N
 Friction is identified at the motor (current or torque) and referred to the slide with the
 axis' torque constant and screw lead (``kt_nm_per_a``, ``screw_pitch_mm``, ``gear_ratio`` of
 the machine description, which the user states; they are not identifiable from these
-signals). Several recordings are pooled per parameter by the inverse-variance weighted mean.
+signals). Several recordings are pooled per parameter by the inverse-variance weighted mean;
+the stated standard uncertainty adds a relative floor (:data:`REL_FLOOR`) in quadrature.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -34,7 +38,13 @@ from cnctwin.machine import FeedAxis, Machine, ParameterRecord, Provenance
 from cnctwin.recording import Recording
 from cnctwin.servo import AxisIdentification, identify_axis
 
-__all__ = ["JERK_FILTER_MD32402", "AxesCalibration", "calibrate_axes", "moving_axes"]
+__all__ = [
+    "JERK_FILTER_MD32402",
+    "REL_FLOOR",
+    "AxesCalibration",
+    "calibrate_axes",
+    "moving_axes",
+]
 
 JERK_FILTER_MD32402: dict[str, int] = {"none": 0, "pt2": 1, "moving_average": 2,
                                        "double_moving_average": 4}
@@ -44,11 +54,16 @@ _DIRECT = {
     "kv_m_min_per_mm": "kv_m_min_mm",
     "ffw_weight": "ffw_weight",
     "jerk_time_s": "jerk_time_s",
-    "equiv_speedctrl_time_s": "speed_loop_equiv_time_s",
 }
 
+REL_FLOOR = 0.01
+"""Relative standard-uncertainty floor of an identified loop parameter: what the loop model
+(one PT1 + dead time for the speed loop, linearly interpolated fractional delays) does not
+describe on a real drive; the same floor :class:`~cnctwin.servo.predict.DriftMonitor` uses."""
+
 _BOUNDS = {"ffw_weight": (0.0, 1.0), "jerk_time_s": (0.0, 0.1),
-           "equiv_speedctrl_time_s": (0.0, 0.05), "kv_m_min_per_mm": (0.05, 20.0)}
+           "equiv_speedctrl_time_s": (0.0, 0.05), "equiv_currctrl_time_s": (1e-5, 0.01),
+           "kv_m_min_per_mm": (0.05, 20.0)}
 
 
 @dataclass
@@ -188,6 +203,7 @@ def calibrate_axes(
             full = f"axes.{ax}.{key}"
             if est:
                 v, u = _pool(est)
+                u = math.hypot(u if u == u else 0.0, REL_FLOOR * abs(v))
                 lo, hi = _BOUNDS.get(key, (-math.inf, math.inf))
                 if not lo <= v <= hi:
                     edge = min(max(v, lo), hi)
@@ -216,8 +232,66 @@ def calibrate_axes(
             jt = max(set(jtypes), key=jtypes.count)
             out.records[f"axes.{ax}.jerk_filter_type"] = ParameterRecord(
                 float(JERK_FILTER_MD32402[jt]), None, prov)
+            rec_j = out.records.get(f"axes.{ax}.jerk_time_s")
+            dt = idents[0].cycle_time_s
+            inactive = jt == "none" or (
+                jt in ("moving_average", "double_moving_average") and rec_j is not None
+                and rec_j.identified and rec_j.value <= 1.5 * dt)
+            if inactive and base is not None:
+                out.records[f"axes.{ax}.jerk_filter_type"] = ParameterRecord(0.0, None, prov)
+                out.records[f"axes.{ax}.jerk_time_s"] = ParameterRecord(
+                    float(base.jerk_time_s), identified=False,
+                    reason="no jerk filter seen between DES_POS and CTRL_POS (MD32402 = 0 is "
+                           "written); a moving average over 2 cycles is a linearly "
+                           "interpolated half-cycle delay and cannot be told from one: it is "
+                           "then part of the balancing time")
+            elif jt in ("moving_average", "double_moving_average") and rec_j is not None \
+                    and rec_j.identified and rec_j.uncertainty is not None:
+                # a moving average spans whole cycles: every MD32410 within half a cycle of
+                # the identified length gives the same filter (uniform, dt / sqrt(12))
+                out.records[f"axes.{ax}.jerk_time_s"] = dataclasses.replace(
+                    rec_j, uncertainty=math.hypot(rec_j.uncertainty, dt / math.sqrt(12.0)))
+        _balancing(out, ax, idents, prov)
         _friction(out, ax, idents, base, prov)
     return out
+
+
+def _balancing(out: AxesCalibration, ax: str, idents: list[AxisIdentification],
+               prov: Provenance) -> None:
+    """FFW mode MD32620 and the balancing time MD32810 (speed FFW) or MD32800 (torque FFW).
+
+    With feedforward the NC delays the setpoint by the balancing time (dead time: modes 3/4)
+    or filters it (PT1: modes 1/2) so that it meets the actual position; the identification
+    sees it between DES_POS and CTRL_POS as ``setpoint_delay_s`` / ``setpoint_pt1_s``
+    (with the dynamic response adaptation MD32910, which it cannot tell apart: both are
+    written to the balancing time).
+    """
+    modes = [i.ffw_mode for i in idents if i.ffw_mode in ("none", "speed", "torque")]
+    if not modes:
+        return
+    mode = max(set(modes), key=modes.count)
+    if mode == "none":
+        out.records[f"axes.{ax}.ffw_mode"] = ParameterRecord(0.0, None, prov)
+        return
+    delay = [(i.params["setpoint_delay_s"].value, i.params["setpoint_delay_s"].stderr)
+             for i in idents if "setpoint_delay_s" in i.params]
+    pt1 = [(i.params["setpoint_pt1_s"].value, i.params["setpoint_pt1_s"].stderr)
+           for i in idents if "setpoint_pt1_s" in i.params]
+    if not delay:
+        return
+    d_v, d_u = _pool(delay)
+    p_v, p_u = _pool(pt1) if pt1 else (0.0, 0.0)
+    dead = d_v >= p_v
+    code = {("speed", True): 3, ("speed", False): 1, ("torque", True): 4,
+            ("torque", False): 2}[(mode, dead)]
+    out.records[f"axes.{ax}.ffw_mode"] = ParameterRecord(float(code), None, prov)
+    v, u = (d_v, d_u) if dead else (p_v, p_u)
+    key = "equiv_speedctrl_time_s" if mode == "speed" else "equiv_currctrl_time_s"
+    lo, hi = _BOUNDS.get(key, (0.0, math.inf))
+    v = min(max(v, lo), hi)
+    out.records[f"axes.{ax}.{key}"] = ParameterRecord(
+        v, math.hypot(u if u == u else 0.0, REL_FLOOR * v, 0.05 * idents[0].cycle_time_s),
+        prov)
 
 
 def _friction(out: AxesCalibration, ax: str, idents: list[AxisIdentification],
@@ -250,7 +324,8 @@ def _friction(out: AxesCalibration, ax: str, idents: list[AxisIdentification],
                     est.append((e.value * f, e.stderr * f))
             if est:
                 v, u = _pool(est)
-                out.records[full] = ParameterRecord(v, u if u == u else None, prov)
+                u = math.hypot(u if u == u else 0.0, REL_FLOOR * abs(v))
+                out.records[full] = ParameterRecord(v, u, prov)
                 break
         else:
             why = "; ".join(sorted({i.not_identified.get(f"coulomb_{c}", "")

@@ -12,8 +12,9 @@ Uncertainty budget (standard uncertainties, combined in quadrature; GUM, JCGM 10
   Kt over the consecutive averaging windows of the reference cut (standard error of their mean);
 * model form: the standard deviation of B, tau_f and Kt over fit variants the method could as
   well have used (upper end of the fit range at 60 / 80 / 100 % of the linear region, lower end
-  moved up), which shows the curvature the straight line does not model (bearing self-heating
-  during the sweep, viscous roll-off, Stribeck residue);
+  moved up, the self-heating drift on the viscous term only / on both terms / common), which
+  shows the curvature the straight line does not model (bearing self-heating during the
+  sweep, viscous roll-off, Stribeck residue);
 * reference: the torque reference's own relative uncertainty, as the user states it (a
   dynamometer's calibration certificate; 0 if not given, and the report says it is not
   included).
@@ -149,7 +150,8 @@ def _chain(method: str, **kw: Any) -> TwinChain:
 
 def _variant_options(method: str) -> list[dict[str, Any]]:
     if method == "improved":
-        return [{"fit_to_fraction": 0.6}, {"fit_to_fraction": 1.0}, {"fit_from_rpm": 600.0}]
+        return [{"fit_to_fraction": 0.6}, {"fit_to_fraction": 1.0}, {"fit_from_rpm": 600.0},
+                {"thermal_drift": "both"}, {"thermal_drift": "common"}]
     return [{"fit_to_fraction": 0.6}, {"fit_to_fraction": 0.8}]
 
 

@@ -288,7 +288,7 @@ def fit_setpoint_chain(
     for jt in models:
         cost = cost_of(jt)
         wins = [float(w) for w in range(1, 21)] + [24.0, 28.0, 32.0]
-        taus = [0.0, 1.0, 2.0, 4.0]
+        taus = [0.0, 1.0, 1.5, 2.0, 2.5, 4.0]
         t1s = [0.0, 1.0, 2.5]
         t2s = [0.0, 1.5]
         if jt == "none":
