@@ -1,0 +1,110 @@
+"""The calibrated twin beside the machine, through the command line (issue 12 acceptance).
+
+One hidden machine (seed 101) is calibrated from its campaign; then
+
+* ``cnctwin twin compare`` on a new recording of the same machine (another seed, other feeds
+  and stroke): residual_ratio <= 0.2 and not flagged on every moving axis;
+* after one hidden change, Y1 Coulomb friction x 1.5 or X1 Kv x 0.8, the changed axis is
+  flagged and the other is not;
+* ``cnctwin simulate --program`` with the calibrated machine file reproduces the air cut's
+  spindle current within the calibrated uncertainty.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from cnctwin.analysis.segments import speed_plateaus
+from cnctwin.iotools import read_recording
+from cnctwin.machine import load_machine
+from cnctwin.spindle import air_cut_statistics
+from tests.calibration._campaign import calibrate, cli, hidden_machine, sets, simulate_campaign
+
+SEED = 101
+pytestmark = pytest.mark.xdist_group("twin_compare")
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
+    d = tmp_path_factory.mktemp("hidden")
+    hidden = hidden_machine(SEED)
+    simulate_campaign(d, SEED, hidden)
+    calibrate(d, d / "machine.toml")
+    return d, hidden
+
+
+def _compare(d: Path, hidden: dict[str, Any], change: dict[str, Any], tag: str
+             ) -> dict[str, Any]:
+    rec_dir = d / f"new_{tag}"
+    assert cli("simulate", "axis_test", "--out", rec_dir, "--seed", SEED + 7,
+               *sets({**hidden, **change}), "--option", 'axes=["X1", "Y1"]',
+               "--option", "feeds_mm_min=[750, 1500, 3000, 6000]",
+               "--option", "stroke_mm=45") == 0
+    out = d / f"cmp_{tag}"
+    assert cli("twin", "compare", rec_dir / "axis_test.json", "--machine", d / "machine.toml",
+               "--out", out) == 0
+    assert (out / "compare.html").stat().st_size > 10_000
+    return json.loads((out / "compare.json").read_text(encoding="utf-8"))
+
+
+def test_unchanged_machine_holds(calibrated: tuple[Path, dict[str, Any]]) -> None:
+    d, hidden = calibrated
+    doc = _compare(d, hidden, {}, "same")
+    assert set(doc["axes"]) == {"X1", "Y1"}
+    for axis, res in doc["axes"].items():
+        assert res["residual_ratio"] <= 0.2, (axis, res)
+        assert res["flagged"] is False, (axis, res["reasons"])
+    assert doc["flagged"] == []
+
+
+@pytest.mark.parametrize(("key", "factor", "changed", "other"), [
+    ("axes.Y1.coulomb_n", 1.5, "Y1", "X1"),
+    ("axes.X1.kv_m_min_per_mm", 0.8, "X1", "Y1"),
+])
+def test_hidden_change_is_flagged_on_its_axis(calibrated: tuple[Path, dict[str, Any]],
+                                              key: str, factor: float, changed: str,
+                                              other: str) -> None:
+    d, hidden = calibrated
+    base = hidden.get(key, load_machine(d / "machine.toml").value(key))
+    doc = _compare(d, hidden, {key: round(float(base) * factor, 5)}, key.replace(".", "_"))
+    assert doc["axes"][changed]["flagged"] is True
+    assert any(key.rsplit(".", 1)[-1] in r for r in doc["axes"][changed]["reasons"])
+    assert doc["axes"][other]["flagged"] is False, doc["axes"][other]["reasons"]
+
+
+def test_simulate_program_reproduces_the_air_cut(calibrated: tuple[Path, dict[str, Any]]
+                                                 ) -> None:
+    d, _ = calibrated
+    assert cli("simulate", "--program", d / "ac" / "air_cut_sweep.mpf", "--machine",
+               d / "machine.toml", "--out", d / "replay", "--seed", 5) == 0
+    mf = load_machine(d / "machine.toml")
+    a = read_recording(d / "ac" / "air_cut_sweep.json")
+    b = read_recording(d / "replay" / "air_cut_sweep.json")
+    sa = air_cut_statistics(a, speed_plateaus(a))
+    sb = air_cut_statistics(b, speed_plateaus(b))
+    rb = mf.record("spindle.viscous_friction_nm_per_rpm")
+    assert rb is not None and rb.valid_range is not None
+    lo, hi = rb.valid_range
+    sa = sa[(sa["speed_rpm"] >= lo) & (sa["speed_rpm"] <= hi)].groupby("speed_rpm").mean()
+    sb = sb[(sb["speed_rpm"] >= lo) & (sb["speed_rpm"] <= hi)].groupby("speed_rpm").mean()
+    n = sa.index.to_numpy(dtype=np.float64)
+    assert len(n) >= 15 and list(sa.index) == list(sb.index)
+    ia, ib = sa["current_a"].to_numpy(), sb["current_a"].to_numpy()
+
+    def u(key: str) -> float:
+        rec = mf.record(key)
+        assert rec is not None and rec.uncertainty is not None
+        return rec.uncertainty
+
+    kt = mf.value("spindle.kt_nm_per_a")
+    # standard uncertainty of the twin's air current I = (B n + tau_f) / Kt at each speed
+    u_i = np.sqrt((u("spindle.viscous_friction_nm_per_rpm") * n) ** 2
+                  + u("spindle.coulomb_friction_nm") ** 2
+                  + (ib * u("spindle.kt_nm_per_a")) ** 2) / kt
+    z = (ib - ia) / u_i
+    assert np.all(np.abs(z) <= 2.0), np.c_[n, ia, ib, z]
