@@ -11,8 +11,7 @@ import pytest
 from tests.calibration._campaign import REFERENCE, cli
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "real"
-TRACE = next((DATA / "sinumerik-trace").glob("*.xml"), None) if (DATA / "sinumerik-trace").is_dir() \
-    else None
+TRACE = DATA / "sinumerik-trace" / "Tav23362_2140_frenata_15_4_26_EmgTest.xml"
 pytestmark = pytest.mark.xdist_group("calibration_bad_input")
 
 
@@ -71,7 +70,6 @@ def test_reference_without_torque(campaign: Path, tmp_path: Path,
     assert "--dynamometer CSV or --torque-nm VALUE" in err
 
 
-@pytest.mark.skipif(TRACE is None, reason="tests/data/real/sinumerik-trace is vendored")
 def test_recording_without_spindle_signals(campaign: Path, tmp_path: Path,
                                            capsys: pytest.CaptureFixture[str]) -> None:
     err = _err(capsys, "calibrate", "spindle", "--air-cut", TRACE, "--reference",

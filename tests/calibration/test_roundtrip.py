@@ -60,10 +60,10 @@ def _run_seed(seed: int, base: Path) -> dict[str, tuple[float, float, float, flo
     for key in TOLERANCE:
         rec = mf.record(key)
         assert rec is not None, f"seed {seed}: {key} not in the machine file"
-        if key.endswith("jerk_time_s") and round(float(hidden[key]) / DT) <= 2:
-            if not rec.identified:
-                assert "half-cycle delay" in rec.reason
-                continue
+        two_cycles = key.endswith("jerk_time_s") and round(float(hidden[key]) / DT) <= 2
+        if two_cycles and not rec.identified:
+            assert "half-cycle delay" in rec.reason
+            continue
         assert rec.identified, f"seed {seed}: {key} not identified: {rec.reason}"
         assert rec.uncertainty is not None and rec.uncertainty > 0, key
         h = float(hidden[key])
