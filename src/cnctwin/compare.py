@@ -218,9 +218,16 @@ def _compare_axis(rec: Recording, mf: MachineFile, name: str, *, residual_limit:
     model = loop_model_from_axis(ax, cycle_time_s=dt)
     pred = np.full(des.shape, np.nan)
     for s in d.segments:
-        if s.stop - s.start < 3:
+        ok = np.flatnonzero(np.isfinite(enc[s]) & np.isfinite(des[s]))
+        if ok.size == 0:
             continue
-        pred[s] = model.predict(des[s], enc_start=float(enc[s.start])).enc_pos
+        a = s.start + int(ok[0])
+        # a run of finite setpoints from the first finite actual position on
+        bad = np.flatnonzero(~np.isfinite(des[a:s.stop]))
+        b = a + int(bad[0]) if bad.size else s.stop
+        if b - a < 3:
+            continue
+        pred[a:b] = model.predict(des[a:b], enc_start=float(enc[a])).enc_pos
     fe_meas = des - enc
     fe_pred = des - pred
     v = derivative(des, d.segments, dt, kind="central")
@@ -232,7 +239,12 @@ def _compare_axis(rec: Recording, mf: MachineFile, name: str, *, residual_limit:
     ratio = float(np.sqrt(np.mean(res[moving] ** 2)) / rms_fe) if rms_fe > 0 else float("nan")
     reasons: list[str] = []
     if not ratio <= residual_limit:
-        reasons.append(f"following-error residual ratio {ratio:.3f} > {residual_limit:g}")
+        unknown = [k for k in ("kv_m_min_per_mm", "ffw_weight", "jerk_time_s",
+                               "equiv_speedctrl_time_s")
+                   if not mf.is_identified(f"axes.{name}.{k}")]
+        reasons.append(f"following-error residual ratio {ratio:.3f} > {residual_limit:g}"
+                       + (f" (not identified in the machine file, defaults used: "
+                          f"{', '.join(unknown)})" if unknown else ""))
     # spans: 0.2 s rolling rms of the residual beyond the limit share of the measured FE
     w = max(1, round(0.2 / dt))
     kern = np.ones(w) / w

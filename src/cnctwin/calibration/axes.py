@@ -87,7 +87,9 @@ class AxesCalibration:
 
 
 def moving_axes(rec: Recording, *, min_travel: float = 0.05) -> list[str]:
-    """Axes whose DES_POS and ENC_POS are recorded and whose setpoint moves.
+    """Axes whose DES_POS and actual position are recorded and whose setpoint moves.
+
+    The actual position is ``ENC_POS`` or, in a servo trace, ``ENC1_POS`` / ``ENC2_POS``.
 
     Parameters
     ----------
@@ -97,7 +99,8 @@ def moving_axes(rec: Recording, *, min_travel: float = 0.05) -> list[str]:
     """
     out = []
     for ax in rec.axes:
-        if not (rec.has("DES_POS", ax) and rec.has("ENC_POS", ax)):
+        has_enc = any(rec.has(code, ax) for code in ("ENC_POS", "ENC1_POS", "ENC2_POS"))
+        if not (rec.has("DES_POS", ax) and has_enc):
             continue
         v = rec.signal("DES_POS", ax).to_numpy(dtype=np.float64)
         v = v[np.isfinite(v)]
@@ -325,7 +328,16 @@ def _friction(out: AxesCalibration, ax: str, idents: list[AxisIdentification],
             if est:
                 v, u = _pool(est)
                 u = math.hypot(u if u == u else 0.0, REL_FLOOR * abs(v))
-                out.records[full] = ParameterRecord(v, u, prov)
+                if v < 0.0:
+                    out.records[full] = ParameterRecord(
+                        float(getattr(base, key)), identified=False,
+                        reason=f"the fit on {code.upper()} gives {v:.4g} {load_unit}"
+                               f"{'' if stem == 'coulomb' else '/(unit/s)'}, a negative "
+                               "friction: a weight or a process force on the axis, or a "
+                               "current sign opposite to the motion; record the axis test "
+                               "program in air")
+                else:
+                    out.records[full] = ParameterRecord(v, u, prov)
                 break
         else:
             why = "; ".join(sorted({i.not_identified.get(f"coulomb_{c}", "")

@@ -60,7 +60,7 @@ def _reference_figure(cal: SpindleCalibration, reference: Recording, spindle: st
     fs = reference.fs_hz
     cyc = reference.cycles
     a = int(np.searchsorted(cyc, c.region_start_cycle - round(1.0 * fs)))
-    b = int(np.searchsorted(cyc, c.region_end_cycle + round(1.0 * fs), side="right"))
+    b = int(np.searchsorted(cyc, c.region_end_cycle + round(0.3 * fs), side="right"))
     cur = reference.signal(f"CURRENT|{spindle}").to_numpy(dtype=np.float64)
     speed, _ = spindle_speed_rpm(reference, spindle)
     est = cal.model.cutting_torque(np.abs(cur), np.abs(speed), accel_term=True, fs_hz=fs)
@@ -150,7 +150,9 @@ def spindle_calibration_report(
               "[unit of the parameter], combined in quadrature", float_format="{:.3g}")
     sec2 = rep.section("Air-cut plateaus and friction fit")
     sec2.figure(_fit_figure(cal), caption="Mean spindle current per constant-speed plateau "
-                "(thesis Fig. 4.1/4.2 analogue) with the fitted friction curve and its residuals")
+                "(thesis Fig. 4.1/4.2 analogue) with the fitted friction curve and the residuals "
+                "against it; with the self-heating fitted out the curve is the state at the "
+                "start of the sweep, and the plateaus held later (warmer) lie a few mA below")
     if res.thermal_friction is not None:
         th = res.thermal_friction
         sec2.text("The air cut held its speeds twice: the bearings' self-heating was fitted "

@@ -70,6 +70,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    help="machine file to update (created if missing)")
     a.add_argument("--axis", action="append", default=[], metavar="NAME",
                    help="axis to calibrate (repeatable; default every moving axis)")
+    a.add_argument("--verbose", action="store_true",
+                   help="print the identification's notes on each recording")
     a.set_defaults(func=_cmd_axes)
 
 
@@ -164,20 +166,28 @@ def _cmd_axes(args: argparse.Namespace) -> int:
                              recording_names=[str(p) for p in args.files])
     save_machine(mf.with_records(cal.records), args.machine)
     table = Table(title="feed axes")
-    for col in ("parameter", "value", "std. uncertainty", "unit", "note"):
-        table.add_column(col, justify="left" if col in ("parameter", "note") else "right")
+    for col in ("axis", "parameter", "value", "std. uncertainty", "unit", "not identified"):
+        table.add_column(col, justify="left" if col in ("axis", "parameter", "not identified")
+                         else "right")
     from cnctwin.machine import parameter_unit
 
     for key, rec in cal.records.items():
         axis = key.split(".")[1]
         rot = mf.machine.axis(axis).rotary if axis in mf.machine.axis_names else False
-        table.add_row(key, f"{rec.value:.5g}" if rec.identified else "-",
+        why = rec.reason.split(";")[0].split(": ")[0]
+        table.add_row(axis, key.split(".")[2], f"{rec.value:.5g}" if rec.identified else "-",
                       f"{rec.uncertainty:.2g}" if rec.uncertainty is not None else "-",
                       parameter_unit(key, rotary=rot),
-                      "" if rec.identified else f"not identified: {rec.reason}")
+                      "" if rec.identified else (why[:60] + ("..." if len(why) > 60 else "")))
     out = Console()
     out.print(table)
-    for note in cal.notes:
-        out.print(f"note: {note}")
+    if any(not r.identified for r in cal.records.values()):
+        out.print("not identified: the value stays the default; the machine file gives each "
+                  "reason in full")
+    if args.verbose:
+        for note in cal.notes:
+            out.print(f"note: {note}")
+    elif cal.notes:
+        out.print(f"{len(cal.notes)} notes on the recordings (--verbose shows them)")
     out.print(f"wrote {args.machine}")
     return 0

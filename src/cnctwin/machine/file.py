@@ -365,6 +365,12 @@ class MachineFile:
                 kw[k] = _coerce_field(default, k, v)
             if axes is not None:
                 kw["axes"] = tuple(axes)
+                # an axis the map does not number gets the next free number
+                amap = dict(kw.get("axis_map", default.axis_map))
+                for ax in axes:
+                    if ax.name not in amap.values():
+                        amap[max(amap, default=0) + 1] = ax.name
+                kw["axis_map"] = amap
             machine = dataclasses.replace(default, spindle=spindle, **kw)
         except ConfigError as exc:
             raise ConfigError(f"{source}: {exc}") from None
