@@ -37,7 +37,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -51,6 +51,9 @@ from cnctwin.analysis.segments import cutting_regions, speed_plateaus, spindle_s
 from cnctwin.analysis.spectra import dominant_line
 from cnctwin.exceptions import ConfigError, IdentificationError, SignalNotFoundError
 from cnctwin.recording import Recording
+
+if TYPE_CHECKING:
+    from cnctwin.machine import MachineFile
 
 __all__ = [
     "RPM_TO_RAD_S",
@@ -889,6 +892,27 @@ class SpindleModel:
                 f"{', '.join(SPINDLE_MODEL_PARAMETERS)} (cnctwin.spindle.SPINDLE_MODEL_PARAMETERS)"
             )
         return cls(**{**SPINDLE_MODEL_PARAMETERS[name], **overrides})
+
+    @classmethod
+    def from_machine(cls, machine_file: MachineFile) -> SpindleModel:
+        """The spindle twin of a machine file (:mod:`cnctwin.machine.file`).
+
+        Kt, B and tau_f are the file's ``spindle.kt_nm_per_a``,
+        ``viscous_friction_nm_per_rpm`` and ``coulomb_friction_nm``, referred to
+        ``kt_ref_temperature_c`` with the magnet coefficient ``magnet_temp_coeff_per_k``
+        where the file states a calibrated reference temperature; J is used only where it was
+        identified (else 0: no acceleration term). Whether the values were calibrated is for
+        the caller to check (:meth:`MachineFile.is_identified`).
+        """
+        s = machine_file.machine.spindle
+        calibrated_t = machine_file.is_identified("spindle.kt_ref_temperature_c")
+        return cls(
+            kt_nm_per_a=s.kt_nm_per_a, b_nm_per_rpm=s.viscous_friction_nm_per_rpm,
+            tau_f_nm=s.coulomb_friction_nm,
+            j_kgm2=s.inertia_kg_m2 if machine_file.is_identified("spindle.inertia_kg_m2")
+            else 0.0,
+            kt_temp_coeff_per_k=s.magnet_temp_coeff_per_k if calibrated_t else 0.0,
+            reference_temperature_c=s.kt_ref_temperature_c if calibrated_t else None)
 
     def to_dict(self) -> dict[str, float | None]:
         """Parameters as a plain dict (for JSON/TOML)."""

@@ -108,3 +108,53 @@ def test_simulate_program_reproduces_the_air_cut(calibrated: tuple[Path, dict[st
                   + (ib * u("spindle.kt_nm_per_a")) ** 2) / kt
     z = (ib - ia) / u_i
     assert np.all(np.abs(z) <= 2.0), np.c_[n, ia, ib, z]
+
+
+def test_edge_runtime_uses_the_machine_file(calibrated: tuple[Path, dict[str, Any]]) -> None:
+    """``cnctwin edge run --machine machine.toml``: the calibrated spindle's cutting torque
+    matches the simulator's true cutting torque over the fully engaged cut (within 2 %)."""
+    import pandas as pd
+
+    d, _ = calibrated
+    ref = "drill_1_aisi1045_2400rpm_0p16"
+    out = d / "edge_state"
+    assert cli("edge", "run", "--source", d / "dv" / f"{ref}.json", "--machine",
+               d / "machine.toml", "--out", out, "--no-anomaly") == 0
+    msgs = [json.loads(x) for x in (out / "results.jsonl").read_text().splitlines()]
+    cyc: list[int] = []
+    tq: list[float] = []
+    for m in msgs:
+        if m["kind"] == "torque":
+            cyc += range(m["first_cycle"], m["first_cycle"] + m["n"])
+            tq += m["torque_nm"]
+    est = pd.Series(tq, index=cyc)
+    truth = pd.read_parquet(d / "dv" / f"truth_per_cycle_{ref[6:]}.parquet").set_index("cycle")
+    cut = json.loads((d / "dv" / "truth.json").read_text())["cuts"][0]
+    a, b = cut["full_engagement_first_cycle"] + 100, cut["cut_last_cycle"] - 100
+    t_true = truth.loc[a:b, "cutting_torque_nm"].mean()
+    t_est = est.loc[a:b].mean()
+    assert t_est == pytest.approx(t_true, rel=0.02)
+    assert all(m["machine"] == load_machine(d / "machine.toml").machine.name for m in msgs)
+
+
+def test_dashboard_compares_a_recording_with_the_twin(calibrated: tuple[Path, dict[str, Any]]
+                                                      ) -> None:
+    pytest.importorskip("fastapi", reason="the web extra: pip install 'cnctwin[web]'")
+    from fastapi.testclient import TestClient
+
+    from cnctwin.web.app import create_app
+
+    d, hidden = calibrated
+    rec = d / "new_same" / "axis_test.json"
+    if not rec.exists():
+        _compare(d, hidden, {}, "same")
+    app = create_app(recordings=[rec], machine=d / "machine.toml")
+    with TestClient(app) as client:
+        rid = client.get("/api/recordings").json()[0]["id"]
+        doc = client.get(f"/api/recordings/{rid}/compare").json()
+        assert set(doc["axes"]) == {"X1", "Y1"}
+        assert not any(a["flagged"] for a in doc["axes"].values())
+        page = client.get(f"/recordings/{rid}/compare")
+        assert page.status_code == 200 and "holds" in page.text
+        assert "departs</b>" not in page.text
+        assert "compare with the calibrated twin" in client.get(f"/recordings/{rid}").text

@@ -36,8 +36,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                         "optional MQTT publish (store-and-forward) and store.")
     r.add_argument("--source", required=True, metavar="URL|FILE",
                    help="mqtt://host:port/<databus metadata topic> or a recording file")
-    r.add_argument("--model", required=True, type=Path, metavar="FILE",
-                   help="calibrated spindle model (.json/.toml, cnctwin.edge.save_spindle_model)")
+    r.add_argument("--model", type=Path, metavar="FILE",
+                   help="calibrated spindle model (.json/.toml, cnctwin.edge.save_spindle_model); "
+                   "not needed with --machine FILE.toml")
     r.add_argument("--out", required=True, type=Path, metavar="DIR",
                    help="state directory: results.jsonl, status.json, outbox.sqlite")
     r.add_argument("--publish", metavar="URL",
@@ -51,7 +52,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     r.add_argument("--speed", type=float, default=0.0,
                    help="replay pace: 1 = real time, N = N x, 0 = as fast as possible")
     r.add_argument("--chunk-cycles", type=int, default=50, help="cycles per chunk (replay)")
-    r.add_argument("--machine", default="", help="machine name in topics and the store")
+    r.add_argument("--machine", default="", metavar="NAME|FILE.toml",
+                   help="the machine file (cnctwin calibrate; its name and calibrated spindle "
+                   "are used) or a machine name for the topics and the store")
     r.add_argument("--name-map", type=Path, metavar="FILE",
                    help="JSON {datapoint name: column} for the Databus (CURRENT|SP1, "
                    "CMD_SPEED|SP1, DES_POS|Z1, ..., CYCLE)")
@@ -146,11 +149,11 @@ def _build(args: argparse.Namespace) -> Any:
         ReplaySource,
         StoreSink,
         TorqueProcessor,
-        load_spindle_model,
         parse_mqtt_url,
     )
 
-    model = load_spindle_model(args.model)
+    machine_name, model = _machine_and_model(args)
+    args.machine = machine_name
     src: Any
     if args.source.startswith(("mqtt://", "tcp://")):
         u = parse_mqtt_url(args.source)
@@ -208,6 +211,35 @@ def _build(args: argparse.Namespace) -> Any:
         sinks.append(OpcUaSink(args.opcua, machine=machine,
                                publish_hz=args.opcua_publish_hz))
     return EdgeRuntime(src, procs, sinks, state_dir=out, machine=machine)
+
+
+def _machine_and_model(args: argparse.Namespace) -> tuple[str, Any]:
+    """The machine name and the spindle model from ``--machine`` and ``--model``.
+
+    ``--machine`` naming a ``.toml`` file (or an existing file) is the machine file: its name
+    and its calibrated spindle (:meth:`SpindleModel.from_machine`) are used; ``--model``, if
+    also given, replaces the spindle model. Otherwise ``--machine`` is a name and ``--model``
+    is required.
+    """
+    from cnctwin.edge import load_spindle_model
+    from cnctwin.spindle import SpindleModel
+
+    value = str(args.machine or "")
+    if value.endswith(".toml") or (value and Path(value).is_file()):
+        from cnctwin.machine import load_machine
+
+        mf = load_machine(value)
+        if args.model is not None:
+            return mf.machine.name, load_spindle_model(args.model)
+        if not mf.is_identified("spindle.kt_nm_per_a"):
+            raise ConfigError(f"{value}: the spindle is not calibrated (spindle.kt_nm_per_a has "
+                              "no provenance); run 'cnctwin calibrate spindle ... --machine "
+                              f"{value}' first or give --model")
+        return mf.machine.name, SpindleModel.from_machine(mf)
+    if args.model is None:
+        raise ConfigError("give --machine FILE.toml (a calibrated machine file) or --model "
+                          "spindle.json")
+    return value, load_spindle_model(args.model)
 
 
 def _run(args: argparse.Namespace) -> int:

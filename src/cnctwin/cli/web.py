@@ -27,6 +27,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--model", type=Path, metavar="FILE",
                    help="calibrated spindle model (JSON/TOML, cnctwin.edge.save_spindle_model) "
                    "for the cutting torque")
+    p.add_argument("--machine", type=Path, metavar="FILE",
+                   help="machine file (cnctwin calibrate): its calibrated spindle for the "
+                   "cutting torque and the twin comparison of every recording")
     p.add_argument("--live", type=Path, metavar="DIR",
                    help="--out directory of `cnctwin edge run` to follow on the live page")
     p.add_argument("--salvage", action="store_true",
@@ -53,8 +56,13 @@ def _cmd_web(args: argparse.Namespace) -> int:
         raise ConfigError("cnctwin web needs the web extra: pip install 'cnctwin[web]'") from None
     from cnctwin.web.app import create_app
 
+    machine = None
+    if args.machine is not None:
+        from cnctwin.machine import load_machine
+
+        machine = load_machine(args.machine)
     app = create_app(store_url=args.store, recordings=args.recording, model=args.model,
-                     live=args.live, salvage=args.salvage)
+                     machine=machine, live=args.live, salvage=args.salvage)
     print(f"cnctwin web: serving on http://{args.host}:{args.port}/ (Ctrl-C stops)", flush=True)
     uvicorn.run(app, host=args.host, port=args.port, log_level="warning")
     return 0

@@ -36,6 +36,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from cnctwin.exceptions import CnctwinError, ConfigError, SignalNotFoundError, StoreError
+from cnctwin.machine import MachineFile
 from cnctwin.recording import Recording
 from cnctwin.spindle import SpindleModel
 from cnctwin.web import analyses, pages
@@ -114,6 +115,7 @@ class Dashboard:
     catalog: Catalog
     model: SpindleModel | None = None
     model_source: str = ""
+    machine_file: MachineFile | None = None
     live: LiveSource | None = None
     title: str = "cnctwin"
     _lock: threading.RLock = field(default_factory=threading.RLock)
@@ -184,6 +186,21 @@ class Dashboard:
                 "calibrated": self.model is not None, "model_source": self.model_source,
                 "thrust_source": str(holes.attrs.get("thrust_source", "")),
                 "issues": [str(i) for i in holes.attrs.get("issues", [])]}
+
+    def compare_payload(self, entry_id: str) -> dict[str, Any]:
+        """The recording against the machine file's twin (``compare.json`` of the CLI)."""
+        if self.machine_file is None:
+            raise ConfigError("no machine file: start the dashboard with --machine FILE "
+                              "(cnctwin calibrate writes it) to compare recordings with the twin")
+        mf = self.machine_file
+
+        def make() -> dict[str, Any]:
+            from cnctwin.compare import compare_recording
+
+            doc = compare_recording(self.catalog.recording(entry_id), mf).to_dict()
+            return dict(analyses.jsonable({"machine_file": str(mf.path or ""), **doc}))
+
+        return dict(self._cached(("compare", entry_id), make))
 
     def trends_payload(self, ids: Sequence[str]) -> dict[str, Any]:
         holes = self.holes(ids)
@@ -257,6 +274,7 @@ def create_app(
     store_url: str | None = None,
     recordings: Sequence[str | os.PathLike[str]] = (),
     model: SpindleModel | str | os.PathLike[str] | None = None,
+    machine: MachineFile | str | os.PathLike[str] | None = None,
     live: str | os.PathLike[str] | None = None,
     title: str = "cnctwin",
     cache_size: int = 4,
@@ -275,6 +293,10 @@ def create_app(
         Calibrated spindle twin (or its JSON/TOML file, ``cnctwin.edge.save_spindle_model``)
         for the cutting torque; without it the hole torques use the library default
         (thesis parameters, flagged "not calibrated") and no torque signal is offered.
+    machine : MachineFile or path-like, optional
+        The machine file (``cnctwin calibrate``): its calibrated spindle is the torque model
+        where ``model`` is not given, and every recording gets a comparison with the twin
+        (``/recordings/ID/compare``, ``/api/recordings/ID/compare``).
     live : path-like, optional
         ``--out`` directory of a ``cnctwin edge run`` (or its ``results.jsonl``) to follow
         on the live page.
@@ -307,7 +329,15 @@ def create_app(
                           "state directory (--live DIR)")
     spindle: SpindleModel | None
     model_source = ""
-    if model is None or isinstance(model, SpindleModel):
+    mfile: MachineFile | None = None
+    if machine is not None:
+        from cnctwin.machine import load_machine
+
+        mfile = machine if isinstance(machine, MachineFile) else load_machine(machine)
+    if model is None and mfile is not None and mfile.is_identified("spindle.kt_nm_per_a"):
+        spindle = SpindleModel.from_machine(mfile)
+        model_source = f"{mfile.path or 'machine file'} (machine file)"
+    elif model is None or isinstance(model, SpindleModel):
         spindle = model
         model_source = "SpindleModel given" if model is not None else ""
     else:
@@ -318,7 +348,7 @@ def create_app(
     dash = Dashboard(
         catalog=Catalog(store_url=store_url, recordings=recordings, cache_size=cache_size,
                         salvage=salvage),
-        model=spindle, model_source=model_source,
+        model=spindle, model_source=model_source, machine_file=mfile,
         live=LiveSource(live) if live is not None else None, title=title)
     plotly_js = _plotly_js()
     JsonResponse = _json_response_class()
@@ -362,7 +392,8 @@ def create_app(
     def _recording_page(entry_id: str) -> Any:
         e = dash.catalog.entry(entry_id)
         return HTMLResponse(pages.recording_page(dash.title, e, dash.signal_names(e),
-                                                 calibrated=dash.model is not None))
+                                                 calibrated=dash.model is not None,
+                                                 twin=dash.machine_file is not None))
 
     @app.get("/machines/{machine}", response_class=HTMLResponse, include_in_schema=False)
     def _machine_page(machine: str) -> Any:
@@ -370,6 +401,12 @@ def create_app(
         return HTMLResponse(pages.machine_page(dash.title, machine,
                                                [dash.catalog.entry(i) for i in ids],
                                                calibrated=dash.model is not None))
+
+    @app.get("/recordings/{entry_id}/compare", response_class=HTMLResponse,
+             include_in_schema=False)
+    def _compare_page(entry_id: str) -> Any:
+        e = dash.catalog.entry(entry_id)
+        return HTMLResponse(pages.compare_page(dash.title, e, dash.compare_payload(entry_id)))
 
     @app.get("/live", response_class=HTMLResponse, include_in_schema=False)
     def _live_page() -> Any:
@@ -408,6 +445,11 @@ def create_app(
     def api_trends(entry_id: str) -> Any:
         dash.catalog.entry(entry_id)
         return JsonResponse(dash.trends_payload([entry_id]))
+
+    @app.get("/api/recordings/{entry_id}/compare")
+    def api_compare(entry_id: str) -> Any:
+        dash.catalog.entry(entry_id)
+        return JsonResponse(dash.compare_payload(entry_id))
 
     @app.get("/api/recordings/{entry_id}/anomalies")
     def api_anomalies(entry_id: str, detector: str = "physics",

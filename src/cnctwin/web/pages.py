@@ -174,7 +174,8 @@ scored on the rest.</p>
 </section>"""
 
 
-def recording_page(title: str, e: Entry, signals: Sequence[str], *, calibrated: bool) -> str:
+def recording_page(title: str, e: Entry, signals: Sequence[str], *, calibrated: bool,
+                   twin: bool = False) -> str:
     """Summary, signal-quality figures, signal plot with server-side decimation, use cases."""
     q = e.quality
     qual = "" if q is None else f"""
@@ -197,6 +198,8 @@ across gaps the wall clock and the counter differ by {_num(q.clock_step_s, '{:.4
 <dt>duration</dt><dd>{_num(e.duration_s, '{:.3f}', 's')} ({e.n_cycles} cycles)</dd>{qual}
 </dl>
 <details><summary>{len(e.issues)} reader notes (meta.issues)</summary><ul>{issues}</ul></details>
+{f'<p><a href="/recordings/{_q(e.id)}/compare">compare with the calibrated twin</a></p>'
+ if twin else ''}
 <section id="signal-section"><h2>Signals</h2>
 <div class="row"><div>{_signal_picker(signals, e.units)}
 <br><button id="plot-btn">plot</button> <button id="reset-btn">full range</button></div>
@@ -210,6 +213,42 @@ zoom in (drag) to refetch the range, at full resolution once it fits the plot wi
     cfg = {"recording": e.id, "api": f"/api/recordings/{_q(e.id)}",
            "signals": _default_signals(signals)}
     return _page(f"{title}: {e.label}", body, page="recording", config=cfg)
+
+
+_DEPARTS = '<b class="warn">departs</b>'
+
+
+def compare_page(title: str, e: Entry, doc: dict[str, Any]) -> str:
+    """The recording against the calibrated twin: one row per axis and the spindle."""
+    rows = []
+    for name, a in doc.get("axes", {}).items():
+        cur = a.get("current_residual_ratio")
+        rows.append(
+            f"<tr><td>{_e(name)}</td><td>{_num(a.get('residual_ratio'), '{:.3f}')}</td>"
+            f"<td>{'-' if cur is None else _num(cur, '{:.3f}')}</td>"
+            f"<td>{_DEPARTS if a.get('flagged') else 'holds'}</td>"
+            f"<td>{_e('; '.join(a.get('reasons', [])) or '-')}</td></tr>")
+    sp = doc.get("spindle")
+    if sp:
+        rows.append(
+            f"<tr><td>spindle (air current)</td><td>-</td>"
+            f"<td>{_num(sp.get('residual_ratio'), '{:.3f}')}</td>"
+            f"<td>{_DEPARTS if sp.get('flagged') else 'holds'}</td>"
+            f"<td>{_e('; '.join(sp.get('reasons', [])) or '-')}</td></tr>")
+    skipped = "".join(f"<li>{_e(k)}: {_e(v)}</li>" for k, v in doc.get("skipped", {}).items())
+    body = f"""
+<h1>{_e(e.label)} against its twin</h1>
+<p class="muted">Machine file {_e(doc.get('machine_file', ''))}. The twin is driven with the
+recording's own setpoints; residual ratio = rms(machine - twin) / rms(machine) over the moving
+cycles; an axis departs where that exceeds {_num(doc.get('limits', {}).get('residual_limit'),
+'{:g}')} or a friction/gain moved beyond the calibrated uncertainty
+({_num(doc.get('limits', {}).get('k_sigma'), '{:g}')} sigma).</p>
+<table><thead><tr><th>axis</th><th>following-error residual ratio [-]</th>
+<th>current residual ratio [-]</th><th>twin</th><th>why</th></tr></thead>
+<tbody>{''.join(rows)}</tbody></table>
+{f'<h3>Not compared</h3><ul>{skipped}</ul>' if skipped else ''}
+<p><a href="/recordings/{_q(e.id)}">back to the recording</a></p>"""
+    return _page(f"{title}: {e.label} vs twin", body, page="compare")
 
 
 def machine_page(title: str, machine: str, entries: Sequence[Entry], *, calibrated: bool,
