@@ -11,8 +11,8 @@ Runs what ``tests/usecases/test_wear_full.py``, ``test_wear_validation.py`` and
    never in memory at once;
 3. score the wear estimator (5 measured points), the 15-hole trend, the set-of-6 pattern, the
    remaining-life forecast and the tool-temperature soft sensor against the truth
-   (:func:`cnctwin.usecases.wearcheck.validate_wear`);
-4. run the fault trials at hidden seeded times (:mod:`cnctwin.usecases.trials`) over
+   (:func:`cnctwin.validation.wearcheck.validate_wear`);
+4. run the fault trials at hidden seeded times (:mod:`cnctwin.validation.trials`) over
    ``--seeds`` seeds for every drilling monitor (envelope baseline, wear-adaptive, physics
    from part 1, physics residual) and the 300-hole compressed run of the test suite;
 5. run the long fault-free runs (whole tool life, 2676 holes = 3.46 h of machining, simulated
@@ -38,7 +38,7 @@ import numpy as np
 import pandas as pd
 
 from cnctwin.usecases.holes import hole_record
-from cnctwin.usecases.wearcheck import WearValidation, hole_record_chunked, validate_wear
+from cnctwin.validation.wearcheck import WearValidation, hole_record_chunked, validate_wear
 
 READING = """\
 * **Wear state**: 5 measured points are enough to map the set-mean torque increase to flank
@@ -152,7 +152,7 @@ def run_300(seed: int, out: Path) -> WearValidation:
 
 
 def run_trials(seeds: int) -> tuple[pd.DataFrame, pd.DataFrame]:
-    from cnctwin.usecases.trials import (
+    from cnctwin.validation.trials import (
         DRILLING_MONITORS,
         fault_trial,
         loose_tap_trial,
@@ -196,7 +196,7 @@ def _poisson_upper(k: int, t_h: float) -> float:
 
 def run_fault_free(seed: int) -> tuple[pd.DataFrame, dict[str, float]]:
     """False alarms per hour per detector over long fault-free runs."""
-    from cnctwin.usecases.trials import fault_free_run, loose_tap_trial
+    from cnctwin.validation.trials import fault_free_run, loose_tap_trial
 
     rows = []
     timing: dict[str, float] = {}
@@ -263,7 +263,7 @@ def write_doc(path: Path, full: WearValidation | None, timing: dict[str, float],
             "~50 s wall on an idle 2-vCPU machine) asserts wear RMS < 12 µm, trend correlation "
             "> 0.99 and RMS < 5 %-points, pattern within 0.5 %-points, forecast at 90 % within "
             "100 holes, soft sensor RMS < 15 °C. The analysis never holds the whole recording: "
-            "`cnctwin.usecases.wearcheck.hole_record_chunked` builds the hole record window by "
+            "`cnctwin.validation.wearcheck.hole_record_chunked` builds the hole record window by "
             "window from the Parquet chunk files.",
             "",
         ]
@@ -278,7 +278,7 @@ def write_doc(path: Path, full: WearValidation | None, timing: dict[str, float],
         "",
         f"## Faults at hidden times: {seeds} seeds per kind",
         "",
-        "`cnctwin.usecases.trials`: the fault time is drawn from `default_rng([seed, 6])`; the "
+        "`cnctwin.validation.trials`: the fault time is drawn from `default_rng([seed, 6])`; the "
         "detector is taught on a fixed number of first holes (tapping: 2 of 6; drilling: 12 of "
         "18, two sets) and never sees the draw. Loose tap: `TappingDetector` (fluctuation of the "
         "spindle current and the Z following error during extraction, against the level learned "
@@ -311,7 +311,7 @@ def write_doc(path: Path, full: WearValidation | None, timing: dict[str, float],
         lines += [
             "## Fault-free runs: false alarms per hour",
             "",
-            f"`cnctwin.usecases.trials.fault_free_run({free_seed}, n_holes=2676, "
+            f"`cnctwin.validation.trials.fault_free_run({free_seed}, n_holes=2676, "
             "segment_holes=300)`: the whole tool life of thesis §5.1 without a fault (2676 "
             "holes, wear to ~277 µm, 3.46 h of machining), simulated in 9 segments that carry "
             "the wear on (`start_hole`; the tool cools at each joint, a 4 s pause); "

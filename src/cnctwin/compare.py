@@ -34,7 +34,7 @@ import numpy as np
 from cnctwin.exceptions import IdentificationError, SignalNotFoundError
 from cnctwin.machine import KV_UNIT_PER_S, FeedAxis, MachineFile
 from cnctwin.recording import Recording
-from cnctwin.servo import AxisIdentification, identify_axis
+from cnctwin.servo import AxisIdentification, identify_axis, moving_axes
 from cnctwin.servo._common import axis_data, derivative
 from cnctwin.servo.predict import AxisLoopModel
 
@@ -408,8 +408,6 @@ def compare_recording(
     -------
     MachineComparison
     """
-    from cnctwin.calibration.axes import moving_axes
-
     m = machine_file.machine
     moving = [a for a in moving_axes(rec) if a != m.spindle_name]
     wanted = list(axes) if axes else [a for a in moving if a in m.axis_names]

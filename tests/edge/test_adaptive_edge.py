@@ -1,5 +1,5 @@
 """The wear-adaptive monitor live: simulated drilling runs with hidden faults
-(:func:`cnctwin.usecases.trials.fault_trial`, the fault hole and its size drawn from a seeded
+(:func:`cnctwin.validation.trials.fault_trial`, the fault hole and its size drawn from a seeded
 generator the detector never sees) replayed through the edge runtime, against the batch
 ``backtest`` of the same detector on the same recording and against the simulator's onset.
 
@@ -30,7 +30,7 @@ from cnctwin.exceptions import ConfigError
 from cnctwin.spindle import SpindleModel
 from cnctwin.usecases.holes import hole_record
 from cnctwin.usecases.monitoring import WearAdaptiveDetector
-from cnctwin.usecases.trials import fault_trial
+from cnctwin.validation.trials import fault_trial
 
 from ._memsink import MemorySink
 

@@ -1,4 +1,4 @@
-"""The position-loop section of the demo report (cnctwin.servo.report).
+"""The position-loop section of the demo report (cnctwin.validation.servo_section).
 
 Hidden loop parameters are drawn by the simulator (scenarios.random_loop_overrides); the section
 identifies X1/Y1 from the recording and prints the comparison. Issue #5 tolerances: Kv within
@@ -12,7 +12,7 @@ import re
 import pytest
 
 from cnctwin.report import Report
-from cnctwin.servo.report import position_loop_section
+from cnctwin.validation.servo_section import position_loop_section
 
 
 class _Ctx:

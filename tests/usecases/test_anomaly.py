@@ -14,7 +14,6 @@ import pytest
 
 from cnctwin import ConfigError
 from cnctwin.usecases.anomaly import (
-    DETECTORS,
     Detector,
     EnvelopeDetector,
     PhysicsResidualDetector,
@@ -22,6 +21,7 @@ from cnctwin.usecases.anomaly import (
     TappingDetector,
     backtest,
 )
+from cnctwin.usecases.monitoring import DETECTORS
 
 FS = 500.0
 

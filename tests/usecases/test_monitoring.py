@@ -136,7 +136,7 @@ def test_expected_stream_and_errors() -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("monitor", ["adaptive", "physics"])
 def test_drilling_faults_at_hidden_times_adaptive(monitor: str) -> None:
-    from cnctwin.usecases.trials import fault_trial, summarize_trials
+    from cnctwin.validation.trials import fault_trial, summarize_trials
 
     for kind, max_delay_s in (("breakage", 0.05), ("hardness", 0.5), ("none", None)):
         trials = [fault_trial(kind, s, monitor=monitor) for s in range(4)]
@@ -151,7 +151,7 @@ def test_drilling_faults_at_hidden_times_adaptive(monitor: str) -> None:
 
 @pytest.mark.slow
 def test_whole_tool_life_compressed_no_false_alarm_where_envelope_fails() -> None:
-    from cnctwin.usecases.trials import fault_free_run
+    from cnctwin.validation.trials import fault_free_run
 
     # the thesis wear curve (to ~277 µm, +28 % torque) compressed into 300 holes, fault-free
     res = fault_free_run(11, n_holes=300, compress_life=True,

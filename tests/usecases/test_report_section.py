@@ -1,4 +1,4 @@
-"""The use-case section of the demo report (cnctwin.usecases.report), quick mode.
+"""The use-case section of the demo report (cnctwin.validation.usecases_section), quick mode.
 
 The section simulates a 120-hole wear run with the wear curve compressed, a loose tap at a hidden
 hole and drilling faults at hidden times, and shows the analysis beside the hidden truth. The
@@ -15,7 +15,7 @@ from typing import Any
 import pytest
 
 from cnctwin.report import Report
-from cnctwin.usecases.report import use_cases_section
+from cnctwin.validation.usecases_section import use_cases_section
 
 
 class _Ctx:

@@ -14,7 +14,7 @@ import pytest
 
 from cnctwin.sim.faults import LooseTool, loose_tool_signature
 from cnctwin.usecases.figures import plot_loose_tap
-from cnctwin.usecases.trials import (
+from cnctwin.validation.trials import (
     fault_free_run,
     fault_trial,
     loose_tap_trial,

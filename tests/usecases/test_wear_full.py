@@ -2,7 +2,7 @@
 
 Runs the whole run once (~30-45 s of simulation into a Parquet chunk directory under
 tmp_path, plus ~10-30 s for the windowed hole record; memory stays near 1 GB) and scores the
-analysis against the truth with :func:`cnctwin.usecases.wearcheck.validate_wear`. The numbers
+analysis against the truth with :func:`cnctwin.validation.wearcheck.validate_wear`. The numbers
 measured for seed 1 are in docs/validation-usecases.md (written by
 scripts/validate_wear_full.py); the tolerances below are what the assertions allow.
 """
@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 
 from cnctwin.sim.scenarios import tool_wear_run
-from cnctwin.usecases.wearcheck import WearValidation, hole_record_chunked, validate_wear
+from cnctwin.validation.wearcheck import WearValidation, hole_record_chunked, validate_wear
 
 pytestmark = pytest.mark.slow
 

@@ -21,7 +21,7 @@ import pytest
 from cnctwin.iotools import read_recording
 from cnctwin.sim.scenarios import tool_wear_run
 from cnctwin.usecases.holes import hole_record
-from cnctwin.usecases.wearcheck import WearValidation, validate_wear
+from cnctwin.validation.wearcheck import WearValidation, validate_wear
 
 pytestmark = pytest.mark.slow
 

@@ -36,14 +36,13 @@ import numpy as np
 from cnctwin.exceptions import IdentificationError
 from cnctwin.machine import FeedAxis, Machine, ParameterRecord, Provenance
 from cnctwin.recording import Recording
-from cnctwin.servo import AxisIdentification, identify_axis
+from cnctwin.servo import AxisIdentification, identify_axis, moving_axes
 
 __all__ = [
     "JERK_FILTER_MD32402",
     "REL_FLOOR",
     "AxesCalibration",
     "calibrate_axes",
-    "moving_axes",
 ]
 
 JERK_FILTER_MD32402: dict[str, int] = {"none": 0, "pt2": 1, "moving_average": 2,
@@ -84,29 +83,6 @@ class AxesCalibration:
     records: dict[str, ParameterRecord] = field(default_factory=dict)
     identifications: dict[str, list[AxisIdentification]] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
-
-
-def moving_axes(rec: Recording, *, min_travel: float = 0.05) -> list[str]:
-    """Axes whose DES_POS and actual position are recorded and whose setpoint moves.
-
-    The actual position is ``ENC_POS`` or, in a servo trace, ``ENC1_POS`` / ``ENC2_POS``.
-
-    Parameters
-    ----------
-    rec : Recording
-    min_travel : float, default 0.05
-        Smallest setpoint travel that counts as moving [mm or deg].
-    """
-    out = []
-    for ax in rec.axes:
-        has_enc = any(rec.has(code, ax) for code in ("ENC_POS", "ENC1_POS", "ENC2_POS"))
-        if not (rec.has("DES_POS", ax) and has_enc):
-            continue
-        v = rec.signal("DES_POS", ax).to_numpy(dtype=np.float64)
-        v = v[np.isfinite(v)]
-        if v.size and float(np.ptp(v)) >= min_travel:
-            out.append(ax)
-    return out
 
 
 def _pool(values: list[tuple[float, float]]) -> tuple[float, float]:

@@ -34,19 +34,19 @@ import time
 import traceback
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 
+from cnctwin.validation.context import DemoContext
+
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
     from rich.console import Console
 
     from cnctwin.recording import Recording
-    from cnctwin.report import Report
     from cnctwin.sim.scenarios import ScenarioResult
     from cnctwin.twin import TwinChain
 
@@ -68,54 +68,6 @@ THESIS_TABLE_4_1 = pd.DataFrame(
 """Thesis Table 4.1 (measured current, measured and predicted mean cutting torque, error)."""
 
 _MATERIAL_LABEL = {"aisi1045": "Steel", "grey_cast_iron": "Cast iron"}
-
-
-@dataclass
-class DemoContext:
-    """What a report-section builder gets.
-
-    Attributes
-    ----------
-    out_dir : Path
-        Output directory (the report is ``out_dir / "report.html"``).
-    seed : int
-        Random seed of the campaign.
-    quick : bool
-        Quick mode (fewer speeds, shorter runs): builders should scale their work down.
-    report : Report
-        The report to add sections to.
-    console : rich.console.Console
-        Terminal output.
-    sweep, warm_up, cold, warm : ScenarioResult
-        Air-cut sweep, warm-up, drilling validation cold (calibration) and after the warm-up
-        drift (validation).
-    chains : dict of str to TwinChain
-        Calibrated chains by name (``'thesis'``, ``'improved'``), already run on ``warm``.
-    drift_k : float
-        Temperature offset of the warm validation [K].
-    timings : dict of str to float
-        Wall time per step [s].
-    extra : dict
-        Free space for builders to share results.
-    """
-
-    out_dir: Path
-    seed: int
-    quick: bool
-    report: Report
-    console: Console
-    sweep: ScenarioResult | None = None
-    warm_up: ScenarioResult | None = None
-    cold: ScenarioResult | None = None
-    warm: ScenarioResult | None = None
-    chains: dict[str, TwinChain] = field(default_factory=dict)
-    drift_k: float = 15.0
-    timings: dict[str, float] = field(default_factory=dict)
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    def progress(self, text: str) -> None:
-        """Print a progress line."""
-        self.console.log(text)
 
 
 SectionBuilder = Callable[[DemoContext], None]
@@ -577,14 +529,14 @@ SPINDLE_SECTIONS: list[SectionBuilder] = [
 
 def section_position_loop(ctx: DemoContext) -> None:
     """Position-loop section (issue #5); imported lazily to keep ``cnctwin --help`` fast."""
-    from cnctwin.servo.report import position_loop_section
+    from cnctwin.validation.servo_section import position_loop_section
 
     position_loop_section(ctx)
 
 
 def section_use_cases(ctx: DemoContext) -> None:
     """Use-case section (issue #6); imported lazily to keep ``cnctwin --help`` fast."""
-    from cnctwin.usecases.report import use_cases_section
+    from cnctwin.validation.usecases_section import use_cases_section
 
     use_cases_section(ctx)
 

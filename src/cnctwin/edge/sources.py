@@ -93,7 +93,7 @@ class ReplaySource:
         if speed is not None and speed < 0:
             raise ConfigError(f"speed must be >= 0 (0 = as fast as possible), not {speed}")
         if not isinstance(recording, Recording):
-            from cnctwin import read_recording
+            from cnctwin.iotools import read_recording
 
             recording = read_recording(recording)
         self.recording = recording

@@ -23,17 +23,21 @@ from cnctwin.machine.file import (
     parameter_unit,
     save_machine,
 )
+from cnctwin.machine.tools import Drill, EndMill, Tap
 
 __all__ = [
     "KV_UNIT_PER_S",
     "SCHEMA",
     "SCHEMA_VERSION",
+    "Drill",
+    "EndMill",
     "FeedAxis",
     "Machine",
     "MachineFile",
     "ParameterRecord",
     "Provenance",
     "SpindleMotor",
+    "Tap",
     "dynamic_response_adaptation_times",
     "load_machine",
     "parameter_unit",

@@ -14,6 +14,7 @@ they run unchanged on real Capture4Analysis files and servo traces.
 
 from __future__ import annotations
 
+from cnctwin.servo._common import moving_axes
 from cnctwin.servo.geometry import CircleResult, ContourErrorResult, circle_test, contour_error
 from cnctwin.servo.identify import (
     JERK_FILTER_TYPES,
@@ -48,5 +49,6 @@ __all__ = [
     "circle_test",
     "contour_error",
     "identify_axis",
+    "moving_axes",
     "prediction_residual",
 ]

@@ -25,6 +25,7 @@ __all__ = [
     "derivative",
     "detect_velocity_unit",
     "moving_average",
+    "moving_axes",
     "pt1",
     "pt2",
     "quantum",
@@ -450,3 +451,26 @@ def pt2(x: FloatArray, time_cycles: float, damping: float) -> FloatArray:
     zi = np.array([(b[1] - a[1]) * x[0] + z1, z1])
     y, _ = sps.lfilter(b, a, x, zi=zi)
     return np.asarray(y, dtype=np.float64)
+
+
+def moving_axes(rec: Recording, *, min_travel: float = 0.05) -> list[str]:
+    """Axes whose DES_POS and actual position are recorded and whose setpoint moves.
+
+    The actual position is ``ENC_POS`` or, in a servo trace, ``ENC1_POS`` / ``ENC2_POS``.
+
+    Parameters
+    ----------
+    rec : Recording
+    min_travel : float, default 0.05
+        Smallest setpoint travel that counts as moving [mm or deg].
+    """
+    out = []
+    for ax in rec.axes:
+        has_enc = any(rec.has(code, ax) for code in ("ENC_POS", "ENC1_POS", "ENC2_POS"))
+        if not (rec.has("DES_POS", ax) and has_enc):
+            continue
+        v = rec.signal("DES_POS", ax).to_numpy(dtype=np.float64)
+        v = v[np.isfinite(v)]
+        if v.size and float(np.ptp(v)) >= min_travel:
+            out.append(ax)
+    return out

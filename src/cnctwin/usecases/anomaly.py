@@ -19,7 +19,8 @@ Detectors
 ``TappingDetector``
     The loose tap of thesis Figure 5.10: fluctuation of spindle current and Z following error
     while the spindle runs in reverse (extraction), relative to the learned level.
-``WearAdaptiveDetector`` (:mod:`cnctwin.usecases.monitoring`)
+``WearAdaptiveDetector`` (:mod:`cnctwin.usecases.monitoring`, which also lists every detector
+class in ``DETECTORS``)
     Torque band around a teach-in profile or the physics-predicted torque, scaled by a wear
     index tracked per hole at a bounded rate (no false alarms over a tool life, from part 1).
 
@@ -47,7 +48,6 @@ if TYPE_CHECKING:
     from cnctwin.recording import Recording
 
 __all__ = [
-    "DETECTORS",
     "BacktestResult",
     "Detector",
     "EnvelopeDetector",
@@ -821,24 +821,3 @@ def signal_stream(
         data = data[data["hole"] >= 0].reset_index(drop=True)
     data.attrs["issues"] = issues
     return data
-
-
-DETECTORS: tuple[type[Detector], ...]
-"""Every detector class (built on first access by the module ``__getattr__``)."""
-
-
-def __getattr__(name: str) -> Any:
-    """``DETECTORS``: every detector class, the conformance tests run on each.
-
-    Built on first access because :mod:`cnctwin.usecases.monitoring` subclasses
-    :class:`Detector` from this module (a module-level tuple would be a circular import).
-    """
-    if name == "DETECTORS":
-        from cnctwin.usecases.monitoring import WearAdaptiveDetector
-
-        detectors: tuple[type[Detector], ...] = (
-            PhysicsResidualDetector, EnvelopeDetector, SpectralDetector, TappingDetector,
-            WearAdaptiveDetector,
-        )
-        return detectors
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

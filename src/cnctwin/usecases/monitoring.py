@@ -40,9 +40,16 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from cnctwin.exceptions import ConfigError, SignalNotFoundError
-from cnctwin.usecases.anomaly import Detector
+from cnctwin.usecases.anomaly import (
+    Detector,
+    EnvelopeDetector,
+    PhysicsResidualDetector,
+    SpectralDetector,
+    TappingDetector,
+)
 
 __all__ = [
+    "DETECTORS",
     "KIENZLE_PARAMETERS",
     "WearAdaptiveDetector",
     "drilling_torque_nm",
@@ -399,3 +406,10 @@ class WearAdaptiveDetector(Detector):
     @classmethod
     def _unit_test_params(cls) -> dict[str, Any]:
         return {"signal": "current_a", "n_bins": 10, "smoothing": 5.0}
+
+
+DETECTORS: tuple[type[Detector], ...] = (
+    PhysicsResidualDetector, EnvelopeDetector, SpectralDetector, TappingDetector,
+    WearAdaptiveDetector,
+)
+"""Every detector class (the conformance tests run on each)."""

@@ -31,7 +31,7 @@ the axis' dynamic compliance (:func:`feed_axis_dynamic_stiffness`):
 With the axis description (``machine``) the amplitudes become forces (amplitude x dynamic
 stiffness); with the drill (``drill``) tool-tip estimates follow: hole position error
 F_entry / k_tip, orbit radius runout + F_rot / (g k_tip), oversize twice that
-(:class:`cnctwin.sim.tool.Drill`).
+(:class:`cnctwin.machine.tools.Drill`).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ from cnctwin.recording import Recording
 
 if TYPE_CHECKING:
     from cnctwin.machine import FeedAxis, Machine
-    from cnctwin.sim.tool import Drill
+    from cnctwin.machine.tools import Drill
 
 __all__ = [
     "AxisStiffness",
@@ -345,7 +345,7 @@ def hole_runout(
         Axial length of the drill point (D/2)/tan(sigma/2) [mm]; default 8.5 mm, 140 deg.
     machine : cnctwin.machine.Machine, optional
         Axis description: adds force estimates (amplitude x :func:`feed_axis_dynamic_stiffness`).
-    drill : cnctwin.sim.tool.Drill, optional
+    drill : cnctwin.machine.tools.Drill, optional
         With ``machine``: tool-tip estimates from the drill's tip stiffness and run-out.
     axes : (str, str, str)
         Lateral X, lateral Y and drilling axis.

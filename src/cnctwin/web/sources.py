@@ -204,7 +204,7 @@ class Catalog:
         self.store_url = store_url
         self.store: Any = None
         if store_url is not None:
-            from cnctwin import store as store_mod
+            import cnctwin.store as store_mod
 
             try:
                 self.store = store_mod.open(store_url, create=False)

@@ -20,8 +20,8 @@ import pandas as pd
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from cnctwin.cli.demo import DemoContext
-    from cnctwin.usecases.wearcheck import WearValidation
+    from cnctwin.validation.context import DemoContext
+    from cnctwin.validation.wearcheck import WearValidation
 
 __all__ = ["plot_wear_estimate", "use_cases_section"]
 
@@ -69,7 +69,7 @@ def _wear_part(ctx: DemoContext, sec: Any) -> None:
     from cnctwin.usecases.quality import deviation_paths, hole_quality
     from cnctwin.usecases.thermal import ToolThermalModel, merge_camera
     from cnctwin.usecases.wear import set_pattern
-    from cnctwin.usecases.wearcheck import validate_wear
+    from cnctwin.validation.wearcheck import validate_wear
 
     n = 120 if ctx.quick else 240
     ov = {"wear.n_end": float(n), "wear.run_in_holes": 40.0 * n / 2676,
@@ -118,7 +118,7 @@ def _wear_part(ctx: DemoContext, sec: Any) -> None:
                caption="Wear estimate: relative increase of the set-mean cutting torque mapped "
                        "to flank wear on 5 measured holes; remaining-life forecast to the limit")
     sec.table(v.table(), caption="Wear, trend, pattern, forecast and soft sensor against the "
-                                 "hidden truth (cnctwin.usecases.wearcheck.validate_wear)")
+                                 "hidden truth (cnctwin.validation.wearcheck.validate_wear)")
     merged = merge_camera(holes, cam)
     camt = merged["camera_temperature_c"].to_numpy(dtype=np.float64)
     calib = np.where(np.arange(len(holes)) < 24, camt, np.nan)
@@ -149,7 +149,7 @@ def _wear_part(ctx: DemoContext, sec: Any) -> None:
 
 def _anomaly_part(ctx: DemoContext, sec: Any) -> None:
     from cnctwin.usecases.figures import plot_anomaly_scores, plot_loose_tap
-    from cnctwin.usecases.trials import (
+    from cnctwin.validation.trials import (
         DRILLING_MONITORS,
         fault_trial,
         loose_tap_trial,
@@ -201,7 +201,7 @@ def _anomaly_part(ctx: DemoContext, sec: Any) -> None:
                            "onset, red: alarms")
     sec.table(summarize_trials(trials),
               caption="Backtest over simulated faults at hidden, seeded times "
-                      "(cnctwin.usecases.trials): detection delay, misses, false alarms per "
+                      "(cnctwin.validation.trials): detection delay, misses, false alarms per "
                       "hour of fault-free scored time")
     rows = []
     for m in DRILLING_MONITORS:

@@ -18,7 +18,7 @@ from cnctwin.servo.identify import identify_axis
 from cnctwin.servo.predict import AxisLoopModel, prediction_residual
 
 if TYPE_CHECKING:
-    from cnctwin.cli.demo import DemoContext
+    from cnctwin.validation.context import DemoContext
 
 __all__ = ["position_loop_section"]
 
