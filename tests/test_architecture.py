@@ -97,4 +97,4 @@ def test_the_graph_sees_function_level_imports() -> None:
     # usecases.trials moved to the validation layer: its lazy simulator imports are edges
     assert "cnctwin.sim.scenarios" in g["cnctwin.validation.trials"]
     with pytest.raises(KeyError):
-        g["cnctwin.usecases.trials"]  # noqa: B018
+        g["cnctwin.usecases.trials"]
