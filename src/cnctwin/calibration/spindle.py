@@ -205,9 +205,12 @@ def calibrate_spindle(
     from cnctwin.analysis.segments import speed_plateaus
     from cnctwin.spindle import air_cut_statistics
 
-    stats = pd.concat([air_cut_statistics(r, speed_plateaus(r, spindle=spindle),
-                                          spindle=spindle) for r in air_cuts],
-                      ignore_index=True)
+    parts = []
+    for r in air_cuts:
+        pl = speed_plateaus(r, spindle=spindle)
+        if not pl.empty:
+            parts.append(air_cut_statistics(r, pl, spindle=spindle))
+    stats = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame({"speed_rpm": []})
     n_air = len(air_cuts)
     air_names = list(recording_names)[:n_air]
     check_air_cut_plateaus(stats, method=method, source="the air cut" + (
