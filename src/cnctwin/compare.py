@@ -210,7 +210,8 @@ def _spans(bad: np.ndarray, t: np.ndarray, cycles: np.ndarray, resid: np.ndarray
 
 
 def _compare_axis(rec: Recording, mf: MachineFile, name: str, *, residual_limit: float,
-                  k_sigma: float, rel_floor: float, n_bootstrap: int) -> AxisComparison:
+                  k_sigma: float, rel_floor: float, n_bootstrap: int,
+                  parameters: bool = True) -> AxisComparison:
     ax = mf.machine.axis(name)
     dt = mf.machine.cycle_time_s
     d = axis_data(rec, name)
@@ -273,10 +274,12 @@ def _compare_axis(rec: Recording, mf: MachineFile, name: str, *, residual_limit:
             cur_ratio = float(np.sqrt(np.mean((i_meas[ok] - i_pred[ok]) ** 2)) / rms_i)
     # parameters the recording shows against the twin's
     params: dict[str, dict[str, float]] = {}
-    try:
-        ident: AxisIdentification | None = identify_axis(rec, name, n_bootstrap=n_bootstrap)
-    except IdentificationError:
-        ident = None
+    ident: AxisIdentification | None = None
+    if parameters:
+        try:
+            ident = identify_axis(rec, name, n_bootstrap=n_bootstrap)
+        except IdentificationError:
+            ident = None
     if ident is not None:
         per_force = ax.motor_torque_per_load_force
         checks = [("kv_m_min_per_mm", "kv_m_min_mm", 1.0)]
@@ -381,6 +384,7 @@ def compare_recording(
     rel_floor: float = 0.05,
     spindle_limit: float = 0.05,
     n_bootstrap: int = 100,
+    parameters: bool = True,
 ) -> MachineComparison:
     """Compare a recording with the twin of the machine file.
 
@@ -403,6 +407,9 @@ def compare_recording(
         Largest mean relative departure of the spindle's air current.
     n_bootstrap : int, default 100
         Bootstrap resamples of the parameter check.
+    parameters : bool, default True
+        Also identify Kv and friction on the recording and compare them with the file's
+        (the costly part: one loop identification per axis).
 
     Returns
     -------
@@ -426,7 +433,7 @@ def compare_recording(
         try:
             out[a] = _compare_axis(rec, machine_file, a, residual_limit=residual_limit,
                                    k_sigma=k_sigma, rel_floor=rel_floor,
-                                   n_bootstrap=n_bootstrap)
+                                   n_bootstrap=n_bootstrap, parameters=parameters)
         except IdentificationError as exc:
             skipped[a] = str(exc)
     spindle = _compare_spindle(rec, machine_file, rel_limit=spindle_limit)

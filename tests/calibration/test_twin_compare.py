@@ -12,6 +12,7 @@ One hidden machine (seed 101) is calibrated from its campaign; then
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 from typing import Any
@@ -158,3 +159,28 @@ def test_dashboard_compares_a_recording_with_the_twin(calibrated: tuple[Path, di
         assert page.status_code == 200 and "holds" in page.text
         assert "departs</b>" not in page.text
         assert "compare with the calibrated twin" in client.get(f"/recordings/{rid}").text
+
+
+def test_edge_runtime_compares_live_with_the_twin(calibrated: tuple[Path, dict[str, Any]]
+                                                  ) -> None:
+    """``twin`` results of ``cnctwin edge run --machine``: Y1 Coulomb x 1.5 is flagged in the
+    windows where Y1 moves, X1 never; every window says which cycles it covers."""
+    d, hidden = calibrated
+    worn = d / "edge_worn"
+    y1 = "axes.Y1.coulomb_n"
+    assert cli("simulate", "axis_test", "--out", worn, "--seed", SEED + 3,
+               *sets({**hidden, y1: round(float(load_machine(d / "machine.toml").value(y1))
+                                          * 1.5, 3)}),
+               "--option", 'axes=["X1", "Y1"]') == 0
+    out = d / "edge_twin"
+    assert cli("edge", "run", "--source", worn / "axis_test.json", "--machine",
+               d / "machine.toml", "--out", out, "--no-anomaly", "--no-holes",
+               "--twin-window-s", "20") == 0
+    twins = [json.loads(x) for x in (out / "results.jsonl").read_text().splitlines()
+             if '"kind":"twin"' in x.replace(" ", "")]
+    assert len(twins) >= 3
+    covered = sorted((t["first_cycle"], t["n"]) for t in twins)
+    for (a, n), (b, _) in itertools.pairwise(covered):
+        assert a + n == b  # windows back to back: every cycle compared once
+    assert any("Y1" in t["flagged"] for t in twins)
+    assert not any("X1" in t["flagged"] for t in twins)

@@ -59,6 +59,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    help="JSON {datapoint name: column} for the Databus (CURRENT|SP1, "
                    "CMD_SPEED|SP1, DES_POS|Z1, ..., CYCLE)")
     r.add_argument("--no-holes", action="store_true", help="skip the per-hole record")
+    r.add_argument("--no-twin", action="store_true",
+                   help="with --machine FILE.toml: skip the live comparison with the twin")
+    r.add_argument("--twin-window-s", type=float, default=30.0, metavar="S",
+                   help="window of the live twin comparison ('twin' results) [s] (30)")
     r.add_argument("--no-anomaly", action="store_true", help="skip the anomaly detector")
     r.add_argument("--detector", choices=("physics", "tapping", "spectral", "adaptive",
                                           "physics-torque"), default="physics",
@@ -152,7 +156,7 @@ def _build(args: argparse.Namespace) -> Any:
         parse_mqtt_url,
     )
 
-    machine_name, model = _machine_and_model(args)
+    machine_name, model, machine_file = _machine_and_model(args)
     args.machine = machine_name
     src: Any
     if args.source.startswith(("mqtt://", "tcp://")):
@@ -196,6 +200,10 @@ def _build(args: argparse.Namespace) -> Any:
             kw = {"learn_s": 0.0, "material": args.material, "diameter_mm": args.drill_mm,
                   "point_angle_deg": args.point_angle_deg}
         procs.append(AnomalyProcessor(det, model=model, **kw))
+    if machine_file is not None and not args.no_twin:
+        from cnctwin.edge.processors import TwinCompareProcessor
+
+        procs.append(TwinCompareProcessor(machine_file, window_s=args.twin_window_s))
     out: Path = args.out
     sinks: list[Any] = [JsonLinesSink(out / "results.jsonl")]
     if args.publish:
@@ -213,13 +221,13 @@ def _build(args: argparse.Namespace) -> Any:
     return EdgeRuntime(src, procs, sinks, state_dir=out, machine=machine)
 
 
-def _machine_and_model(args: argparse.Namespace) -> tuple[str, Any]:
+def _machine_and_model(args: argparse.Namespace) -> tuple[str, Any, Any]:
     """The machine name and the spindle model from ``--machine`` and ``--model``.
 
     ``--machine`` naming a ``.toml`` file (or an existing file) is the machine file: its name
     and its calibrated spindle (:meth:`SpindleModel.from_machine`) are used; ``--model``, if
     also given, replaces the spindle model. Otherwise ``--machine`` is a name and ``--model``
-    is required.
+    is required. The third value is the machine file (None for a name).
     """
     from cnctwin.edge import load_spindle_model
     from cnctwin.spindle import SpindleModel
@@ -230,16 +238,16 @@ def _machine_and_model(args: argparse.Namespace) -> tuple[str, Any]:
 
         mf = load_machine(value)
         if args.model is not None:
-            return mf.machine.name, load_spindle_model(args.model)
+            return mf.machine.name, load_spindle_model(args.model), mf
         if not mf.is_identified("spindle.kt_nm_per_a"):
             raise ConfigError(f"{value}: the spindle is not calibrated (spindle.kt_nm_per_a has "
                               "no provenance); run 'cnctwin calibrate spindle ... --machine "
                               f"{value}' first or give --model")
-        return mf.machine.name, SpindleModel.from_machine(mf)
+        return mf.machine.name, SpindleModel.from_machine(mf), mf
     if args.model is None:
         raise ConfigError("give --machine FILE.toml (a calibrated machine file) or --model "
                           "spindle.json")
-    return value, load_spindle_model(args.model)
+    return value, load_spindle_model(args.model), None
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -38,6 +38,8 @@ RESULT_KINDS: dict[str, str] = {
     "hole_start": "a plunge of the drilling axis began (first downward Z motion)",
     "hole": "a hole is complete: its row of cnctwin.usecases.holes.hole_record",
     "alarm": "an anomaly score crossed its threshold upward",
+    "twin": "a window of the stream against the calibrated twin (cnctwin.compare): residual "
+            "ratio and departures per axis",
     "gap": "the CYCLE counter jumped: cycles missing (never invented)",
     "status": "runtime status (rates, lag, counts, queue, gaps)",
 }

@@ -8,6 +8,8 @@ Each processor wraps an existing analysis instead of re-implementing it:
   bounded buffer that starts after the previous hole.
 * :class:`AnomalyProcessor`: any detector of :mod:`cnctwin.usecases.anomaly` (learn one / score
   one), taught on the first ``learn_s`` of the stream, then scoring.
+* :class:`TwinCompareProcessor`: :func:`cnctwin.compare.compare_recording` on consecutive
+  windows of the stream (the machine against its calibrated twin, live).
 """
 
 from __future__ import annotations
@@ -23,12 +25,13 @@ from numpy.typing import NDArray
 from cnctwin.edge.cut import CutTracker
 from cnctwin.edge.pipeline import Chunk, Result
 from cnctwin.exceptions import ConfigError
+from cnctwin.machine import MachineFile
 from cnctwin.recording import CounterGap, Recording, RecordingMeta, empty_events
 from cnctwin.spindle import SpindleModel, StreamingTorqueEstimator
 from cnctwin.usecases.anomaly import Detector, PhysicsResidualDetector
 from cnctwin.usecases.holes import HOLE_COLUMNS
 
-__all__ = ["AnomalyProcessor", "HoleProcessor", "TorqueProcessor"]
+__all__ = ["AnomalyProcessor", "HoleProcessor", "TorqueProcessor", "TwinCompareProcessor"]
 
 
 class TorqueProcessor:
@@ -609,3 +612,84 @@ class AnomalyProcessor:
 
     def finish(self) -> list[Result]:
         return self._release()
+
+
+class TwinCompareProcessor:
+    """The machine against its calibrated twin, window by window (``twin`` results).
+
+    Buffers the stream and runs :func:`cnctwin.compare.compare_recording` (the same
+    comparison as ``cnctwin twin compare``) on each window of ``window_s`` in which an axis of
+    the machine file moves; a counter gap ends the window (the twin is restarted from the
+    measured position after it, never bridged). Each result carries the window's cycle range
+    (``first_cycle``, ``n``) and, per axis, the residual ratio, ``flagged`` and the reasons.
+
+    Parameters
+    ----------
+    machine_file : MachineFile
+        The calibrated machine (``cnctwin calibrate``).
+    window_s : float, default 30
+        Window length [s].
+    parameters : bool, default True
+        Also check Kv and friction against the file's (one loop identification per axis and
+        window).
+    n_bootstrap : int, default 30
+        Bootstrap resamples of that check.
+    """
+
+    name = "twin"
+
+    def __init__(self, machine_file: MachineFile, *, window_s: float = 30.0,
+                 parameters: bool = True, n_bootstrap: int = 30) -> None:
+        if not window_s > 1.0:
+            raise ConfigError(f"window_s must be > 1 s, got {window_s}")
+        self.machine_file = machine_file
+        self.window_s = window_s
+        self.parameters = parameters
+        self.n_bootstrap = n_bootstrap
+        self.windows = 0
+        self.issues: list[str] = []
+        self._parts: list[Chunk] = []
+        self._n = 0
+        self._dt = machine_file.machine.cycle_time_s
+
+    def _window(self) -> list[Result]:
+        from cnctwin.compare import compare_recording
+
+        parts, self._parts, self._n = self._parts, [], 0
+        if not parts:
+            return []
+        cyc = np.concatenate([q.cycles for q in parts])
+        cols = sorted({c for q in parts for c in q.signals})
+        data = {c: np.concatenate([q.signals.get(c, np.full(len(q), np.nan)) for q in parts])
+                for c in cols}
+        hf = pd.DataFrame(data, index=pd.Index(cyc, name="cycle"))
+        hf.insert(0, "time", pd.to_datetime(np.concatenate([q.time_ns for q in parts]),
+                                            unit="ns", utc=True))
+        rec = Recording(hf, meta=RecordingMeta(machine=parts[0].machine,
+                                               cycle_time_s=parts[0].cycle_time_s,
+                                               source_format="edge"))
+        cmp = compare_recording(rec, self.machine_file, parameters=self.parameters,
+                                n_bootstrap=self.n_bootstrap)
+        if not cmp.axes:
+            return []
+        self.windows += 1
+        doc = cmp.to_dict()
+        for a in doc["axes"].values():
+            a.pop("spans", None)
+        return [Result("twin", int(cyc[0]), {
+            "first_cycle": int(cyc[0]), "n": int(cyc.size), "axes": doc["axes"],
+            "spindle": doc["spindle"], "flagged": doc["flagged"], "skipped": doc["skipped"]})]
+
+    def process(self, chunk: Chunk) -> list[Result]:
+        self._parts.append(chunk)
+        self._n += len(chunk)
+        self._dt = chunk.cycle_time_s
+        if self._n * self._dt >= self.window_s:
+            return self._window()
+        return []
+
+    def gap(self, gap: CounterGap) -> list[Result]:
+        return self._window()
+
+    def finish(self) -> list[Result]:
+        return self._window() if self._n * self._dt >= 1.0 else []
