@@ -24,6 +24,7 @@ __all__ = [
     "FormatError",
     "GCodeError",
     "IdentificationError",
+    "NotScoredError",
     "SignalNotFoundError",
     "StoreError",
     "TruncatedFileError",
@@ -132,6 +133,11 @@ def _rebuild_gcode_error(message: str, line: int, text: str | None) -> GCodeErro
 
 class IdentificationError(CnctwinError, RuntimeError):
     """The data cannot support the requested estimate; the message says why and what is needed."""
+
+
+class NotScoredError(CnctwinError, ValueError):
+    """An analysis cannot judge its input (a needed signal missing or not finite); the
+    message says which and why, instead of a score of 0 that looks like "no alarm"."""
 
 
 class StoreError(CnctwinError, RuntimeError):

@@ -127,3 +127,32 @@ def test_cli_on_real_files(capsys: pytest.CaptureFixture[str]) -> None:
     out = capsys.readouterr().out
     assert "spindle speed NaN" in out
     assert "band_hz=(0.4, 4.8)" in out
+
+
+@pytest.mark.parametrize(("detector", "needs"), [
+    ("physics", "predicted_current_a"),
+    ("tapping", "speed_rpm"),
+])
+def test_a_detector_without_its_input_says_not_scored(
+        detector: str, needs: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """UMich records no spindle speed the reader maps: physics and tapping cannot judge it.
+    Before, both returned a score of exactly 0 on every sample and reported '0 alarms'."""
+    exp1 = REAL / "umich-cnc-mill" / "experiment_01.csv"
+    code = main(["anomalies", str(exp1), "--detector", detector])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "not scored" in err and needs in err and "spindle speed" in err
+    assert "alarms" not in err and "Traceback" not in err
+
+
+def test_replay_refuses_a_stream_without_a_needed_input() -> None:
+    import numpy as np
+
+    from cnctwin.exceptions import NotScoredError
+    from cnctwin.usecases.replay import _check_inputs, make_detector
+
+    data = pd.DataFrame({"current_a": np.ones(10), "predicted_current_a": np.full(10, np.nan)})
+    with pytest.raises(NotScoredError, match="predicted_current_a"):
+        _check_inputs(make_detector("physics", fs_hz=500.0), "physics", data)
+    data["predicted_current_a"] = 1.0
+    _check_inputs(make_detector("physics", fs_hz=500.0), "physics", data)  # finite: scored

@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from cnctwin.exceptions import ConfigError
+from cnctwin.exceptions import ConfigError, NotScoredError
 from cnctwin.recording import Recording
 from cnctwin.usecases.anomaly import (
     BacktestResult,
@@ -94,6 +94,37 @@ class DetectorReplay:
     issues: list[str] = field(default_factory=list)
 
 
+_INPUT_SOURCES: dict[str, str] = {
+    "current_a": "the spindle current CURRENT|SP1",
+    "speed_rpm": "the spindle speed (CMD_SPEED|SP1 or the actual speed)",
+    "predicted_current_a": "the twin's air current, which needs the spindle speed",
+    "torque_nm": "the cutting torque of the twin, which needs the spindle speed",
+    "z_error_mm": "the Z following error (DES_POS|Z1 - ENC_POS|Z1)",
+    "progress": "the progress through each cut (the hole record)",
+    "expected_torque_nm": "the predicted cutting torque (the hole record and the feed)",
+}
+
+
+def _check_inputs(det: Detector, name: str, data: pd.DataFrame) -> None:
+    """Refuse to score where a needed input is missing or never finite.
+
+    A detector fed NaN returns a score of 0 on every sample, which reads as "no alarm"; the
+    stream says instead that it was not scored and why.
+    """
+    notes = [str(i).split("; HF columns")[0] for i in data.attrs.get("issues", [])]
+    issues = "; ".join(n if len(n) <= 240 else n[:237] + "..." for n in notes)
+    for col in det.inputs:
+        vals = data[col].to_numpy(dtype=np.float64) if col in data.columns else np.empty(0)
+        n_ok = int(np.isfinite(vals).sum())
+        if n_ok == 0:
+            what = _INPUT_SOURCES.get(col, col)
+            raise NotScoredError(
+                f"not scored: the {name} detector needs {what} ({col}), and the recording "
+                f"has {'none' if col not in data.columns or vals.size == 0 else 'no finite value'}"
+                + (f" ({issues})" if issues else "") + "; choose a detector whose inputs the "
+                "recording has, or record the missing signal")
+
+
 def replay_detector(
     recordings: Sequence[Recording],
     holes: pd.DataFrame | None,
@@ -132,6 +163,8 @@ def replay_detector(
     ------
     ConfigError
         Unknown detector, a detector that needs holes without them, nothing to score.
+    NotScoredError
+        A needed input is missing or never finite (e.g. no spindle speed for ``physics``).
     """
     if detector not in DETECTOR_NAMES:
         raise ConfigError(f"detector {detector!r} is not known; use one of "
@@ -151,6 +184,7 @@ def replay_detector(
         data["expected_torque_nm"] = expected_torque_stream(data, holes, material=material,
                                                             diameter_mm=drill_mm)
     det = make_detector(detector, fs_hz=recordings[0].fs_hz)
+    _check_inputs(det, detector, data)
     t = data["time_s"].to_numpy(dtype=np.float64)
     learn = learn_until_s if learn_until_s is not None else (
         t[0] - 1.0 if detector == "physics-torque" else t[0] + (t[-1] - t[0]) / 3.0)
