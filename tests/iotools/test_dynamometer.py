@@ -123,3 +123,12 @@ def test_attach_external(tmp_path: Path, trace_file: Path) -> None:
     with pytest.raises(ConfigError, match="already has"):
         attach_external(rec2, ch)
     assert attach_external(rec2, ch, replace=True).external["dynamometer"] is ch
+
+
+def test_a_force_without_a_unit_is_not_assumed_to_be_newtons(tmp_path: Path) -> None:
+    """The KIT merged CSV's f_x, f_y, f_z carry no unit (and are ~200x smaller than N):
+    the reader keeps them as fx/fy/fz with the unit 'unknown' (issue 13)."""
+    ch = read_dynamometer_csv(_w(tmp_path, "time,f_x,f_y,f_z,Mz [Nm]\n0,1,2,3,4\n0.02,5,6,7,8\n"))
+    assert list(ch.data.columns) == ["fx", "fy", "fz", "mz_nm"]
+    assert ch.units == {"fx": "unknown", "fy": "unknown", "fz": "unknown", "mz_nm": "N*m"}
+    assert ch.data["fx"].tolist() == [1.0, 5.0]  # not scaled

@@ -108,7 +108,14 @@ def _cmd_spindle(args: argparse.Namespace) -> int:
         if args.dynamometer is not None:
             if not args.dynamometer.exists():
                 raise ConfigError(f"{args.dynamometer}: no such file")
-            ref = attach_external(ref, read_dynamometer_csv(args.dynamometer), replace=True)
+            dyn = read_dynamometer_csv(args.dynamometer)
+            if "mz_nm" not in dyn.data.columns:
+                unknown = [c for c in dyn.data.columns if dyn.units.get(c) == "unknown"]
+                raise ConfigError(
+                    f"{args.dynamometer}: no torque column in N*m"
+                    + (f" (the header gives {unknown} without a unit)" if unknown else "")
+                    + "; state the unit in the header, e.g. 'Mz [Nm]', or give --torque-nm")
+            ref = attach_external(ref, dyn, replace=True)
         warm = _read(args.warm_up) if args.warm_up is not None else None
     if args.torque_nm is None and "dynamometer" not in ref.external:
         raise ConfigError(f"{args.reference}: the reference cut has no dynamometer channel; "

@@ -16,7 +16,10 @@ variants are accepted (case-insensitive; delimiter ``,`` ``;`` or tab; decimal c
 
 A unit in brackets or parentheses (or as a ``_n`` / ``_kn`` / ``_nm`` suffix) is converted to
 the canonical unit; an unknown unit raises :class:`~cnctwin.exceptions.FormatError` listing the
-accepted ones. Without a time column the sample rate ``fs_hz`` is required.
+accepted ones. A force or torque header without any unit (``Fx``, ``f_x``) is never taken for
+newtons: the column is kept as ``fx`` / ``fy`` / ``fz`` / ``mz`` with the unit ``"unknown"``
+(:data:`UNKNOWN_UNIT_COLUMNS`); a calibration that needs the torque in N*m then says so.
+Without a time column the sample rate ``fs_hz`` is required.
 
 TDMS (NI DAQ, e.g. Kistler with an NI card): channels are found by the same names in one group;
 time comes from a time channel or from the waveform properties ``wf_increment`` [s] and
@@ -41,6 +44,7 @@ from cnctwin.recording import ExternalChannel, Recording
 
 __all__ = [
     "DYNAMOMETER_COLUMNS",
+    "UNKNOWN_UNIT_COLUMNS",
     "attach_external",
     "read_dynamometer_csv",
     "read_dynamometer_tdms",
@@ -49,11 +53,17 @@ __all__ = [
 DYNAMOMETER_COLUMNS: dict[str, str] = {"fx_n": "N", "fy_n": "N", "fz_n": "N", "mz_nm": "N*m"}
 """Canonical dynamometer columns and their units."""
 
+UNKNOWN_UNIT_COLUMNS: dict[str, str] = {"fx_n": "fx", "fy_n": "fy", "fz_n": "fz", "mz_nm": "mz"}
+"""Column of a force/torque whose header states no unit (its unit is recorded as unknown)."""
+
 _FORCE_SCALE = {"n": 1.0, "kn": 1e3, "mn": 1e-3, "dan": 10.0}
 _TORQUE_SCALE = {"nm": 1.0, "n*m": 1.0, "n.m": 1.0, "n m": 1.0, "n·m": 1.0, "ncm": 1e-2,
                  "nmm": 1e-3, "knm": 1e3}
 _TIME_SCALE = {"s": 1.0, "sec": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "min": 60.0}
 _UNIT_RE = re.compile(r"^\s*(?P<name>.*?)\s*[\[(](?P<unit>[^\])]*)[\])]\s*$")
+
+
+_UNKNOWN = set(UNKNOWN_UNIT_COLUMNS.values())
 
 
 def _split_unit(header: str) -> tuple[str, str | None]:
@@ -103,7 +113,9 @@ def _classify(header: str, *, path: str) -> tuple[str, float] | None:
         if n in {_normalise(a) for a in aliases}:
             table = _TORQUE_SCALE if canon == "mz_nm" else _FORCE_SCALE
             if u is None:
-                return canon, 1.0
+                # no unit stated: kept under the bare name with the unit unknown, never
+                # assumed to be newtons
+                return UNKNOWN_UNIT_COLUMNS[canon], 1.0
             key = u.replace(" ", "") if canon == "mz_nm" else u
             if key not in table and u not in table:
                 raise FormatError(
@@ -171,7 +183,7 @@ def read_dynamometer_csv(
         raise FormatError("empty file", path=spath) from None
     kinds: list[tuple[str, float] | None] = [_classify(h, path=spath) for h in header]
     canon = [k[0] for k in kinds if k is not None]
-    if not any(c in DYNAMOMETER_COLUMNS for c in canon):
+    if not any(c in DYNAMOMETER_COLUMNS or c in _UNKNOWN for c in canon):
         raise FormatError(
             f"no force/torque column found in header {header}; expected e.g. "
             "time_s,fx_n,fy_n,fz_n,mz_nm or Time [s],Fx [N],Fy [N],Fz [N],Mz [Nm]",
@@ -211,7 +223,7 @@ def read_dynamometer_csv(
         else:
             cols[k[0]] = arr[:, j] * k[1]
             if k[0] != "time_s":
-                units[k[0]] = DYNAMOMETER_COLUMNS[k[0]]
+                units[k[0]] = DYNAMOMETER_COLUMNS.get(k[0], "unknown")
     return _channel(cols, units, fs_hz=fs_hz, name=name, source=spath)
 
 
@@ -314,7 +326,7 @@ def read_dynamometer_tdms(
             continue
         cols[k[0]] = values * k[1]
         if k[0] != "time_s":
-            units[k[0]] = DYNAMOMETER_COLUMNS[k[0]]
+            units[k[0]] = DYNAMOMETER_COLUMNS.get(k[0], "unknown")
             if "wf_increment" in ch.properties and inc is None:
                 inc = float(ch.properties["wf_increment"])
                 start = float(ch.properties.get("wf_start_offset", 0.0))
