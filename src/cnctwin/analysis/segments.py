@@ -109,7 +109,8 @@ def spindle_speed_rpm(rec: Recording, spindle: str = "SP1") -> tuple[NDArray[np.
     """Spindle speed on the HF cycles and where it came from.
 
     Uses the HF speed command ``CMD_SPEED|<spindle>`` if present, else the LF smoothed actual
-    speed (``SPEED_SMOOTHED``, r0063) held on the HF rows.
+    speed (``SPEED_SMOOTHED``, r0063) held on the HF rows, else an HF actual speed
+    ``SPEED_ACT|<spindle>`` in rpm (the KIT merged files).
 
     Returns
     -------
@@ -129,6 +130,9 @@ def spindle_speed_rpm(rec: Recording, spindle: str = "SP1") -> tuple[NDArray[np.
     lf = lf_on_hf(rec, "SPEED_SMOOTHED", spindle)
     if lf is not None:
         return lf.to_numpy(dtype=np.float64), f"SPEED_SMOOTHED|{spindle} (LF)"
+    act = f"SPEED_ACT|{spindle}"
+    if rec.has(act) and rec.meta.units.get(act, "rpm") == "rpm":
+        return rec.hf[act].to_numpy(dtype=np.float64), act
     raise SignalNotFoundError(
         f"no spindle speed for {spindle!r}: neither HF {col!r} nor the LF smoothed speed "
         f"(SPEED_SMOOTHED / r0063) is recorded; HF columns: {', '.join(rec.columns)}"

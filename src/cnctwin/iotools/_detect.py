@@ -50,6 +50,10 @@ SUPPORTED_FORMATS: dict[str, tuple[str, str, str]] = {
         "cnctwin.iotools.umich", "read_umich",
         ".csv UMich CNC mill experiment (X1_ActualPosition column)",
     ),
+    "kit_merged": (
+        "cnctwin.iotools.kit_merged", "read_kit_merged",
+        ".csv KIT merged milling layout (curr_sp, v_sp, f_x ... columns)",
+    ),
     "dynamometer": (
         "cnctwin.iotools.dynamometer", "read_dynamometer_tdms",
         ".tdms dynamometer recording",
@@ -131,9 +135,16 @@ def detect_format(path: str | PathLike[str]) -> str:
         first_line = head.split(b"\n", 1)[0]
         if b"X1_ActualPosition" in first_line:
             return "umich"
+        header = next((ln for ln in head.decode("utf-8", "replace").splitlines()
+                       if ln.strip() and not ln.lstrip().startswith("#")), "")
+        from cnctwin.iotools.kit_merged import looks_like_kit_merged
+
+        if looks_like_kit_merged(header):
+            return "kit_merged"
         raise FormatError(
-            "CSV not recognised (expected <TRIAL>_hfdata.csv or a UMich experiment CSV with "
-            f"X1_ActualPosition); supported: {_supported()}", path=str(p))
+            "CSV not recognised (expected <TRIAL>_hfdata.csv, a UMich experiment CSV with "
+            f"X1_ActualPosition or the KIT merged layout); supported: {_supported()}",
+            path=str(p))
     if head.startswith(b"PAR1"):
         return "parquet"
     if head.lstrip().startswith(b"<"):
