@@ -59,6 +59,7 @@ __all__ = [
     "RPM_TO_RAD_S",
     "SPINDLE_MODEL_PARAMETERS",
     "CutMeasurement",
+    "FluxLawFit",
     "FrictionFit",
     "LinearRegion",
     "SpindleModel",
@@ -69,6 +70,7 @@ __all__ = [
     "calibrate_from_recording",
     "estimate_poles",
     "field_weakening_onset_rpm",
+    "fit_flux_law",
     "fit_friction",
     "identify_inertia",
     "linear_region",
@@ -866,6 +868,15 @@ class SpindleModel:
     reference_temperature_c : float or None, default None
         Motor temperature at which the parameters were identified [degC]; required to use
         ``temperature_c`` in :meth:`cutting_torque` with non-zero coefficients.
+    flux_base_speed_rpm : float, default 0.0
+        Base speed of the constant-power range [rpm]: above it the torque per reported current
+        falls as ``(n_b / |n|)^flux_exponent`` (:meth:`kt_at_speed`, the flux weakening of an
+        induction spindle); 0 = Kt does not depend on the speed.
+    flux_exponent : float, default 1.0
+        Exponent of that law [-] (1 = constant power).
+    kt_valid_speed_rpm : tuple of float or None, default None
+        Speed range Kt (and the flux law) was calibrated over [rpm]; an estimate outside it is
+        an extrapolation (:meth:`kt_extrapolated`).
 
     Notes
     -----
@@ -882,6 +893,40 @@ class SpindleModel:
     b_temp_coeff_per_k: float = 0.0
     tau_f_temp_coeff_per_k: float = 0.0
     reference_temperature_c: float | None = None
+    flux_base_speed_rpm: float = 0.0
+    flux_exponent: float = 1.0
+    kt_valid_speed_rpm: tuple[float, float] | None = None
+
+    def flux_factor(self, speed_rpm: ArrayLike) -> NDArray[np.float64]:
+        """``(n_b / |n|)^exponent`` above the base speed, 1 below (and without a law) [-]."""
+        n = np.abs(np.asarray(speed_rpm, dtype=np.float64))
+        if not self.flux_base_speed_rpm > 0:
+            return np.ones_like(n)
+        with np.errstate(divide="ignore"):
+            f = np.where(n > self.flux_base_speed_rpm,
+                         (self.flux_base_speed_rpm / np.maximum(n, 1e-12))
+                         ** self.flux_exponent, 1.0)
+        return np.asarray(f, dtype=np.float64)
+
+    def kt_at_speed(self, speed_rpm: ArrayLike) -> NDArray[np.float64]:
+        """Torque per reported current at a speed: ``Kt (n_b/|n|)^exponent`` above n_b [Nm/A].
+
+        Examples
+        --------
+        >>> m = SpindleModel(1.0, 8e-5, 0.3, flux_base_speed_rpm=2000.0)
+        >>> m.kt_at_speed([1000.0, 4000.0]).tolist()
+        [1.0, 0.5]
+        """
+        return self.kt_nm_per_a * self.flux_factor(speed_rpm)
+
+    def kt_extrapolated(self, speed_rpm: ArrayLike) -> NDArray[np.bool_]:
+        """True where a speed lies outside the calibrated range (``kt_valid_speed_rpm``)."""
+        n = np.abs(np.asarray(speed_rpm, dtype=np.float64))
+        if self.kt_valid_speed_rpm is None:
+            return np.zeros(n.shape, dtype=bool)
+        lo, hi = self.kt_valid_speed_rpm
+        tol = 0.02 * hi
+        return np.asarray((n < lo - tol) | (n > hi + tol))
 
     @classmethod
     def from_parameters(cls, name: str, **overrides: float) -> SpindleModel:
@@ -891,7 +936,8 @@ class SpindleModel:
                 f"unknown spindle parameter set {name!r}; valid: "
                 f"{', '.join(SPINDLE_MODEL_PARAMETERS)} (cnctwin.spindle.SPINDLE_MODEL_PARAMETERS)"
             )
-        return cls(**{**SPINDLE_MODEL_PARAMETERS[name], **overrides})
+        kw: dict[str, Any] = {**SPINDLE_MODEL_PARAMETERS[name], **overrides}
+        return cls(**kw)
 
     @classmethod
     def from_machine(cls, machine_file: MachineFile) -> SpindleModel:
@@ -912,7 +958,10 @@ class SpindleModel:
             j_kgm2=s.inertia_kg_m2 if machine_file.is_identified("spindle.inertia_kg_m2")
             else 0.0,
             kt_temp_coeff_per_k=s.magnet_temp_coeff_per_k if calibrated_t else 0.0,
-            reference_temperature_c=s.kt_ref_temperature_c if calibrated_t else None)
+            reference_temperature_c=s.kt_ref_temperature_c if calibrated_t else None,
+            flux_base_speed_rpm=s.flux_base_speed_rpm, flux_exponent=s.flux_exponent,
+            kt_valid_speed_rpm=rec.valid_range
+            if (rec := machine_file.record("spindle.kt_nm_per_a")) is not None else None)
 
     def to_dict(self) -> dict[str, float | None]:
         """Parameters as a plain dict (for JSON/TOML)."""
@@ -997,6 +1046,8 @@ class SpindleModel:
         if i.shape != n.shape:
             i, n = np.broadcast_arrays(i, n)
         kt, b, tf = self._params_at(temperature_c)
+        if self.flux_base_speed_rpm > 0:
+            kt = kt * self.flux_factor(n)
         tau = kt * i - b * n - tf * np.sign(n)
         if accel_term and self.j_kgm2 != 0.0 and n.ndim == 1 and n.size >= 2:
             tau = tau - self.j_kgm2 * _domega_dt(n, fs_hz)
@@ -1012,9 +1063,119 @@ class SpindleModel:
         """Current needed for a cutting torque at constant speed [A] (Eq. 4.4 solved for I)."""
         n = np.asarray(speed_rpm, dtype=np.float64)
         kt, b, tf = self._params_at(temperature_c)
+        if self.flux_base_speed_rpm > 0:
+            kt = kt * self.flux_factor(n)
         return np.asarray(
             (np.asarray(torque_nm, dtype=np.float64) + b * n + tf * np.sign(n)) / kt
         )
+
+
+# ====================================================================== speed law of Kt
+@dataclass(frozen=True)
+class FluxLawFit:
+    """Kt over the speed range: ``Kt(n) = Kt0 (n_b / n)^gamma`` above the base speed n_b.
+
+    Attributes
+    ----------
+    kt_nm_per_a : float
+        Kt below the base speed [Nm/A].
+    base_speed_rpm : float
+        Base speed n_b [rpm]; 0 when Kt does not change over the calibration speeds.
+    exponent : float
+        gamma [-]; 1 (constant power) unless three or more speeds fitted it.
+    exponent_fitted : bool
+        gamma was identified (else it is the stated constant-power value 1).
+    base_speed_bound : str
+        ``""`` if n_b lies inside the calibration speeds; ``"at most"`` if every speed was
+        above it (Kt0 and n_b are then only known as their product, n_b is set to the lowest
+        speed); ``"at least"`` if no speed was above it.
+    speeds_rpm, kt_values : tuple of float
+        The calibration points [rpm], [Nm/A].
+    rms_rel : float
+        Relative rms residual of the law at the points [-].
+    """
+
+    kt_nm_per_a: float
+    base_speed_rpm: float
+    exponent: float
+    exponent_fitted: bool
+    base_speed_bound: str
+    speeds_rpm: tuple[float, ...]
+    kt_values: tuple[float, ...]
+    rms_rel: float
+
+
+def fit_flux_law(speed_rpm: ArrayLike, kt_nm_per_a: ArrayLike, *,
+                 rel_tol: float = 0.01) -> FluxLawFit:
+    """Fit the speed law of the torque constant to Kt measured at several speeds.
+
+    Parameters
+    ----------
+    speed_rpm : array-like
+        Speeds of the calibration cuts [rpm] (at least 2 distinct).
+    kt_nm_per_a : array-like
+        Kt measured at each [Nm/A].
+    rel_tol : float, default 0.01
+        Relative change below which two Kt count as equal (no flux weakening between them).
+
+    Returns
+    -------
+    FluxLawFit
+
+    Raises
+    ------
+    IdentificationError
+        Fewer than two distinct speeds.
+
+    Notes
+    -----
+    Above its base speed an induction spindle runs with its flux reduced as 1/n (constant
+    power): the torque per torque-producing current falls as ``n_b / n`` (Kt x speed constant,
+    as the KIT DMC 60H data show over 2400-4000 rpm). With two speeds the exponent is the
+    constant-power 1 and n_b follows from the ratio ``n_b = n2 Kt2 / Kt1`` when the base speed
+    lies between them; with three or more speeds the exponent is fitted too (grid 0.5-1.5).
+    """
+    n = np.abs(np.asarray(speed_rpm, dtype=np.float64)).ravel()
+    k = np.asarray(kt_nm_per_a, dtype=np.float64).ravel()
+    ok = np.isfinite(n) & np.isfinite(k) & (k > 0)
+    n, k = n[ok], k[ok]
+    order = np.argsort(n)
+    n, k = n[order], k[order]
+    distinct = np.unique(np.round(n))
+    if distinct.size < 2:
+        raise IdentificationError(
+            f"the speed law of Kt needs calibration cuts at 2 or more speeds; got "
+            f"{', '.join(f'{v:.0f}' for v in distinct) or 'none'} rpm")
+
+    def law(kt0: float, nb: float, g: float) -> NDArray[np.float64]:
+        return kt0 * np.where(n > nb, (nb / n) ** g, 1.0)
+
+    def best_for(g: float) -> tuple[float, float, float]:
+        cands = np.concatenate([np.linspace(0.5 * n[0], n[-1], 400), n])
+        best = (np.inf, 0.0, 0.0)
+        for nb in cands:
+            shape = np.where(n > nb, (nb / n) ** g, 1.0)
+            kt0 = float(np.sum(shape * k) / np.sum(shape * shape))
+            r = float(np.sum(((law(kt0, nb, g) - k) / k) ** 2))
+            if r < best[0] - 1e-15:
+                best = (r, kt0, float(nb))
+        return best
+
+    spread = float(np.ptp(k) / np.mean(k))
+    if spread <= rel_tol:
+        return FluxLawFit(float(np.mean(k)), 0.0, 1.0, False, "at least",
+                          tuple(float(v) for v in n), tuple(float(v) for v in k),
+                          float(np.sqrt(np.mean((k / np.mean(k) - 1) ** 2))))
+    fit_g = distinct.size >= 3
+    grid = np.linspace(0.5, 1.5, 101) if fit_g else np.array([1.0])
+    r, kt0, nb, g = min((*best_for(float(gg)), float(gg)) for gg in grid)
+    bound = ""
+    if nb <= n[0] + 1e-9:
+        bound = "at most"
+        nb = float(n[0])
+        kt0 = float(k[0])
+    return FluxLawFit(kt0, nb, g, fit_g, bound, tuple(float(v) for v in n),
+                      tuple(float(v) for v in k), float(np.sqrt(r / n.size)))
 
 
 # ====================================================================== calibration (Eq. 4.3)

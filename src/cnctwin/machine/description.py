@@ -172,6 +172,15 @@ class SpindleMotor:
     lf_smoothing_time_s : float
         PT1 smoothing time constant of the LF drive values r0063/r0068/r0078 [s]. [S] 0.1
         (thesis §3.2.1: "100 ms smoothing time constant")
+    flux_base_speed_rpm : float
+        Speed above which the drive weakens the machine's flux as ``(n_b / n)^flux_exponent``
+        [rpm], so that the torque per reported (torque-producing) current falls with speed:
+        the constant-power range of an induction motor spindle (the KIT DMC 60H data: Kt x
+        speed constant within +-5 % over 2400-4000 rpm, docs/real-data-kit.md). 0 = no such
+        law (a permanent-magnet spindle: only the voltage-ellipse field weakening above
+        ``base_speed_rpm``). [E] 0
+    flux_exponent : float
+        Exponent of that flux law [-]; 1 = constant power. [E] 1
     """
 
     pole_count: int = 4
@@ -222,6 +231,8 @@ class SpindleMotor:
     speed_noise_rpm: float = 0.5
     torque_noise_nm: float = 0.02
     lf_smoothing_time_s: float = 0.1
+    flux_base_speed_rpm: float = 0.0
+    flux_exponent: float = 1.0
 
     @property
     def pole_pairs(self) -> int:

@@ -264,8 +264,10 @@ _P_NAMES: tuple[str, ...] = (
     "roll_r",
     "spos_v",
     "spos_a",
+    "flux_wb",
+    "flux_exp",
 )
-assert len(_P_NAMES) == 46
+assert len(_P_NAMES) == 48
 
 
 def _param_vector(motor: SpindleMotor) -> NDArray[np.float64]:
@@ -338,6 +340,8 @@ def _param_vector(motor: SpindleMotor) -> NDArray[np.float64]:
         "noise_w": motor.speed_noise_rpm,
         "noise_t": motor.torque_noise_nm,
         "tau_lf": motor.lf_smoothing_time_s,
+        "flux_wb": motor.flux_base_speed_rpm * _RPM_TO_RAD_S,
+        "flux_exp": motor.flux_exponent,
         "roll_r": motor.viscous_rolloff_ratio,
         "spos_v": motor.spos_speed_rpm * 6.0,
         "spos_a": motor.spos_accel_rev_s2 * 360.0,
@@ -518,6 +522,12 @@ def _kernel(  # pragma: no cover - compiled
         tau_load = load_nm[k] + pv[41] * noise[k, 2]
         # magnet flux at rotor temperature (Kt drift) - constant within a cycle
         psi_t = psi0 * (1.0 + pv[2] * (tr - pv[3]))
+        # flux law of the constant-power range (induction spindle): (w_b / |w|)^exp above w_b,
+        # known to the drive (its torque constant follows); off (factor exactly 1) at w_b = 0
+        flux_f = 1.0
+        if pv[46] > 0.0 and abs(w) > pv[46]:
+            flux_f = (pv[46] / abs(w)) ** pv[47]
+            psi_t = psi_t * flux_f
         for i_in in range(inner_steps):
             if m == 1:
                 pos_err = pc0 + dpc * i_in - th * 180.0 / math.pi
@@ -540,7 +550,7 @@ def _kernel(  # pragma: no cover - compiled
                 if id_ref < -0.95 * imax:
                     id_ref = -0.95 * imax
             # speed PI with torque limit from the current circle (anti-windup: clamp)
-            kt_drive = 1.5 * p * (psi0 + (ld - lq) * i_d)
+            kt_drive = 1.5 * p * (psi0 * flux_f + (ld - lq) * i_d)
             # sqrt(fl(imax^2)) == imax exactly, so id_ref == 0 needs no sqrt (same bits)
             iq_avail = (imax if id_ref == 0.0
                         else math.sqrt(max(imax * imax - id_ref * id_ref, 0.0)))
@@ -554,7 +564,8 @@ def _kernel(  # pragma: no cover - compiled
             else:
                 integ += ki * e * dt
             # i_d is exactly 0 below base speed: the constant 1 / kt then (no division)
-            iq_ref = t_ref * inv_kt0 if i_d == 0.0 else t_ref / kt_drive
+            iq_ref = (t_ref * inv_kt0 if i_d == 0.0 and flux_f == 1.0
+                      else t_ref / kt_drive)
             # current loop (first order)
             i_d += a_i * (id_ref - i_d)
             i_q += a_i * (iq_ref - i_q)
@@ -602,9 +613,9 @@ def _kernel(  # pragma: no cover - compiled
         id_rms = i_d / sq2
         cur = iq_rms + rip * math.sin(p * th) + pv[39] * noise[k, 0]
         iabs = math.sqrt(iq_rms * iq_rms + id_rms * id_rms)
-        kt_nom = 1.5 * p * psi0 * sq2
+        kt_nom = 1.5 * p * psi0 * flux_f * sq2
         speed_meas = w * rpm + pv[40] * noise[k, 1]
-        kt_drive_now = 1.5 * p * (psi0 + (ld - lq) * i_d) * sq2
+        kt_drive_now = 1.5 * p * (psi0 * flux_f + (ld - lq) * i_d) * sq2
         t_avail = kt_drive_now * math.sqrt(max(imax * imax - i_d * i_d, 0.0)) / sq2
         util = 100.0 * abs(t_ref) / max(t_avail, 1e-9)
         state[7] += b_lf * (w * rpm - state[7])
