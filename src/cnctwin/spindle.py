@@ -1578,6 +1578,8 @@ class StreamingTorqueEstimator:
                 t: NDArray[np.float64] | None, acc: NDArray[np.float64] | None
                 ) -> NDArray[np.float64]:
         kt, b, tf = self.model._params_at(t)
+        if self.model.flux_base_speed_rpm > 0:
+            kt = kt * self.model.flux_factor(n)
         tau = kt * i - b * n - tf * np.sign(n)
         if acc is not None:
             tau = tau - self.model.j_kgm2 * acc

@@ -674,7 +674,8 @@ class TwinChainResult:
         (:func:`thermal_drift_from_warm_up`) [1/(A rpm s)].
     validation : pandas.DataFrame
         One row per cut of the recordings passed to :meth:`TwinChain.run_model_from_measured`:
-        ``recording`` (index), the :class:`CutEstimate` fields, ``error_nm`` and ``error_pct``
+        ``recording`` (index), the :class:`CutEstimate` fields, ``kt_extrapolated`` (the cut's
+        speed outside the calibrated range of Kt), ``error_nm`` and ``error_pct``
         (|predicted - measured| / |measured| x 100, where a dynamometer is present).
     cutting_torque : list of pandas.Series
         Estimated cutting torque per HF cycle of each recording [Nm].
@@ -882,6 +883,13 @@ class TwinChain:
     def model(self) -> SpindleModel:
         """The calibrated spindle model."""
         return self.results.spindle_model
+
+    def with_model(self, model: SpindleModel) -> TwinChain:
+        """Use ``model`` (e.g. with the speed law of Kt fitted to cuts at several speeds,
+        :func:`cnctwin.spindle.fit_flux_law`) for the estimates from here on; returns ``self``.
+        """
+        self.results.spindle_model = model
+        return self
 
     # ------------------------------------------------------------------ calibration
     def calibrate(
@@ -1260,7 +1268,9 @@ class TwinChain:
                 w = self._window_means(rec, reg, res.friction, res.spindle_model.j_kgm2,
                                        with_torque=True)
                 pred = self._predict(w)
-                rows.append({"recording": name, **w, "predicted_torque_nm": pred})
+                extra = bool(res.spindle_model.kt_extrapolated(w["speed_rpm"]))
+                rows.append({"recording": name, **w, "predicted_torque_nm": pred,
+                             "kt_extrapolated": extra})
         df = pd.DataFrame(rows)
         if not df.empty:
             meas = df["torque_nm"].abs()
@@ -1271,16 +1281,18 @@ class TwinChain:
         res.cutting_torque = series
         return self
 
-    def _kt_at(self, temperature_c: float) -> float:
+    def _kt_at(self, temperature_c: float, speed_rpm: float | None = None) -> float:
         m = self.results.spindle_model
+        kt = m.kt_nm_per_a
+        if speed_rpm is not None and m.flux_base_speed_rpm > 0:
+            kt = float(m.kt_at_speed(speed_rpm))
         if m.reference_temperature_c is None or not np.isfinite(temperature_c):
-            return m.kt_nm_per_a
-        return m.kt_nm_per_a * (1.0 + m.kt_temp_coeff_per_k
-                                * (temperature_c - m.reference_temperature_c))
+            return kt
+        return kt * (1.0 + m.kt_temp_coeff_per_k * (temperature_c - m.reference_temperature_c))
 
     def _predict(self, w: dict[str, Any]) -> float:
-        """Mean cutting torque of a window [Nm]: ``Kt(T) (I - I_air) - J dOmega/dt``."""
-        kt = self._kt_at(w["temperature_c"])
+        """Mean cutting torque of a window [Nm]: ``Kt(T, n) (I - I_air) - J dOmega/dt``."""
+        kt = self._kt_at(w["temperature_c"], w["speed_rpm"])
         return float(kt * (abs(w["current_a"]) - w["air_current_a"]) - w["accel_torque_nm"])
 
     def _torque_series(self, rec: Recording, regions: pd.DataFrame) -> pd.Series:
@@ -1295,6 +1307,8 @@ class TwinChain:
             kt = kt * (1.0 + res.spindle_model.kt_temp_coeff_per_k
                        * (np.nan_to_num(temp, nan=res.spindle_model.reference_temperature_c)
                           - res.spindle_model.reference_temperature_c))
+        if res.spindle_model.flux_base_speed_rpm > 0:
+            kt = kt * res.spindle_model.flux_factor(speed)
         air = res.friction.current_a(speed)
         tau = kt * (np.abs(cur) - air) * np.sign(np.where(speed == 0, 1.0, speed))
         if self.options.acceleration_term and res.spindle_model.j_kgm2 > 0:

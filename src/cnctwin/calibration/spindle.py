@@ -33,7 +33,7 @@ import pandas as pd
 from cnctwin.exceptions import IdentificationError
 from cnctwin.machine import ParameterRecord, Provenance
 from cnctwin.recording import Recording
-from cnctwin.spindle import SpindleModel
+from cnctwin.spindle import FluxLawFit, SpindleModel, fit_flux_law
 from cnctwin.twin import TwinChain, TwinChainResult
 
 __all__ = [
@@ -84,6 +84,11 @@ class SpindleCalibration:
         ``"dynamometer"`` or ``"given"``.
     notes : list of str
         What a user should know (what was not identified and why, what is not included).
+    speeds : pandas.DataFrame
+        Kt of each reference cut at its speed (``speed_rpm``, ``kt_nm_per_a``, ``kt_se``,
+        ``torque_nm``, ``current_a``).
+    flux_law : FluxLawFit or None
+        The speed law of Kt, where the references span speeds.
     """
 
     method: str
@@ -96,6 +101,8 @@ class SpindleCalibration:
     variants: pd.DataFrame
     reference_torque_source: str
     notes: list[str] = field(default_factory=list)
+    speeds: pd.DataFrame = field(default_factory=pd.DataFrame)
+    flux_law: FluxLawFit | None = None
 
 
 def check_air_cut_plateaus(
@@ -157,10 +164,10 @@ def _variant_options(method: str) -> list[dict[str, Any]]:
 
 def calibrate_spindle(
     air_cuts: Sequence[Recording],
-    reference: Recording,
+    reference: Recording | Sequence[Recording],
     *,
     method: str = "improved",
-    reference_torque_nm: float | None = None,
+    reference_torque_nm: float | Sequence[float] | None = None,
     reference_uncertainty_pct: float = 0.0,
     warm_up: Recording | None = None,
     spindle: str = "SP1",
@@ -172,13 +179,15 @@ def calibrate_spindle(
     ----------
     air_cuts : sequence of Recording
         Air-cut recordings with constant-speed plateaus (thesis §3.2.2).
-    reference : Recording
-        One cut whose torque is known: with the dynamometer attached as external channel
-        ``"dynamometer"`` (column ``mz_nm``), or with ``reference_torque_nm``.
+    reference : Recording or sequence of Recording
+        Cuts whose torque is known: with the dynamometer attached as external channel
+        ``"dynamometer"`` (column ``mz_nm``), or with ``reference_torque_nm``. Cuts at two or
+        more speeds give the speed law of Kt (:func:`cnctwin.spindle.fit_flux_law`: the
+        constant-power range of an induction spindle); the first gives friction and J.
     method : {'improved', 'thesis'}, default 'improved'
         :meth:`TwinChain.improved_method` or :meth:`TwinChain.thesis_method`.
-    reference_torque_nm : float, optional
-        Mean cutting torque of the reference cut [Nm], instead of a dynamometer.
+    reference_torque_nm : float or sequence of float, optional
+        Mean cutting torque of each reference cut [Nm], instead of a dynamometer.
     reference_uncertainty_pct : float, default 0
         Relative standard uncertainty of the torque reference [%] (calibration certificate).
     warm_up : Recording, optional
@@ -216,12 +225,23 @@ def calibrate_spindle(
     check_air_cut_plateaus(stats, method=method, source="the air cut" + (
         f"s {', '.join(air_names)}" if len(air_names) > 1 else
         (f" {air_names[0]}" if air_names else "s")))
+    refs = [reference] if isinstance(reference, Recording) else list(reference)
+    if not refs:
+        raise IdentificationError("calibrate_spindle needs at least one reference cut")
+    if reference_torque_nm is None or isinstance(reference_torque_nm, int | float):
+        torques: list[float | None] = [reference_torque_nm] * len(refs)
+    else:
+        torques = [float(t) for t in reference_torque_nm]
+        if len(torques) != len(refs):
+            raise IdentificationError(f"{len(torques)} reference torques for {len(refs)} "
+                                      "reference cuts; give one per cut")
+    reference = refs[0]
     chain = _chain(method, spindle=spindle)
-    cal_kw: dict[str, Any] = {"warm_up": warm_up, "reference_torque_nm": reference_torque_nm}
+    cal_kw: dict[str, Any] = {"warm_up": warm_up, "reference_torque_nm": torques[0]}
     chain.calibrate(air_cuts, reference, **cal_kw)
     res = chain.results
     model = res.spindle_model
-    windows = chain.calibration_windows(reference, reference_torque_nm=reference_torque_nm)
+    windows = chain.calibration_windows(reference, reference_torque_nm=torques[0])
     full = windows[(windows["end_cycle"] - windows["start_cycle"] + 1)
                    >= 0.5 * chain.options.window_s * reference.fs_hz]
     # --- variants (model form)
@@ -286,7 +306,7 @@ def calibrate_spindle(
                      "region")
     budget = pd.DataFrame(budget_rows)
     names = list(recording_names) or [
-        f for r in (*air_cuts, reference) for f in r.meta.source_files[:1]]
+        f for r in (*air_cuts, *refs) for f in r.meta.source_files[:1]]
     prov = Provenance.now(f"cnctwin calibrate spindle --method {method}", names)
     fit_range = (float(res.fit_range_rpm[0]), float(res.fit_range_rpm[1]))
     n_cal = abs(cal.speed_rpm)
@@ -316,8 +336,119 @@ def calibrate_spindle(
     if t_ref is not None and np.isfinite(t_ref):
         for key in ("spindle.kt_ref_temperature_c", "spindle.friction_ref_temperature_c"):
             records[key] = ParameterRecord(float(t_ref), None, prov)
+    speeds = _speed_table(chain, refs, torques)
+    model, law = _speed_law(model, speeds, unc, records, prov, notes)
+    if law is not None:
+        chain.with_model(model)
+        budget.loc[budget["parameter"] == "kt_nm_per_a", "value"] = model.kt_nm_per_a
+        for name in ("b_nm_per_rpm", "tau_f_nm"):
+            budget.loc[budget["parameter"] == name, "value"] = getattr(model, name)
+        for name in ("kt_nm_per_a", "b_nm_per_rpm", "tau_f_nm"):
+            budget.loc[budget["parameter"] == name, "combined"] = unc[name]
     return SpindleCalibration(
         method=method, model=model, uncertainty=unc, budget=budget, records=records,
         result=res, windows=windows, variants=variants,
-        reference_torque_source="given" if reference_torque_nm is not None else "dynamometer",
-        notes=notes)
+        reference_torque_source="given" if torques[0] is not None else "dynamometer",
+        notes=notes, speeds=speeds, flux_law=law)
+
+
+def _speed_table(chain: TwinChain, refs: list[Recording],
+                 torques: list[float | None]) -> pd.DataFrame:
+    """Kt of each reference cut at its speed (mean of its full windows) [Nm/A]."""
+    rows = []
+    for k, (rec, tq) in enumerate(zip(refs, torques, strict=True)):
+        w = chain.calibration_windows(rec, reference_torque_nm=tq)
+        full = w[(w["end_cycle"] - w["start_cycle"] + 1)
+                 >= 0.5 * chain.options.window_s * rec.fs_hz]
+        kt = full["kt_nm_per_a"].to_numpy(dtype=np.float64)
+        kt = kt[np.isfinite(kt)]
+        if kt.size == 0:
+            raise IdentificationError(f"reference cut {k + 1}: no full averaging window in "
+                                      "its cut (the cut is shorter than the window)")
+        rows.append({"reference": k + 1, "speed_rpm": float(np.mean(np.abs(full["speed_rpm"]))),
+                     "kt_nm_per_a": float(np.mean(kt)),
+                     "kt_se": float(np.std(kt, ddof=1) / math.sqrt(kt.size))
+                     if kt.size > 1 else 0.0,
+                     "torque_nm": float(np.mean(np.abs(full["torque_nm"]))),
+                     "current_a": float(np.mean(np.abs(full["current_a"])))})
+    return pd.DataFrame(rows)
+
+
+def _speed_law(model: SpindleModel, speeds: pd.DataFrame, unc: dict[str, float],
+               records: dict[str, ParameterRecord], prov: Provenance, notes: list[str],
+               ) -> tuple[SpindleModel, FluxLawFit | None]:
+    """Fit the speed law of Kt where the references span speeds; record it (or why not)."""
+    import dataclasses
+
+    n = speeds["speed_rpm"].to_numpy(dtype=np.float64)
+    lo, hi = float(n.min()), float(n.max())
+    kt_rec = records["spindle.kt_nm_per_a"]
+    if hi - lo <= 0.05 * hi:
+        records["spindle.kt_nm_per_a"] = dataclasses.replace(kt_rec, valid_range=(lo, hi))
+        records["spindle.flux_base_speed_rpm"] = ParameterRecord(
+            0.0, identified=False,
+            reason=f"Kt was calibrated at one speed ({hi:.0f} rpm): how it changes with speed "
+                   "is not known and estimates at other speeds are extrapolations (flagged); "
+                   f"add reference cuts at other speeds (e.g. {0.75 * hi:.0f} and "
+                   f"{1.25 * hi:.0f} rpm)")
+        notes.append(f"Kt holds at {hi:.0f} rpm only; reference cuts at two or more speeds "
+                     "give its speed law")
+        return dataclasses.replace(model, kt_valid_speed_rpm=(lo, hi)), None
+    k = speeds["kt_nm_per_a"].to_numpy(dtype=np.float64)
+    law = fit_flux_law(n, k)
+    scale = law.kt_nm_per_a / model.kt_nm_per_a
+    new = dataclasses.replace(
+        model, kt_nm_per_a=law.kt_nm_per_a, b_nm_per_rpm=model.b_nm_per_rpm * scale,
+        tau_f_nm=model.tau_f_nm * scale, j_kgm2=model.j_kgm2 * scale,
+        flux_base_speed_rpm=law.base_speed_rpm, flux_exponent=law.exponent,
+        kt_valid_speed_rpm=(lo, hi))
+    rel_kt = unc["kt_nm_per_a"] / model.kt_nm_per_a
+    u_rel = math.hypot(rel_kt, law.rms_rel)
+    unc["kt_nm_per_a"] = law.kt_nm_per_a * u_rel
+    for key in ("b_nm_per_rpm", "tau_f_nm"):
+        unc[key] = unc[key] * scale
+    records["spindle.kt_nm_per_a"] = dataclasses.replace(
+        kt_rec, value=law.kt_nm_per_a, uncertainty=unc["kt_nm_per_a"], valid_range=(lo, hi))
+    for key, attr in (("spindle.viscous_friction_nm_per_rpm", "b_nm_per_rpm"),
+                      ("spindle.coulomb_friction_nm", "tau_f_nm")):
+        r = records[key]
+        records[key] = dataclasses.replace(r, value=getattr(new, attr),
+                                           uncertainty=unc["b_nm_per_rpm" if "visc" in key
+                                                           else "tau_f_nm"])
+    for key in ("spindle.stribeck_torque_nm", "spindle.inertia_kg_m2"):
+        r0 = records.get(key)
+        if r0 is not None and r0.identified:
+            records[key] = dataclasses.replace(r0, value=r0.value * scale)
+    if law.base_speed_bound == "at least":
+        records["spindle.flux_base_speed_rpm"] = ParameterRecord(
+            0.0, identified=False,
+            reason=f"Kt is constant over {lo:.0f}-{hi:.0f} rpm: no flux weakening there; the "
+                   f"base speed lies above {hi:.0f} rpm and estimates above it are "
+                   "extrapolations")
+    else:
+        # standard uncertainty of n_b: refit with each Kt moved by its standard uncertainty
+        u_i = np.hypot(speeds["kt_se"].to_numpy(dtype=np.float64), k * rel_kt)
+        d = []
+        for i in range(k.size):
+            kp, km = k.copy(), k.copy()
+            kp[i] += u_i[i]
+            km[i] -= u_i[i]
+            d.append(0.5 * (fit_flux_law(n, kp).base_speed_rpm
+                            - fit_flux_law(n, km).base_speed_rpm))
+        u_nb = float(np.sqrt(np.sum(np.square(d))))
+        records["spindle.flux_base_speed_rpm"] = ParameterRecord(
+            law.base_speed_rpm, u_nb, prov, valid_range=(lo, hi), valid_quantity="speed_rpm")
+        if law.base_speed_bound == "at most":
+            notes.append(f"every reference cut ran above the base speed: Kt x speed is "
+                         f"constant over {lo:.0f}-{hi:.0f} rpm; the base speed is at most "
+                         f"{lo:.0f} rpm and Kt below {lo:.0f} rpm is an extrapolation")
+    if law.exponent_fitted:
+        records["spindle.flux_exponent"] = ParameterRecord(law.exponent, None, prov,
+                                                           valid_range=(lo, hi),
+                                                           valid_quantity="speed_rpm")
+    elif law.base_speed_bound != "at least":
+        records["spindle.flux_exponent"] = ParameterRecord(
+            1.0, identified=False,
+            reason="constant power assumed (flux as 1/n above the base speed); reference cuts "
+                   "at three or more speeds fit the exponent")
+    return new, law

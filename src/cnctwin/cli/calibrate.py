@@ -37,14 +37,15 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     s.add_argument("--air-cut", nargs="+", type=Path, required=True, metavar="FILE",
                    help="air-cut recording(s): spindle at constant speeds, no contact")
-    s.add_argument("--reference", type=Path, required=True, metavar="FILE",
-                   help="recording of one cut whose torque is known")
+    s.add_argument("--reference", type=Path, nargs="+", required=True, metavar="FILE",
+                   help="recording of a cut whose torque is known; cuts at two or more speeds "
+                   "give the speed law of Kt (constant-power range)")
     g = s.add_mutually_exclusive_group()
-    g.add_argument("--dynamometer", type=Path, metavar="CSV",
-                   help="dynamometer CSV of the reference cut (its own clock; aligned on the "
-                   "current)")
-    g.add_argument("--torque-nm", type=float, metavar="VALUE",
-                   help="mean cutting torque of the reference cut [Nm], if no dynamometer")
+    g.add_argument("--dynamometer", type=Path, nargs="+", metavar="CSV",
+                   help="dynamometer CSV of each reference cut, in the same order (its own "
+                   "clock; aligned on the current)")
+    g.add_argument("--torque-nm", type=float, nargs="+", metavar="VALUE",
+                   help="mean cutting torque of each reference cut [Nm], if no dynamometer")
     s.add_argument("--torque-uncertainty-pct", type=float, default=0.0, metavar="PCT",
                    help="relative standard uncertainty of the torque reference [%%] "
                    "(calibration certificate); default 0 = not included")
@@ -102,29 +103,36 @@ def _cmd_spindle(args: argparse.Namespace) -> int:
     mf = _load_or_new(args.machine)  # a damaged machine file stops here, before any work
     if args.torque_uncertainty_pct < 0:
         raise ConfigError("--torque-uncertainty-pct must be >= 0")
+    n_ref = len(args.reference)
+    for opt, vals in (("--dynamometer", args.dynamometer), ("--torque-nm", args.torque_nm)):
+        if vals is not None and len(vals) != n_ref:
+            raise ConfigError(f"{opt}: {len(vals)} given for {n_ref} --reference cut(s); give "
+                              "one per reference cut, in the same order")
     with console.status("reading the recordings"):
         air = [_read(p) for p in args.air_cut]
-        ref = _read(args.reference)
-        if args.dynamometer is not None:
-            if not args.dynamometer.exists():
-                raise ConfigError(f"{args.dynamometer}: no such file")
-            dyn = read_dynamometer_csv(args.dynamometer)
+        refs = [_read(p) for p in args.reference]
+        for k, csv in enumerate(args.dynamometer or []):
+            if not csv.exists():
+                raise ConfigError(f"{csv}: no such file")
+            dyn = read_dynamometer_csv(csv)
             if "mz_nm" not in dyn.data.columns:
                 unknown = [c for c in dyn.data.columns if dyn.units.get(c) == "unknown"]
                 raise ConfigError(
-                    f"{args.dynamometer}: no torque column in N*m"
+                    f"{csv}: no torque column in N*m"
                     + (f" (the header gives {unknown} without a unit)" if unknown else "")
                     + "; state the unit in the header, e.g. 'Mz [Nm]', or give --torque-nm")
-            ref = attach_external(ref, dyn, replace=True)
+            refs[k] = attach_external(refs[k], dyn, replace=True)
         warm = _read(args.warm_up) if args.warm_up is not None else None
-    if args.torque_nm is None and "dynamometer" not in ref.external:
-        raise ConfigError(f"{args.reference}: the reference cut has no dynamometer channel; "
-                          "give --dynamometer CSV or --torque-nm VALUE")
-    names = [str(p) for p in (*args.air_cut, args.reference)]
+    for path, rec in zip(args.reference, refs, strict=True):
+        if args.torque_nm is None and "dynamometer" not in rec.external:
+            raise ConfigError(f"{path}: the reference cut has no dynamometer channel; "
+                              "give --dynamometer CSV or --torque-nm VALUE")
+    ref = refs[0]
+    names = [str(p) for p in (*args.air_cut, *args.reference)]
     with console.status(f"calibrating the spindle ({args.method} method)"):
         try:
             cal = calibrate_spindle(
-                air, ref, method=args.method, reference_torque_nm=args.torque_nm,
+                air, refs, method=args.method, reference_torque_nm=args.torque_nm,
                 reference_uncertainty_pct=args.torque_uncertainty_pct, warm_up=warm,
                 spindle=args.spindle, recording_names=names)
         except SignalNotFoundError as exc:
@@ -135,11 +143,11 @@ def _cmd_spindle(args: argparse.Namespace) -> int:
             msg = str(exc)
             if any(n in msg for n in names):
                 raise
-            raise ConfigError(f"{args.reference}: {msg}") from None
+            raise ConfigError(f"{args.reference[0]}: {msg}") from None
     report = args.report or args.machine.with_name(args.machine.stem + ".spindle-report.html")
     spindle_calibration_report(cal, ref, report, spindle=args.spindle,
-                               reference_torque_nm=args.torque_nm,
-                               machine_path=str(args.machine))
+                               reference_torque_nm=args.torque_nm[0] if args.torque_nm
+                               else None, machine_path=str(args.machine))
     save_machine(mf.with_records(cal.records), args.machine)
     table = Table(title=f"spindle ({args.method} method)")
     for col in ("parameter", "value", "std. uncertainty", "unit"):
@@ -149,6 +157,10 @@ def _cmd_spindle(args: argparse.Namespace) -> int:
                       str(r["unit"]))
     if cal.model.j_kgm2 > 0:
         table.add_row("j_kgm2", f"{cal.model.j_kgm2:.4g}", "-", "kg m^2")
+    fb = cal.records.get("spindle.flux_base_speed_rpm")
+    if fb is not None and fb.identified:
+        table.add_row("base speed (Kt ~ n_b/n above)", f"{fb.value:.0f}",
+                      f"{fb.uncertainty:.2g}" if fb.uncertainty is not None else "-", "rpm")
     out = Console()
     out.print(table)
     for note in cal.notes:
