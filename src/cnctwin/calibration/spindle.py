@@ -236,11 +236,30 @@ def calibrate_spindle(
             raise IdentificationError(f"{len(torques)} reference torques for {len(refs)} "
                                       "reference cuts; give one per cut")
     reference = refs[0]
-    chain = _chain(method, spindle=spindle)
     cal_kw: dict[str, Any] = {"warm_up": warm_up, "reference_torque_nm": torques[0]}
-    chain.calibrate(air_cuts, reference, **cal_kw)
+    base_opts: dict[str, Any] = {}
+    for _ in range(3):
+        chain = _chain(method, spindle=spindle, **base_opts)
+        chain.calibrate(air_cuts, reference, **cal_kw)
+        # above a base speed inside the air cut the air current bends up (the torque per
+        # current falls): the friction line must stay below it
+        nb = _base_speed_hint(chain, refs, torques)
+        lo_fit, hi_fit = chain.results.fit_range_rpm
+        if nb is None or nb >= hi_fit:
+            break
+        region = chain.results.region
+        base_opts = {"region": (region.lo_rpm if region is not None else lo_fit, nb)}
     res = chain.results
     model = res.spindle_model
+    if model.b_nm_per_rpm < 0 or model.tau_f_nm < 0:
+        lo_fit, hi_fit = res.fit_range_rpm
+        raise IdentificationError(
+            f"the friction line through the air cut over {lo_fit:.0f}-{hi_fit:.0f} rpm gives "
+            f"B = {model.b_nm_per_rpm:.3g} Nm/rpm and tau_f = {model.tau_f_nm:.3g} Nm: a "
+            "negative friction, so the air current bends inside that range (above a base "
+            "speed the torque per current falls); give reference cuts at two or more speeds "
+            "(one below and one above the bend) so the base speed is found and the fit stays "
+            "below it")
     windows = chain.calibration_windows(reference, reference_torque_nm=torques[0])
     full = windows[(windows["end_cycle"] - windows["start_cycle"] + 1)
                    >= 0.5 * chain.options.window_s * reference.fs_hz]
@@ -250,7 +269,8 @@ def calibrate_spindle(
              "fit_lo_rpm": res.fit_range_rpm[0], "fit_hi_rpm": res.fit_range_rpm[1]}]
     for opts in _variant_options(method):
         try:
-            v = _chain(method, spindle=spindle, **opts).calibrate(air_cuts, reference, **cal_kw)
+            v = _chain(method, spindle=spindle, **{**base_opts, **opts}).calibrate(
+                air_cuts, reference, **cal_kw)
         except IdentificationError:
             continue
         vm = v.results.spindle_model
@@ -350,6 +370,19 @@ def calibrate_spindle(
         result=res, windows=windows, variants=variants,
         reference_torque_source="given" if torques[0] is not None else "dynamometer",
         notes=notes, speeds=speeds, flux_law=law)
+
+
+def _base_speed_hint(chain: TwinChain, refs: list[Recording],
+                     torques: list[float | None]) -> float | None:
+    """The base speed the references show (None: one speed, or no flux weakening seen)."""
+    if len(refs) < 2:
+        return None
+    sp = _speed_table(chain, refs, torques)
+    n = sp["speed_rpm"].to_numpy(dtype=np.float64)
+    if float(np.ptp(n)) <= 0.05 * float(n.max()):
+        return None
+    law = fit_flux_law(n, sp["kt_nm_per_a"].to_numpy(dtype=np.float64))
+    return law.base_speed_rpm if law.base_speed_rpm > 0 else None
 
 
 def _speed_table(chain: TwinChain, refs: list[Recording],
