@@ -156,3 +156,25 @@ def test_replay_refuses_a_stream_without_a_needed_input() -> None:
         _check_inputs(make_detector("physics", fs_hz=500.0), "physics", data)
     data["predicted_current_a"] = 1.0
     _check_inputs(make_detector("physics", fs_hz=500.0), "physics", data)  # finite: scored
+
+
+def test_physics_prediction_says_whose_spindle_it_uses(run_dir, tmp_path: Path,  # type: ignore[no-untyped-def]
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """Without a machine file the prediction uses the thesis machine and says so; with one,
+    the machine's calibrated spindle (issue 13: never the thesis machine silently)."""
+    from cnctwin.machine import MachineFile, ParameterRecord, Provenance, save_machine
+
+    d, _ = run_dir
+    assert main(["anomalies", *_files(d), "--detector", "physics"]) == 0
+    assert "not calibrated to this machine" in capsys.readouterr().out
+    m = tmp_path / "m.toml"
+    prov = Provenance.now("test", ["air.json", "cut.json"])
+    save_machine(MachineFile().with_records(
+        {"spindle.kt_nm_per_a": ParameterRecord(1.04, 0.004, prov)}), m)
+    assert main(["anomalies", *_files(d), "--detector", "physics", "--machine", str(m)]) == 0
+    assert "not calibrated to this machine" not in capsys.readouterr().out
+    bare = tmp_path / "bare.toml"
+    save_machine(MachineFile(), bare)
+    assert main(["anomalies", *_files(d), "--detector", "physics", "--machine",
+                 str(bare)]) == 2
+    assert "the spindle is not calibrated" in capsys.readouterr().err

@@ -41,6 +41,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--out", type=Path, help="write the full table to this CSV")
     p.add_argument("--figures", type=Path, metavar="DIR",
                    help="write hole-mean and deviation-path figures (PNG) here")
+    p.add_argument("--machine", type=Path, metavar="FILE",
+                   help="machine file (cnctwin calibrate): its calibrated spindle for the "
+                   "torque (default: the thesis machine's, not calibrated to yours)")
     p.set_defaults(func=_cmd_holes)
 
     w = sub.add_parser("wear", help="tool-wear trend, estimate and remaining life",
@@ -53,6 +56,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     w.add_argument("--set-size", type=int, default=6, help="holes per set (6)")
     w.add_argument("--baseline", type=int, default=30, help="new-tool holes (30)")
     w.add_argument("--out", type=Path, metavar="DIR", help="write figures and wear.csv here")
+    w.add_argument("--machine", type=Path, metavar="FILE",
+                   help="machine file (cnctwin calibrate): its calibrated spindle for the "
+                   "torque (default: the thesis machine's, not calibrated to yours)")
     w.set_defaults(func=_cmd_wear)
 
     a = sub.add_parser("anomalies", help="replay recordings through an anomaly detector",
@@ -72,6 +78,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    help="teach-in duration [s] (default: the first third)")
     a.add_argument("--threshold", type=float, default=0.0, help="alarm above this score (0)")
     a.add_argument("--out", type=Path, metavar="DIR", help="write the score figure here")
+    a.add_argument("--machine", type=Path, metavar="FILE",
+                   help="machine file (cnctwin calibrate): its calibrated spindle for the "
+                   "torque (default: the thesis machine's, not calibrated to yours)")
     a.set_defaults(func=_cmd_anomalies)
 
 
@@ -84,15 +93,31 @@ def _read(files: list[Path]) -> list[Any]:
     return [read_recording(f) for f in files]
 
 
-def _holes(files: list[Path], set_size: int = 6) -> tuple[list[Any], pd.DataFrame]:
+def _model(args: argparse.Namespace) -> Any:
+    """The calibrated spindle of ``--machine`` (None: the thesis machine's, said so)."""
+    if getattr(args, "machine", None) is None:
+        return None
+    from cnctwin.machine import load_machine
+    from cnctwin.spindle import SpindleModel
+
+    mf = load_machine(args.machine)
+    if not mf.is_identified("spindle.kt_nm_per_a"):
+        raise ConfigError(f"{args.machine}: the spindle is not calibrated (spindle.kt_nm_per_a "
+                          "has no provenance); run 'cnctwin calibrate spindle ... --machine "
+                          f"{args.machine}' first")
+    return SpindleModel.from_machine(mf)
+
+
+def _holes(files: list[Path], set_size: int = 6, model: Any = None
+           ) -> tuple[list[Any], pd.DataFrame]:
     recs = _read(files)
-    return recs, _holes_of(recs, set_size=set_size)
+    return recs, _holes_of(recs, set_size=set_size, model=model)
 
 
-def _holes_of(recs: list[Any], set_size: int = 6) -> pd.DataFrame:
+def _holes_of(recs: list[Any], set_size: int = 6, model: Any = None) -> pd.DataFrame:
     from cnctwin.usecases.holes import hole_records
 
-    holes = hole_records(recs, set_size=set_size)
+    holes = hole_records(recs, set_size=set_size, model=model)
     if holes.empty:
         raise ConfigError("no hole found (no plunge of the Z axis in the recordings)")
     return holes
@@ -124,7 +149,7 @@ def _cmd_holes(args: argparse.Namespace) -> int:
     from cnctwin.usecases.figures import plot_deviation_paths, plot_hole_means
     from cnctwin.usecases.quality import deviation_paths
 
-    recs, holes = _holes(args.files)
+    recs, holes = _holes(args.files, model=_model(args))
     _table(holes[[c for c in _HOLE_SHOW if c in holes.columns]],
            f"{len(holes)} holes ({holes.attrs.get('thrust_source', '')})")
     for issue in holes.attrs.get("issues", []):
@@ -167,7 +192,7 @@ def _cmd_wear(args: argparse.Namespace) -> int:
     )
 
     measured = _parse_measured(args.measured)
-    _, holes = _holes(args.files, set_size=args.set_size)
+    _, holes = _holes(args.files, set_size=args.set_size, model=_model(args))
     torque = holes["torque_mean_nm"].to_numpy(dtype=np.float64)
     baseline = min(args.baseline, len(holes))
     inc = relative_increase(torque, baseline=baseline, set_size=args.set_size)
@@ -214,15 +239,16 @@ def _cmd_anomalies(args: argparse.Namespace) -> int:
     from cnctwin.usecases.replay import replay_detector
 
     recs = _read(args.files)
+    model = _model(args)
     holes: pd.DataFrame | None
     if args.detector == "tapping":
         try:
-            holes = hole_records(recs)
+            holes = hole_records(recs, model=model)
         except Exception:
             holes = pd.DataFrame(columns=["hole", "cut_start_cycle", "cut_end_cycle"])
     else:
         try:
-            holes = _holes_of(recs)
+            holes = _holes_of(recs, model=model)
         except ConfigError:
             if args.detector in ("envelope", "adaptive", "physics-torque"):  # need the holes
                 raise
@@ -230,7 +256,7 @@ def _cmd_anomalies(args: argparse.Namespace) -> int:
             print("note: no hole found; scoring every sample (not only the cuts)")
     rep = replay_detector(recs, holes, detector=args.detector, learn_until_s=args.learn_s,
                           threshold=args.threshold, material=args.material,
-                          drill_mm=args.drill_mm, scores=bool(args.out))
+                          drill_mm=args.drill_mm, scores=bool(args.out), model=model)
     for issue in rep.issues:
         print(f"note: {issue}")
     res = rep.result

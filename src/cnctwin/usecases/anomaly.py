@@ -46,6 +46,7 @@ from cnctwin.exceptions import ConfigError, SignalNotFoundError
 
 if TYPE_CHECKING:
     from cnctwin.recording import Recording
+    from cnctwin.spindle import SpindleModel
 
 __all__ = [
     "BacktestResult",
@@ -753,6 +754,7 @@ def signal_stream(
     holes: pd.DataFrame | None = None,
     *,
     cutting_only: bool = False,
+    model: SpindleModel | None = None,
 ) -> pd.DataFrame:
     """Detector inputs, one row per HF sample, from recordings in time order.
 
@@ -765,6 +767,10 @@ def signal_stream(
         each cut) and ``hole``; without it both are NaN / -1.
     cutting_only : bool, default False
         Keep only the samples inside a cut (envelope, physics and spectral detectors).
+    model : SpindleModel, optional
+        The calibrated spindle of this machine (``SpindleModel.from_machine``); without it
+        the thesis machine's parameters, and ``attrs["issues"]`` says the prediction is not
+        calibrated to this machine.
 
     Returns
     -------
@@ -781,10 +787,14 @@ def signal_stream(
 
     if not recordings:
         raise ConfigError("signal_stream needs at least one recording")
-    model = SpindleModel.from_parameters("thesis_spinner_840dsl")
+    issues: list[str] = []
+    if model is None:
+        model = SpindleModel.from_parameters("thesis_spinner_840dsl")
+        issues.append("the predicted current and torque use the thesis machine's spindle "
+                      "(thesis_spinner_840dsl), not calibrated to this machine: give the "
+                      "machine file (--machine FILE) of a 'cnctwin calibrate spindle'")
     origin = pd.Timestamp(recordings[0].hf["time"].iloc[0])
     parts = []
-    issues: list[str] = []
     for r in recordings:
         t = ((pd.DatetimeIndex(r.hf["time"]) - origin) / pd.Timedelta(seconds=1)).to_numpy()
         cur = r.hf["CURRENT|SP1"].to_numpy(dtype=np.float64)

@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from cnctwin.exceptions import ConfigError, NotScoredError
 from cnctwin.recording import Recording
+from cnctwin.spindle import SpindleModel
 from cnctwin.usecases.anomaly import (
     BacktestResult,
     Detector,
@@ -135,6 +136,7 @@ def replay_detector(
     material: str = "aisi1045",
     drill_mm: float = 8.5,
     scores: bool = False,
+    model: SpindleModel | None = None,
 ) -> DetectorReplay:
     """Replay recordings through the detector ``detector``: teach, then score.
 
@@ -158,6 +160,9 @@ def replay_detector(
         Drill diameter of the ``physics-torque`` prediction [mm].
     scores : bool, default False
         Also score a clone taught on the same rows (for a figure).
+    model : SpindleModel, optional
+        The machine's calibrated spindle for the predicted current and torque (default the
+        thesis machine's, said so in ``issues``).
 
     Raises
     ------
@@ -174,7 +179,7 @@ def replay_detector(
         raise ConfigError(f"the {detector} detector needs holes (progress through each cut); "
                           "this recording has none: use detector=physics")
     data = signal_stream(list(recordings), holes if have_holes else None,
-                         cutting_only=have_holes and detector in _CUTS_ONLY)
+                         cutting_only=have_holes and detector in _CUTS_ONLY, model=model)
     if data.empty:
         raise ConfigError("nothing to score: no cutting samples in the recordings")
     if detector == "physics-torque":
