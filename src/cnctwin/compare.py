@@ -65,7 +65,8 @@ def loop_model_from_axis(axis: FeedAxis, *, cycle_time_s: float = 0.002) -> Axis
 
     Notes
     -----
-    DES_POS passes the jerk filter (MD32402/32410; active above one cycle), the dynamic
+    DES_POS passes the jerk filter (MD32402/32410; active above one cycle; type 1 is two PT1
+    stages of MD32410 / 2), the dynamic
     response adaptation (MD32910, a dead time) and the feedforward balancing: a dead time of
     MD32810 (speed FFW, mode 3) or MD32800 (torque FFW, mode 4), a PT1 of that time in modes 1
     and 2 (SINUMERIK 840D sl function manual K3/G2, "feedforward control"). The closed speed
@@ -81,11 +82,19 @@ def loop_model_from_axis(axis: FeedAxis, *, cycle_time_s: float = 0.002) -> Axis
         axis.equiv_currctrl_time_s if mode in (2, 4) else 0.0)
     delay = axis.dyn_match_time_s + (bal if mode in (3, 4) else 0.0)
     pt1 = bal if mode in (1, 2) else 0.0
+    pt1b = 0.0
+    damping = 1.0
+    if jerk == "pt2":
+        # MD32402 = 1: two PT1 stages of MD32410 / 2 (low-frequency delay MD32410)
+        if pt1 == 0.0:
+            jerk, pt1, pt1b = "none", 0.5 * jt, 0.5 * jt
+        else:
+            jt = 0.5 * jt  # PT2 of T/2, damping 1, beside the PT1 balancing
     return AxisLoopModel(
         kv_1_s=axis.kv_m_min_per_mm * KV_UNIT_PER_S,
         ffw_weight=axis.ffw_weight if mode != 0 else 0.0,
-        jerk_type=jerk, jerk_time_s=jt, jerk_time2_s=jt, jerk_damping=1.0,
-        setpoint_delay_s=delay, setpoint_pt1_s=pt1, ffw_delay_s=0.5 * dt,
+        jerk_type=jerk, jerk_time_s=jt, jerk_time2_s=jt, jerk_damping=damping,
+        setpoint_delay_s=delay, setpoint_pt1_s=pt1, setpoint_pt1b_s=pt1b, ffw_delay_s=0.5 * dt,
         speed_delay_cycles=1.0 + 0.06 * axis.total_inertia_kgm2
         / max(axis.speed_kp_nm_s_per_rad, 1e-9) / dt,
         speed_time_cycles=0.0,

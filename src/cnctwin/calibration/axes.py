@@ -207,7 +207,11 @@ def calibrate_axes(
                     out.records[full] = ParameterRecord(float(default), identified=False,
                                                         reason=why)
         jtypes = [i.jerk_type for i in idents if i.jerk_type]
-        if jtypes:
+        pt2_pair = _pt2_pair(idents)
+        pt2: bool | None = None  # None: no PT2 pair; True: accepted; False: ambiguous
+        if pt2_pair is not None and base is not None:
+            pt2 = _pt2_jerk(out, ax, idents, pt2_pair, prov)
+        elif jtypes:
             jt = max(set(jtypes), key=jtypes.count)
             out.records[f"axes.{ax}.jerk_filter_type"] = ParameterRecord(
                 float(JERK_FILTER_MD32402[jt]), None, prov)
@@ -230,13 +234,66 @@ def calibrate_axes(
                 # the identified length gives the same filter (uniform, dt / sqrt(12))
                 out.records[f"axes.{ax}.jerk_time_s"] = dataclasses.replace(
                     rec_j, uncertainty=math.hypot(rec_j.uncertainty, dt / math.sqrt(12.0)))
-        _balancing(out, ax, idents, prov)
+        if pt2 is False and base is not None:
+            for key in ("equiv_speedctrl_time_s", "ffw_mode"):
+                out.records[f"axes.{ax}.{key}"] = ParameterRecord(
+                    float(getattr(base, key)), identified=False,
+                    reason="a PT2 jerk filter beside PT1 balancing: three PT1 stages the "
+                           "identification's two cannot separate; read MD32620/MD32810 from "
+                           "the NC")
+        else:
+            _balancing(out, ax, idents, prov, pt2_pair=bool(pt2))
         _friction(out, ax, idents, base, prov)
     return out
 
 
+def _pt2_pair(idents: list[AxisIdentification]) -> tuple[float, float] | None:
+    """The two equal setpoint PT1s of a PT2 jerk filter (MD32402 = 1), if the fit shows them.
+
+    The NC's second-order jerk filter is two PT1 stages of MD32410 / 2 each (low-frequency
+    delay MD32410). The identification's setpoint chain has two PT1 slots after the jerk
+    filter (for the dynamic response adaptation and the PT1 balancing); a PT2 jerk filter with
+    dead-time balancing fills both with the same time constant, where the jerk model 'none'
+    explains the data exactly. Returns (T1 + T2, its standard error) [s].
+    """
+    vals = []
+    for i in idents:
+        a = i.params.get("setpoint_pt1_s")
+        b = i.params.get("setpoint_pt1b_s")
+        if i.jerk_type not in ("none", "pt2") or a is None or b is None:
+            continue
+        dt = i.cycle_time_s
+        if min(a.value, b.value) > 0.25 * dt and abs(a.value - b.value) <= 0.15 * max(
+                a.value, b.value):
+            se = math.hypot(a.stderr if a.stderr == a.stderr else 0.0,
+                            b.stderr if b.stderr == b.stderr else 0.0)
+            vals.append((a.value + b.value, se))
+    return _pool(vals) if vals else None
+
+
+def _pt2_jerk(out: AxesCalibration, ax: str, idents: list[AxisIdentification],
+              pair: tuple[float, float], prov: Provenance) -> bool:
+    """Record MD32402 = 1 and MD32410 from a PT2 pair; False (refused, with the reason) where
+    PT1 balancing makes it ambiguous."""
+    modes = [i.ffw_mode for i in idents]
+    delays = [i.params["setpoint_delay_s"].value for i in idents if "setpoint_delay_s" in i.params]
+    dt = idents[0].cycle_time_s
+    if delays and max(delays) < 0.25 * dt and "none" not in modes:
+        out.records[f"axes.{ax}.jerk_time_s"] = ParameterRecord(
+            0.008, identified=False,
+            reason="two equal setpoint PT1s and no dead time: a PT2 jerk filter (MD32402 = 1) "
+                   "beside PT1 feedforward balancing (MD32620 = 1/2) cannot be told apart with "
+                   "two PT1 stages; read MD32402/MD32410 from the NC")
+        return False
+    v, u = pair
+    out.records[f"axes.{ax}.jerk_filter_type"] = ParameterRecord(1.0, None, prov)
+    out.records[f"axes.{ax}.jerk_time_s"] = ParameterRecord(
+        v, math.hypot(u if u == u else 0.0, REL_FLOOR * v), prov)
+    return True
+
+
 def _balancing(out: AxesCalibration, ax: str, idents: list[AxisIdentification],
-               prov: Provenance) -> None:
+               prov: Provenance, *, pt2_pair: bool = False) -> None:
     """FFW mode MD32620 and the balancing time MD32810 (speed FFW) or MD32800 (torque FFW).
 
     With feedforward the NC delays the setpoint by the balancing time (dead time: modes 3/4)
@@ -260,7 +317,7 @@ def _balancing(out: AxesCalibration, ax: str, idents: list[AxisIdentification],
         return
     d_v, d_u = _pool(delay)
     p_v, p_u = _pool(pt1) if pt1 else (0.0, 0.0)
-    dead = d_v >= p_v
+    dead = d_v >= p_v or pt2_pair  # the PT1 pair is the jerk filter, not the balancing
     code = {("speed", True): 3, ("speed", False): 1, ("torque", True): 4,
             ("torque", False): 2}[(mode, dead)]
     out.records[f"axes.{ax}.ffw_mode"] = ParameterRecord(float(code), None, prov)
