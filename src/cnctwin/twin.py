@@ -895,11 +895,12 @@ class TwinChain:
     def calibrate(
         self,
         air_cut: Recording | Sequence[Recording],
-        calibration_cut: Recording,
+        calibration_cut: Recording | None,
         *,
         warm_up: Recording | None = None,
         region_index: int = 0,
         reference_torque_nm: float | None = None,
+        kt_nm_per_a: float | None = None,
     ) -> TwinChain:
         """Identify the spindle from an air-cut sweep and one cut with a dynamometer.
 
@@ -918,6 +919,10 @@ class TwinChain:
         reference_torque_nm : float, optional
             Mean cutting torque of the calibration window known otherwise (a torque
             measured or computed for that cut) [Nm]; replaces the dynamometer channel.
+        kt_nm_per_a : float, optional
+            The motor's torque constant from the drive's data (SINAMICS p0316) [Nm/A]: no
+            calibration cut is used (``calibration_cut`` may be None) and the friction and J
+            are referred to it; the calibration window of the results is empty (NaN).
 
         Returns
         -------
@@ -972,6 +977,23 @@ class TwinChain:
         else:
             friction = ffn(speeds, means, fit_lo, hi)
         t_ref = self._air_cut_temperature(stats, lo, hi)
+        if kt_nm_per_a is not None:
+            # Kt from the drive's motor data (p0316), no cut: friction in torque units
+            j = 0.0
+            if o.acceleration_term:
+                j = self._inertia(air_cuts[0], self._model(kt_nm_per_a, friction, 0.0, t_ref))
+            nan = float("nan")
+            cal = CutEstimate(0, 0, 0, 0, nan, nan, nan, nan, 0.0, nan, nan)
+            self._result = TwinChainResult(
+                air_cut_stats=stats, field_weakening_rpm=fw, region=region,
+                fit_range_rpm=(float(fit_lo), float(hi)), friction=friction,
+                spindle_model=self._model(float(kt_nm_per_a), friction, j, t_ref),
+                calibration=cal, warm_up_coeff_per_k=None, thermal_drift_per_energy=gamma,
+                thermal_friction=thermal)
+            return self
+        if calibration_cut is None:
+            raise IdentificationError("give a calibration cut (with its torque) or the "
+                                      "motor's torque constant")
         # Kt from the calibration cut (Eq. 4.3)
         rec = calibration_cut
         if reference_torque_nm is None:

@@ -90,7 +90,7 @@ def _reference_figure(cal: SpindleCalibration, reference: Recording, spindle: st
 
 def spindle_calibration_report(
     cal: SpindleCalibration,
-    reference: Recording,
+    reference: Recording | None,
     path: str | Path,
     *,
     spindle: str = "SP1",
@@ -103,8 +103,9 @@ def spindle_calibration_report(
     ----------
     cal : SpindleCalibration
         The result of :func:`~cnctwin.calibration.calibrate_spindle`.
-    reference : Recording
-        The reference cut it was calibrated with (dynamometer attached, if any).
+    reference : Recording or None
+        The reference cut it was calibrated with (dynamometer attached, if any); None when
+        Kt came from the motor data.
     path : str or Path
         The HTML file.
     spindle : str
@@ -164,6 +165,17 @@ def spindle_calibration_report(
     sec2.table(st, caption="Plateaus found", float_format="{:.4g}")
     sec2.table(cal.variants, caption="Fit variants behind the model-form uncertainty",
                float_format="{:.5g}")
+    if not cal.speeds.empty and len(cal.speeds) > 1:
+        sp = cal.speeds.copy()
+        sp.columns = ["reference", "speed [rpm]", "Kt [Nm/A]", "Kt standard error [Nm/A]",
+                      "torque [Nm]", "current [A]"]
+        law = cal.flux_law
+        sec.table(sp, caption="Kt of each reference cut at its speed; the speed law "
+                  + (f"Kt(n) = {law.kt_nm_per_a:.4g} (n_b/n)^{law.exponent:.2f} above "
+                     f"n_b = {law.base_speed_rpm:.0f} rpm" if law is not None and
+                     law.base_speed_rpm > 0 else "shows no change"), float_format="{:.4g}")
+    if reference is None:
+        return rep.write(path)
     sec3 = rep.section("Reference cut: predicted vs measured torque")
     sec3.figure(_reference_figure(cal, reference, spindle, reference_torque_nm),
                 caption="Reference cut: the twin's cutting torque from the spindle current "

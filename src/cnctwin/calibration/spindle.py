@@ -164,11 +164,13 @@ def _variant_options(method: str) -> list[dict[str, Any]]:
 
 def calibrate_spindle(
     air_cuts: Sequence[Recording],
-    reference: Recording | Sequence[Recording],
+    reference: Recording | Sequence[Recording] | None,
     *,
     method: str = "improved",
     reference_torque_nm: float | Sequence[float] | None = None,
     reference_uncertainty_pct: float = 0.0,
+    kt_nm_per_a: float | None = None,
+    kt_tolerance_pct: float = 5.0,
     warm_up: Recording | None = None,
     spindle: str = "SP1",
     recording_names: Sequence[str] = (),
@@ -190,6 +192,12 @@ def calibrate_spindle(
         Mean cutting torque of each reference cut [Nm], instead of a dynamometer.
     reference_uncertainty_pct : float, default 0
         Relative standard uncertainty of the torque reference [%] (calibration certificate).
+    kt_nm_per_a : float, optional
+        Without a reference cut: the motor's torque constant from the drive's data (SINAMICS
+        p0316, the motor data sheet) [Nm/A]. Friction and J are referred to it.
+    kt_tolerance_pct : float, default 5
+        Its tolerance as the data sheet states it (+- %, taken as a uniform distribution:
+        standard uncertainty tolerance / sqrt(3)); every cutting torque inherits it.
     warm_up : Recording, optional
         A long constant-speed run for the temperature referral (improved method).
     spindle : str, default 'SP1'
@@ -225,9 +233,15 @@ def calibrate_spindle(
     check_air_cut_plateaus(stats, method=method, source="the air cut" + (
         f"s {', '.join(air_names)}" if len(air_names) > 1 else
         (f" {air_names[0]}" if air_names else "s")))
-    refs = [reference] if isinstance(reference, Recording) else list(reference)
+    if kt_nm_per_a is not None:
+        return _calibrate_with_motor_kt(air_cuts, method=method, kt_nm_per_a=kt_nm_per_a,
+                                        kt_tolerance_pct=kt_tolerance_pct, warm_up=warm_up,
+                                        spindle=spindle, recording_names=recording_names)
+    refs = ([] if reference is None else [reference] if isinstance(reference, Recording)
+            else list(reference))
     if not refs:
-        raise IdentificationError("calibrate_spindle needs at least one reference cut")
+        raise IdentificationError("calibrate_spindle needs a reference cut with a known "
+                                  "torque, or the motor's torque constant (kt_nm_per_a)")
     if reference_torque_nm is None or isinstance(reference_torque_nm, int | float):
         torques: list[float | None] = [reference_torque_nm] * len(refs)
     else:
@@ -370,6 +384,89 @@ def calibrate_spindle(
         result=res, windows=windows, variants=variants,
         reference_torque_source="given" if torques[0] is not None else "dynamometer",
         notes=notes, speeds=speeds, flux_law=law)
+
+
+def _calibrate_with_motor_kt(
+    air_cuts: Sequence[Recording], *, method: str, kt_nm_per_a: float,
+    kt_tolerance_pct: float, warm_up: Recording | None, spindle: str,
+    recording_names: Sequence[str],
+) -> SpindleCalibration:
+    """Friction and J from the air cuts with Kt from the motor data; no reference cut."""
+    import dataclasses
+
+    if not kt_nm_per_a > 0 or not kt_tolerance_pct >= 0:
+        raise IdentificationError(f"the motor's torque constant must be > 0 Nm/A and its "
+                                  f"tolerance >= 0 %, not {kt_nm_per_a} / {kt_tolerance_pct}")
+    kw: dict[str, Any] = {"warm_up": warm_up, "kt_nm_per_a": kt_nm_per_a}
+    chain = _chain(method, spindle=spindle).calibrate(air_cuts, None, **kw)
+    res = chain.results
+    model = res.spindle_model
+    if model.b_nm_per_rpm < 0 or model.tau_f_nm < 0:
+        raise IdentificationError(
+            f"the friction line through the air cut gives B = {model.b_nm_per_rpm:.3g} Nm/rpm "
+            f"and tau_f = {model.tau_f_nm:.3g} Nm: a negative friction; record the air cut "
+            "up and back down below the motor's rated speed")
+    rows = [{"variant": "chosen", "b_nm_per_rpm": model.b_nm_per_rpm,
+             "tau_f_nm": model.tau_f_nm}]
+    for opts in _variant_options(method):
+        try:
+            vm = _chain(method, spindle=spindle, **opts).calibrate(
+                air_cuts, None, **kw).results.spindle_model
+        except IdentificationError:
+            continue
+        rows.append({"variant": ", ".join(f"{k}={v}" for k, v in opts.items()),
+                     "b_nm_per_rpm": vm.b_nm_per_rpm, "tau_f_nm": vm.tau_f_nm})
+    variants = pd.DataFrame(rows)
+    rel_kt = kt_tolerance_pct / 100.0 / math.sqrt(3.0)
+    line = res.friction.line
+    unc = {"kt_nm_per_a": kt_nm_per_a * rel_kt}
+    budget_rows = [{"parameter": "kt_nm_per_a", "value": kt_nm_per_a, "unit": "Nm/A",
+                    "statistical": 0.0, "model_form": 0.0, "reference": unc["kt_nm_per_a"],
+                    "combined": unc["kt_nm_per_a"]}]
+    for name, value, se, unit in (("b_nm_per_rpm", model.b_nm_per_rpm, line.slope_std,
+                                   "Nm/rpm"),
+                                  ("tau_f_nm", model.tau_f_nm, line.offset_std, "Nm")):
+        x = variants[name].to_numpy(dtype=np.float64)
+        mf = float(np.std(x, ddof=1)) if x.size > 1 else 0.0
+        stat = kt_nm_per_a * se if np.isfinite(se) else 0.0
+        ref = abs(value) * rel_kt
+        unc[name] = math.sqrt(stat**2 + mf**2 + ref**2)
+        budget_rows.append({"parameter": name, "value": value, "unit": unit,
+                            "statistical": stat, "model_form": mf, "reference": ref,
+                            "combined": unc[name]})
+    names = list(recording_names) or [f for r in air_cuts for f in r.meta.source_files[:1]]
+    prov = Provenance.now(f"cnctwin calibrate spindle --method {method} --kt-nm-per-a "
+                          f"{kt_nm_per_a:g} (motor data, +-{kt_tolerance_pct:g} %)", names)
+    fit_range = (float(res.fit_range_rpm[0]), float(res.fit_range_rpm[1]))
+    records: dict[str, ParameterRecord] = {
+        "spindle.kt_nm_per_a": ParameterRecord(kt_nm_per_a, unc["kt_nm_per_a"], prov),
+        "spindle.viscous_friction_nm_per_rpm": ParameterRecord(
+            model.b_nm_per_rpm, unc["b_nm_per_rpm"], prov, valid_range=fit_range,
+            valid_quantity="speed_rpm"),
+        "spindle.coulomb_friction_nm": ParameterRecord(
+            model.tau_f_nm, unc["tau_f_nm"], prov, valid_range=fit_range,
+            valid_quantity="speed_rpm"),
+        "spindle.flux_base_speed_rpm": ParameterRecord(
+            0.0, identified=False,
+            reason="Kt from the motor data holds below the motor's rated speed; how it falls "
+                   "above (constant power) needs reference cuts at two or more speeds"),
+    }
+    if model.j_kgm2 > 0:
+        records["spindle.inertia_kg_m2"] = ParameterRecord(model.j_kgm2, None, prov)
+    t_ref = model.reference_temperature_c
+    if t_ref is not None and np.isfinite(t_ref):
+        for key in ("spindle.kt_ref_temperature_c", "spindle.friction_ref_temperature_c"):
+            records[key] = ParameterRecord(float(t_ref), None, prov)
+    notes = [f"Kt {kt_nm_per_a:g} Nm/A from the motor data, +-{kt_tolerance_pct:g} %: every "
+             f"cutting torque the twin estimates carries that tolerance (standard "
+             f"uncertainty {100 * rel_kt:.1f} %), besides the friction's; one reference cut "
+             "with a dynamometer brings Kt to about 0.1-0.2 % (docs/validation-calibration.md)"]
+    empty = pd.DataFrame(columns=["start_cycle", "end_cycle", "speed_rpm", "current_a",
+                                  "air_current_a", "torque_nm", "kt_nm_per_a"])
+    return SpindleCalibration(
+        method=method, model=dataclasses.replace(model), uncertainty=unc,
+        budget=pd.DataFrame(budget_rows), records=records, result=res, windows=empty,
+        variants=variants, reference_torque_source="motor data", notes=notes)
 
 
 def _base_speed_hint(chain: TwinChain, refs: list[Recording],

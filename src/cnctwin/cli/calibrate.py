@@ -37,7 +37,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     s.add_argument("--air-cut", nargs="+", type=Path, required=True, metavar="FILE",
                    help="air-cut recording(s): spindle at constant speeds, no contact")
-    s.add_argument("--reference", type=Path, nargs="+", required=True, metavar="FILE",
+    s.add_argument("--reference", type=Path, nargs="+", metavar="FILE",
                    help="recording of a cut whose torque is known; cuts at two or more speeds "
                    "give the speed law of Kt (constant-power range)")
     g = s.add_mutually_exclusive_group()
@@ -46,6 +46,11 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    "clock; aligned on the current)")
     g.add_argument("--torque-nm", type=float, nargs="+", metavar="VALUE",
                    help="mean cutting torque of each reference cut [Nm], if no dynamometer")
+    s.add_argument("--kt-nm-per-a", type=float, metavar="VALUE",
+                   help="no reference cut: the motor's torque constant from the drive's data "
+                   "(SINAMICS p0316 / data sheet) [Nm/A]")
+    s.add_argument("--kt-tolerance-pct", type=float, default=5.0, metavar="PCT",
+                   help="its tolerance as the data sheet states it [+- %%] (5)")
     s.add_argument("--torque-uncertainty-pct", type=float, default=0.0, metavar="PCT",
                    help="relative standard uncertainty of the torque reference [%%] "
                    "(calibration certificate); default 0 = not included")
@@ -103,6 +108,11 @@ def _cmd_spindle(args: argparse.Namespace) -> int:
     mf = _load_or_new(args.machine)  # a damaged machine file stops here, before any work
     if args.torque_uncertainty_pct < 0:
         raise ConfigError("--torque-uncertainty-pct must be >= 0")
+    if (args.reference is None) == (args.kt_nm_per_a is None):
+        raise ConfigError("give --reference FILE... (cuts with a known torque) or "
+                          "--kt-nm-per-a VALUE (the motor's torque constant), one of them")
+    if args.kt_nm_per_a is not None:
+        return _spindle_from_motor_kt(args, mf)
     n_ref = len(args.reference)
     for opt, vals in (("--dynamometer", args.dynamometer), ("--torque-nm", args.torque_nm)):
         if vals is not None and len(vals) != n_ref:
@@ -163,6 +173,35 @@ def _cmd_spindle(args: argparse.Namespace) -> int:
                       f"{fb.uncertainty:.2g}" if fb.uncertainty is not None else "-", "rpm")
     out = Console()
     out.print(table)
+    for note in cal.notes:
+        out.print(f"note: {note}")
+    out.print(f"wrote {args.machine} and {report}")
+    return 0
+
+
+def _spindle_from_motor_kt(args: argparse.Namespace, mf: Any) -> int:
+    from rich.console import Console
+
+    from cnctwin.calibration import calibrate_spindle
+    from cnctwin.calibration.report import spindle_calibration_report
+    from cnctwin.machine import save_machine
+
+    if args.dynamometer is not None or args.torque_nm is not None:
+        raise ConfigError("--dynamometer/--torque-nm go with --reference, not --kt-nm-per-a")
+    with Console(stderr=True).status("reading the air cuts"):
+        air = [_read(p) for p in args.air_cut]
+        warm = _read(args.warm_up) if args.warm_up is not None else None
+    cal = calibrate_spindle(air, None, method=args.method, kt_nm_per_a=args.kt_nm_per_a,
+                            kt_tolerance_pct=args.kt_tolerance_pct, warm_up=warm,
+                            spindle=args.spindle,
+                            recording_names=[str(p) for p in args.air_cut])
+    report = args.report or args.machine.with_name(args.machine.stem + ".spindle-report.html")
+    spindle_calibration_report(cal, None, report, spindle=args.spindle,
+                               machine_path=str(args.machine))
+    save_machine(mf.with_records(cal.records), args.machine)
+    out = Console()
+    for _, r in cal.budget.iterrows():
+        out.print(f"{r['parameter']:>14s} {r['value']:.5g} +- {r['combined']:.2g} {r['unit']}")
     for note in cal.notes:
         out.print(f"note: {note}")
     out.print(f"wrote {args.machine} and {report}")
