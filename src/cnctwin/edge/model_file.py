@@ -37,6 +37,9 @@ MODEL_UNITS: dict[str, str] = {
     "b_temp_coeff_per_k": "1/K",
     "tau_f_temp_coeff_per_k": "1/K",
     "reference_temperature_c": "degC",
+    "flux_base_speed_rpm": "rpm",
+    "flux_exponent": "-",
+    "kt_valid_speed_rpm": "rpm",
 }
 """Units of the :class:`~cnctwin.spindle.SpindleModel` fields."""
 
@@ -105,10 +108,18 @@ def load_spindle_model(path: str | PathLike[str]) -> SpindleModel:
         raise ConfigError(f"{p}: unknown spindle model parameters {unknown}; valid: "
                           f"{sorted(fields)}")
     values: dict[str, float | None] = {}
+    ranges: dict[str, tuple[float, float]] = {}
     for k in fields & set(params):
         v = params[k]
-        if v is None and k == "reference_temperature_c":
+        if v is None and k in ("reference_temperature_c", "kt_valid_speed_rpm"):
             values[k] = None
+            continue
+        if k == "kt_valid_speed_rpm":
+            if (not isinstance(v, list | tuple) or len(v) != 2
+                    or not all(isinstance(x, int | float) and math.isfinite(x) for x in v)):
+                raise FormatError(f"parameter {k} = {v!r} is not [low, high] in rpm",
+                                  path=str(p), field=k)
+            ranges[k] = (float(v[0]), float(v[1]))
             continue
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise FormatError(f"parameter {k} = {v!r} is not a finite number", path=str(p),
@@ -118,4 +129,4 @@ def load_spindle_model(path: str | PathLike[str]) -> SpindleModel:
     if missing:
         raise ConfigError(f"{p}: spindle model lacks {missing} (write it with "
                           "cnctwin.edge.save_spindle_model)")
-    return SpindleModel(**values)  # type: ignore[arg-type]
+    return SpindleModel(**values, **ranges)  # type: ignore[arg-type]
