@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
@@ -55,4 +56,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except CnctwinError as exc:
         print(f"cnctwin {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"cnctwin {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # e.g. piped into head: the reader has gone
+        return 0
+    except Exception as exc:  # the last line of defence: one readable line
+        if os.environ.get("CNCTWIN_DEBUG"):
+            raise
+        print(f"cnctwin {args.command}: internal error: {type(exc).__name__}: {exc} "
+              "(a bug: please report it with the command; CNCTWIN_DEBUG=1 shows the "
+              "traceback)", file=sys.stderr)
+        return 1
     return int(code or 0)

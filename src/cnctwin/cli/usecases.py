@@ -119,7 +119,12 @@ def _holes_of(recs: list[Any], set_size: int = 6, model: Any = None) -> pd.DataF
 
     holes = hole_records(recs, set_size=set_size, model=model)
     if holes.empty:
-        raise ConfigError("no hole found (no plunge of the Z axis in the recordings)")
+        raise ConfigError(
+            "no hole found (no plunge of the Z axis in the recordings): holes and wear need "
+            "drilling. For other recordings: 'cnctwin servo FILE' (position loops), "
+            "'cnctwin twin compare FILE --machine M' (against the calibrated twin), "
+            "'cnctwin anomalies FILE --detector spectral|physics' (every sample scored), "
+            "'cnctwin info FILE' (what it holds)")
     return holes
 
 

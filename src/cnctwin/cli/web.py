@@ -50,6 +50,9 @@ def _cmd_web(args: argparse.Namespace) -> int:
     if args.model is not None and not args.model.exists():
         raise ConfigError(f"model file {args.model} does not exist; write one with "
                           "cnctwin.edge.save_spindle_model (docs/edge.md)")
+    if not 1 <= args.port <= 65535:
+        raise ConfigError(f"--port {args.port} is not a TCP port; give 1 ... 65535 (default 8050)")
+    _check_bind(args.host, args.port)
     try:
         import uvicorn
     except ImportError:
@@ -66,3 +69,21 @@ def _cmd_web(args: argparse.Namespace) -> int:
     print(f"cnctwin web: serving on http://{args.host}:{args.port}/ (Ctrl-C stops)", flush=True)
     uvicorn.run(app, host=args.host, port=args.port, log_level="warning")
     return 0
+
+
+def _check_bind(host: str, port: int) -> None:
+    """Fail before anything is announced if the address cannot be served."""
+    import socket
+
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except socket.gaierror as exc:
+        raise ConfigError(f"--host {host}: not an address of this machine ({exc})") from None
+    family, _, _, _, addr = infos[0]
+    with socket.socket(family, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind(addr)
+        except OSError as exc:
+            raise ConfigError(f"cannot serve on {host}:{port}: {exc.strerror or exc}; the port "
+                              "is in use or not allowed: choose another with --port") from None

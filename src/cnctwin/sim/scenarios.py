@@ -1855,11 +1855,30 @@ def run_scenario(
         fn = SCENARIOS[name]
     except KeyError:
         raise ConfigError(f"unknown scenario {name!r}; known: {', '.join(SCENARIOS)}") from None
-    valid = [p for p in inspect.signature(fn).parameters
-             if p not in ("out", "seed", "overrides", "progress", "machine")]
+    params = inspect.signature(fn).parameters
+    valid = [p for p in params if p not in ("out", "seed", "overrides", "progress", "machine")]
     bad = sorted(set(options) - set(valid))
     if bad:
         raise ConfigError(f"scenario {name!r} has no option(s) {bad}; options: {valid}")
+    for key, value in options.items():
+        default = params[key].default
+        if isinstance(default, bool):
+            ok = isinstance(value, bool)
+            want = "true or false"
+        elif isinstance(default, int):
+            ok = isinstance(value, int) and not isinstance(value, bool)
+            want = "an integer"
+        elif isinstance(default, float):
+            ok = isinstance(value, int | float) and not isinstance(value, bool)
+            want = "a number"
+        elif isinstance(default, str):
+            ok = isinstance(value, str)
+            want = "a string"
+        else:
+            continue
+        if not ok:
+            raise ConfigError(f"scenario {name!r} option {key} must be {want} (default "
+                              f"{default!r}), not {value!r}")
     if machine is not None:
         options["machine"] = machine
     return fn(out, seed=seed, overrides=overrides, progress=progress, **options)

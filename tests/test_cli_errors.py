@@ -1,0 +1,76 @@
+"""Errors at the command line: one readable message, a non-zero exit, no traceback (issue 16)."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from cnctwin.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _run(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "cnctwin", *args], capture_output=True,
+                          text=True, check=False, timeout=120)
+
+
+def test_a_scenario_option_of_the_wrong_type(tmp_path: Path) -> None:
+    r = _run("simulate", "tool_wear_run", "--out", str(tmp_path / "x"), "--option",
+             "n_holes=abc")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "option n_holes must be an integer (default 2676), not 'abc'" in r.stderr
+    assert not (tmp_path / "x").exists()
+
+
+def test_web_on_an_impossible_or_busy_port(tmp_path: Path) -> None:
+    pytest.importorskip("uvicorn", reason="the web extra: pip install 'cnctwin[web]'")
+    rec = ROOT / "tests" / "data" / "real" / "sinumerik-trace"
+    r = _run("web", "--recording", str(rec), "--port", "99999")
+    assert r.returncode == 2 and "--port 99999 is not a TCP port" in r.stderr
+    assert "Traceback" not in r.stderr
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        r = _run("web", "--recording", str(rec), "--port", str(port))
+    assert r.returncode == 2 and "choose another with --port" in r.stderr
+    assert "serving on" not in r.stdout and "Traceback" not in r.stderr
+
+
+def test_an_unexpected_error_is_one_line(monkeypatch: pytest.MonkeyPatch,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    import cnctwin.cli.io as io_cli
+
+    def boom(args: object) -> int:
+        raise ValueError("something the code did not expect")
+
+    monkeypatch.setattr(io_cli, "_cmd_info", boom)
+    monkeypatch.delenv("CNCTWIN_DEBUG", raising=False)
+    assert main(["info", "x"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "internal error: ValueError" in err
+    assert "CNCTWIN_DEBUG=1" in err
+
+
+def test_no_drilling_says_what_applies(capsys: pytest.CaptureFixture[str]) -> None:
+    c4a = (ROOT / "tests" / "data" / "real" / "capture4analysis"
+           / "example_data_ff429d74-6482-4d4f-80e1-31419d9bd56c.json")
+    for cmd in ("holes", "wear"):
+        assert main([cmd, str(c4a)]) == 2
+        err = capsys.readouterr().err
+        assert "no hole found" in err and "cnctwin servo FILE" in err
+
+
+def test_license_matches_pyproject() -> None:
+    meta = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    assert meta["project"]["license"] == "MIT"
+    assert (ROOT / "LICENSE").read_text(encoding="utf-8").startswith("MIT License")
+    first = (ROOT / "README.md").read_text(encoding="utf-8")[:2500]
+    assert "make demo" in first and "make test" in first
+    assert "Koç University" in first and "LICENSE" in first
