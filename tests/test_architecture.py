@@ -98,3 +98,22 @@ def test_the_graph_sees_function_level_imports() -> None:
     assert "cnctwin.sim.scenarios" in g["cnctwin.validation.trials"]
     with pytest.raises(KeyError):
         g["cnctwin.usecases.trials"]
+
+
+def test_no_test_skips_on_the_projects_own_modules() -> None:
+    """``pytest.importorskip("cnctwin...")`` turns an import bug into a silent skip (issue 16)."""
+    hits = [str(p.relative_to(SRC.parents[1])) for p in (SRC.parents[1] / "tests").rglob("*.py")
+            if 'importorskip("cnctwin' in p.read_text(encoding="utf-8")
+            and p.name != "test_architecture.py"]
+    assert hits == []
+
+
+def test_the_edge_runtime_does_not_load_matplotlib() -> None:
+    """Footprint at the edge (issue 16): importing the runtime loads no plotting library."""
+    import subprocess
+    import sys
+
+    code = "import sys, cnctwin.edge, cnctwin.cli.edge; print('matplotlib' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "False"

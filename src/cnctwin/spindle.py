@@ -41,7 +41,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
-from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 
 from cnctwin.analysis.align import align_external, external_on_hf
@@ -53,6 +52,8 @@ from cnctwin.exceptions import ConfigError, IdentificationError, SignalNotFoundE
 from cnctwin.recording import Recording
 
 if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
     from cnctwin.machine import MachineFile
 
 __all__ = [
@@ -379,6 +380,7 @@ def plot_air_cut(stats: pd.DataFrame, *, columns: Sequence[str] | None = None) -
         Not attached to pyplot (Agg canvas).
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     names = list(columns) if columns is not None else [
         c[: -len(" mean")] for c in stats.columns if c.endswith(" mean")

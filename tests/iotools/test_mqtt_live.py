@@ -89,7 +89,6 @@ def test_databus_metadata_then_data(broker: int) -> None:
 
 @pytest.mark.parametrize("zipped", [False, True])
 def test_data_recorder_stream(broker: int, c4a_file: Path, zipped: bool) -> None:
-    pytest.importorskip("cnctwin.iotools.capture4analysis")
     topic = "MACHINE_A/tapping/M8-40"
     ready = threading.Event()
     results: list[Any] = []

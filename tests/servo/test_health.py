@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+import cnctwin.sim as sim  # an import bug of the project's own module must fail, not skip
 from cnctwin.recording import Recording
 from cnctwin.servo.health import (
     HealthResult,
@@ -32,9 +33,7 @@ from cnctwin.servo.health import (
     track_loop_health,
 )
 from cnctwin.servo.identify import Estimate
-
-sim = pytest.importorskip("cnctwin.sim")
-from cnctwin.sim.scenarios import random_loop_overrides  # noqa: E402
+from cnctwin.sim.scenarios import random_loop_overrides
 
 N_RECORDINGS = 12
 JERK_MODELS = ("none", "moving_average")  # the simulator's MD32402 = 2 (MA); saves ~10 s/run

@@ -290,8 +290,8 @@ def align(
     >>> f = lambda t: np.sin(2.1 * t) + np.sin(5.3 * t) + 0.5 * np.sin(13.7 * t)
     >>> t_ref = np.arange(0, 20, 0.002); t_dyn = np.arange(0, 18, 0.001)
     >>> a = align(t_ref, f(t_ref), t_dyn, f(t_dyn + 0.5), max_lag_s=2.0)
-    >>> round(a.lag_s, 3)
-    0.5
+    >>> abs(a.lag_s - 0.5) < 0.002   # one sample of the 500 Hz reference
+    True
     """
     ref_t, ref = _clean(reference_t_s, reference, "reference")
     oth_t, oth = _clean(other_t_s, other, "other")

@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
-from matplotlib.figure import Figure
 
 from cnctwin.analysis.filters import FilterWarning, lowpass
 from cnctwin.exceptions import ConfigError
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = ["correlation_label", "correlation_matrix", "plot_correlation_heatmaps"]
 
@@ -130,6 +133,8 @@ def plot_correlation_heatmaps(
     size = max(len(matrices[k]) for k in keys)
     cell = 0.45 + 0.05 * size
     figsize = figsize_in or (ncols * (1.5 + size * cell), nrows * (1.2 + size * cell))
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=figsize, layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(nrows, ncols, squeeze=False)
