@@ -142,10 +142,12 @@ class MqttRecorder:
 
     Examples
     --------
-    >>> with MqttRecorder("127.0.0.1", 1883,
-    ...                   metadata_topic="ie/m/j/simatic/v1/s7c1/dp") as rec:  # doctest: +SKIP
-    ...     rec.wait_ready(timeout_s=10)
-    ...     recording = rec.collect(duration_s=5)
+    With a broker on the machine (the tests start one)::
+
+        with MqttRecorder("127.0.0.1", 1883,
+                          metadata_topic="ie/m/j/simatic/v1/s7c1/dp") as rec:
+            rec.wait_ready(timeout_s=10)
+            recording = rec.collect(duration_s=5)
     """
 
     def __init__(

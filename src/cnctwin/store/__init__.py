@@ -1,10 +1,12 @@
 """Storage of recordings: embedded DuckDB + Parquet (default) or PostgreSQL.
 
->>> import cnctwin.store
->>> with cnctwin.store.open("/tmp/cnctwin-store") as st:          # doctest: +SKIP
-...     rid = st.ingest(rec)
-...     cur = st.query_signals(["CURRENT|SP1"], start="2023-12-22T13:23:41Z")
-...     rec2 = st.load(rid)
+::
+
+    import cnctwin.store
+    with cnctwin.store.open("/tmp/cnctwin-store") as st:
+        rid = st.ingest(rec)
+        cur = st.query_signals(["CURRENT|SP1"], start="2023-12-22T13:23:41Z")
+        rec2 = st.load(rid)
 
 URLs understood by :func:`open`:
 

@@ -1,7 +1,9 @@
 """The web dashboard: a FastAPI app over a cnctwin store and/or recording files.
 
->>> from cnctwin.web import create_app                                  # doctest: +SKIP
->>> app = create_app(store_url="/data/cnctwin-store", recordings=["run1.json"])  # doctest: +SKIP
+::
+
+    from cnctwin.web import create_app
+    app = create_app(store_url="/data/cnctwin-store", recordings=["run1.json"])
 
 Run it with ``cnctwin web --store PATH_OR_URL [--recording PATH ...]`` (uvicorn). Pages: the
 fleet overview with signal-quality accounting, a recording view with server-side min/max
