@@ -36,6 +36,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    help="read damaged recordings with salvage=True (kept, flagged partial)")
     p.add_argument("--host", default="127.0.0.1", help="interface to listen on (127.0.0.1)")
     p.add_argument("--port", type=int, default=8050, help="port (8050)")
+    p.add_argument("--token-file", type=Path, metavar="FILE",
+                   help="file holding the access token (or CNCTWIN_WEB_TOKEN); required on a "
+                   "non-loopback --host: every page and API endpoint then needs it "
+                   "(Authorization: Bearer TOKEN, or the /login form)")
+    p.add_argument("--insecure", action="store_true",
+                   help="serve a non-loopback --host without a token (not recommended)")
     p.set_defaults(func=_cmd_web)
 
 
@@ -50,6 +56,11 @@ def _cmd_web(args: argparse.Namespace) -> int:
     if args.model is not None and not args.model.exists():
         raise ConfigError(f"model file {args.model} does not exist; write one with "
                           "cnctwin.edge.save_spindle_model (docs/edge.md)")
+    token = _token(args)
+    if token is None and not _is_loopback(args.host) and not args.insecure:
+        raise ConfigError(f"--host {args.host} faces the network: give an access token "
+                          "(--token-file FILE or CNCTWIN_WEB_TOKEN), or --insecure to serve "
+                          "it to anyone")
     if not 1 <= args.port <= 65535:
         raise ConfigError(f"--port {args.port} is not a TCP port; give 1 ... 65535 (default 8050)")
     _check_bind(args.host, args.port)
@@ -65,7 +76,7 @@ def _cmd_web(args: argparse.Namespace) -> int:
 
         machine = load_machine(args.machine)
     app = create_app(store_url=args.store, recordings=args.recording, model=args.model,
-                     machine=machine, live=args.live, salvage=args.salvage)
+                     machine=machine, live=args.live, salvage=args.salvage, token=token)
     print(f"cnctwin web: serving on http://{args.host}:{args.port}/ (Ctrl-C stops)", flush=True)
     uvicorn.run(app, host=args.host, port=args.port, log_level="warning")
     return 0
@@ -87,3 +98,32 @@ def _check_bind(host: str, port: int) -> None:
         except OSError as exc:
             raise ConfigError(f"cannot serve on {host}:{port}: {exc.strerror or exc}; the port "
                               "is in use or not allowed: choose another with --port") from None
+
+
+def _token(args: argparse.Namespace) -> str | None:
+    """The access token from --token-file or CNCTWIN_WEB_TOKEN (never the command line)."""
+    import os
+
+    if args.token_file is not None:
+        try:
+            text = args.token_file.read_text(encoding="utf-8").strip()
+        except OSError as exc:
+            raise ConfigError(f"--token-file {args.token_file}: {exc.strerror or exc}") from None
+        if not text:
+            raise ConfigError(f"--token-file {args.token_file} is empty")
+        return text
+    env = os.environ.get("CNCTWIN_WEB_TOKEN", "").strip()
+    return env or None
+
+
+def _is_loopback(host: str) -> bool:
+    import ipaddress
+    import socket
+
+    if host in ("localhost", ""):
+        return True
+    try:
+        return all(ipaddress.ip_address(info[4][0]).is_loopback
+                   for info in socket.getaddrinfo(host, None))
+    except (OSError, ValueError):
+        return False
