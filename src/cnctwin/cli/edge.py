@@ -15,6 +15,7 @@ import argparse
 import json
 import math
 import signal
+import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -44,6 +45,15 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     r.add_argument("--publish", metavar="URL",
                    help="mqtt://host:port/<topic prefix> for results (default prefix cnctwin)")
     r.add_argument("--store", metavar="URL", help="also append results to this store")
+    r.add_argument("--tls-ca", type=Path, metavar="FILE",
+                   help="MQTT over TLS: the CA certificate (PEM) of the broker(s)")
+    r.add_argument("--tls-cert", type=Path, metavar="FILE",
+                   help="MQTT TLS client certificate (PEM), with --tls-key")
+    r.add_argument("--tls-key", type=Path, metavar="FILE", help="its private key (PEM)")
+    r.add_argument("--mqtt-user", metavar="NAME", help="MQTT user name")
+    r.add_argument("--password-file", type=Path, metavar="FILE",
+                   help="file holding the MQTT password (or CNCTWIN_MQTT_PASSWORD); never on "
+                   "the command line")
     r.add_argument("--opcua", metavar="URL",
                    help="serve the results over OPC UA at this endpoint, e.g. "
                    "opc.tcp://0.0.0.0:4840/cnctwin (extra 'opcua')")
@@ -158,6 +168,11 @@ def _build(args: argparse.Namespace) -> Any:
 
     machine_name, model, machine_file = _machine_and_model(args)
     args.machine = machine_name
+    from cnctwin.iotools.mqtt import MqttSecurity
+
+    security = MqttSecurity.from_options(
+        ca_file=args.tls_ca, cert_file=args.tls_cert, key_file=args.tls_key,
+        username=args.mqtt_user, password_file=args.password_file)
     src: Any
     if args.source.startswith(("mqtt://", "tcp://")):
         u = parse_mqtt_url(args.source)
@@ -166,8 +181,11 @@ def _build(args: argparse.Namespace) -> Any:
         name_map = json.loads(args.name_map.read_text()) if args.name_map else None
         src = DatabusSource(u.host, u.port, metadata_topic=u.topic, name_map=name_map,
                             username=u.username, password=u.password, machine=args.machine,
-                            idle_timeout_s=args.idle_timeout_s)
-        src.start()  # metadata first: its applicationName names the machine by default
+                            idle_timeout_s=args.idle_timeout_s, security=security)
+        try:
+            src.start()  # metadata first: its applicationName names the machine by default
+        except (ConnectionError, TimeoutError) as exc:
+            raise ConfigError(f"--source {u.host}:{u.port}: {exc}") from None
         if not src.machine:
             src.machine = str((src.recorder.decoder.metadata or {}).get("applicationName", ""))
     else:
@@ -208,9 +226,14 @@ def _build(args: argparse.Namespace) -> Any:
     sinks: list[Any] = [JsonLinesSink(out / "results.jsonl")]
     if args.publish:
         u = parse_mqtt_url(args.publish, default_topic="cnctwin")
-        sinks.append(MqttSink(u.host, u.port, state_dir=out, machine=machine,
-                              topic_prefix=u.topic, max_queue_messages=args.max_queue,
-                              username=u.username, password=u.password))
+        sink = MqttSink(u.host, u.port, state_dir=out, machine=machine,
+                        topic_prefix=u.topic, max_queue_messages=args.max_queue,
+                        username=u.username, password=u.password, security=security)
+        unreachable = sink.check()  # a refused password or an untrusted certificate: stop
+        if unreachable:
+            print(f"note: {unreachable}; results are kept in {out / 'outbox.sqlite'} until "
+                  "the broker can be reached", file=sys.stderr)
+        sinks.append(sink)
     if args.store:
         sinks.append(StoreSink(args.store, machine=machine))
     if args.opcua:

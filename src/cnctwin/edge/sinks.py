@@ -20,6 +20,7 @@ import pandas as pd
 from cnctwin.edge.forward import ForwardQueue
 from cnctwin.edge.pipeline import Chunk
 from cnctwin.exceptions import ConfigError
+from cnctwin.iotools.mqtt import MqttSecurity, connect_error, refusal
 from cnctwin.recording import Recording, RecordingMeta, find_gaps
 
 __all__ = ["JsonLinesSink", "MqttSink", "StoreSink", "dumps"]
@@ -101,7 +102,7 @@ class MqttSink:
                  machine: str, topic_prefix: str = "cnctwin",
                  max_queue_messages: int = 200_000, retry_s: float = 2.0,
                  max_inflight: int = 100, username: str | None = None,
-                 password: str | None = None) -> None:
+                 password: str | None = None, security: MqttSecurity | None = None) -> None:
         from cnctwin.iotools.mqtt import _paho
 
         self._mqtt = _paho()
@@ -111,6 +112,7 @@ class MqttSink:
         self.retry_s = retry_s
         self.max_inflight = max_inflight
         self.username, self.password = username, password
+        self.security = security
         self.queue = ForwardQueue(Path(state_dir) / "outbox.sqlite",
                                   max_messages=max_queue_messages)
         self._client: Any = None
@@ -133,7 +135,7 @@ class MqttSink:
     def _on_connect(self, client: Any, userdata: Any, flags: Any, rc: Any,
                     properties: Any = None) -> None:
         if getattr(rc, "is_failure", False):
-            self.last_error = f"broker refused: {rc}"
+            self.last_error = refusal(rc, self.host, self.port)
             self._lost.set()
             return
         self._connected.set()
@@ -170,6 +172,8 @@ class MqttSink:
         c = m.Client(callback_api_version=m.CallbackAPIVersion.VERSION2)
         if self.username:
             c.username_pw_set(self.username, self.password)
+        if self.security is not None:
+            self.security.apply(c)
         c.on_connect = self._on_connect
         c.on_disconnect = self._on_disconnect
         c.on_publish = self._on_publish
@@ -178,11 +182,56 @@ class MqttSink:
         try:
             c.connect(self.host, self.port, keepalive=30)
         except OSError as exc:
-            self.last_error = f"cannot connect to {self.host}:{self.port}: {exc}"
+            self.last_error = connect_error(exc, self.host, self.port)
             return
         c.loop_start()
         self._client = c
         self.connects += 1
+
+    def check(self, timeout_s: float = 5.0) -> str:
+        """Connect once now: a refusal (user, password) or a TLS failure is an error.
+
+        A broker that cannot be reached is not (store-and-forward keeps the results until it
+        can); its reason is returned (empty when connected).
+
+        Raises
+        ------
+        ConfigError
+            The broker refused the credentials, or TLS failed (its certificate not trusted).
+        """
+        import ssl
+
+        m = self._mqtt
+        c = m.Client(callback_api_version=m.CallbackAPIVersion.VERSION2)
+        if self.username:
+            c.username_pw_set(self.username, self.password)
+        if self.security is not None:
+            self.security.apply(c)
+        done = threading.Event()
+        result: list[Any] = []
+
+        def on_connect(client: Any, userdata: Any, flags: Any, rc: Any, *a: Any) -> None:
+            result.append(rc)
+            done.set()
+
+        c.on_connect = on_connect
+        try:
+            c.connect(self.host, self.port, keepalive=30)
+        except ssl.SSLError as exc:
+            raise ConfigError(connect_error(exc, self.host, self.port)) from None
+        except OSError as exc:
+            return connect_error(exc, self.host, self.port)
+        c.loop_start()
+        try:
+            if not done.wait(timeout_s):
+                return f"no CONNACK from {self.host}:{self.port} within {timeout_s} s"
+            if getattr(result[0], "is_failure", False):
+                raise ConfigError(refusal(result[0], self.host, self.port))
+            return ""
+        finally:
+            with contextlib.suppress(Exception):
+                c.disconnect()
+            c.loop_stop()
 
     @property
     def connected(self) -> bool:

@@ -20,6 +20,7 @@ import pandas as pd
 
 from cnctwin.edge.pipeline import Chunk
 from cnctwin.exceptions import ConfigError
+from cnctwin.iotools.mqtt import MqttSecurity
 from cnctwin.recording import CYCLE_COUNTER_MODULUS, Recording
 
 __all__ = ["DatabusSource", "MqttUrl", "ReplaySource", "parse_mqtt_url"]
@@ -171,12 +172,13 @@ class DatabusSource:
                  name_map: dict[str, str] | None = None, window_s: float = 0.1,
                  idle_timeout_s: float | None = None, cycle_time_s: float = 0.002,
                  username: str | None = None, password: str | None = None,
-                 machine: str = "", ready_timeout_s: float = 30.0) -> None:
+                 machine: str = "", ready_timeout_s: float = 30.0,
+                 security: MqttSecurity | None = None) -> None:
         from cnctwin.iotools.mqtt import MqttRecorder
 
         self.recorder = MqttRecorder(host, port, metadata_topic=metadata_topic,
                                      name_map=name_map, cycle_time_s=cycle_time_s,
-                                     username=username, password=password)
+                                     username=username, password=password, security=security)
         self.window_s = window_s
         self.idle_timeout_s = idle_timeout_s
         self.cycle_time_s = cycle_time_s

@@ -17,19 +17,24 @@ counted in the next recording's ``meta.issues``. Every wait is bounded by a time
 from __future__ import annotations
 
 import contextlib
+import os
 import queue
 import threading
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from os import PathLike
+from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-from cnctwin.exceptions import FormatError
+from cnctwin.exceptions import ConfigError, FormatError
 from cnctwin.iotools.databus import DatabusDecoder
 from cnctwin.recording import Recording
 
 __all__ = [
     "MqttRecorder",
+    "MqttSecurity",
     "parse_data_recorder_message",
     "subscribe_data_recorder",
     "subscribe_databus",
@@ -45,11 +50,101 @@ def _paho() -> Any:
     return mqtt
 
 
+@dataclass(frozen=True)
+class MqttSecurity:
+    """Transport security of an MQTT connection: TLS and a user.
+
+    Attributes
+    ----------
+    ca_file : Path or None
+        CA certificate (PEM) the broker's certificate must be signed by; enables TLS.
+    cert_file, key_file : Path or None
+        Client certificate and key (PEM), where the broker asks for them.
+    username, password : str or None
+        Broker credentials (the password from a file or the environment, never the command
+        line: :meth:`from_options`).
+    """
+
+    ca_file: Path | None = None
+    cert_file: Path | None = None
+    key_file: Path | None = None
+    username: str | None = None
+    password: str | None = None
+
+    @property
+    def tls(self) -> bool:
+        """TLS is on (a CA or a client certificate is given)."""
+        return self.ca_file is not None or self.cert_file is not None
+
+    @classmethod
+    def from_options(cls, *, ca_file: str | PathLike[str] | None = None,
+                     cert_file: str | PathLike[str] | None = None,
+                     key_file: str | PathLike[str] | None = None,
+                     username: str | None = None,
+                     password_file: str | PathLike[str] | None = None,
+                     password_env: str = "CNCTWIN_MQTT_PASSWORD") -> MqttSecurity:
+        """From command-line options: the password from ``password_file`` or the environment.
+
+        Raises
+        ------
+        ConfigError
+            A file that does not exist or cannot be read (named), a key without a certificate.
+        """
+        for opt, f in (("--tls-ca", ca_file), ("--tls-cert", cert_file),
+                       ("--tls-key", key_file), ("--password-file", password_file)):
+            if f is not None and not Path(f).is_file():
+                raise ConfigError(f"{opt} {f}: no such file")
+        if (cert_file is None) != (key_file is None):
+            raise ConfigError("--tls-cert and --tls-key go together (the client certificate "
+                              "and its key)")
+        password = None
+        if password_file is not None:
+            password = Path(password_file).read_text(encoding="utf-8").strip()
+        elif os.environ.get(password_env):
+            password = os.environ[password_env]
+        if password is not None and username is None:
+            raise ConfigError("a password without --mqtt-user: give the user name too")
+        return cls(Path(ca_file) if ca_file else None, Path(cert_file) if cert_file else None,
+                   Path(key_file) if key_file else None, username, password)
+
+    def apply(self, client: Any) -> None:
+        """Configure a paho client (TLS and the user) before it connects."""
+        if self.tls:
+            try:
+                client.tls_set(ca_certs=str(self.ca_file) if self.ca_file else None,
+                               certfile=str(self.cert_file) if self.cert_file else None,
+                               keyfile=str(self.key_file) if self.key_file else None)
+            except (OSError, ValueError) as exc:  # ssl.SSLError is an OSError
+                raise ConfigError(f"TLS files ({self.ca_file}, {self.cert_file}): {exc}"
+                                  ) from None
+        if self.username is not None:
+            client.username_pw_set(self.username, self.password)
+
+
+def connect_error(exc: BaseException, host: str, port: int) -> str:
+    """A readable reason for a failed (TLS) connection."""
+    import ssl
+
+    if isinstance(exc, ssl.SSLCertVerificationError):
+        return (f"TLS: the certificate of {host}:{port} is not trusted ({exc.verify_message}); "
+                "give the CA that signed it with --tls-ca")
+    if isinstance(exc, ssl.SSLError):
+        return f"TLS handshake with {host}:{port} failed ({exc.reason or exc}); is it a TLS port?"
+    return f"cannot connect to MQTT broker {host}:{port}: {exc}"
+
+
+def refusal(rc: Any, host: str, port: int) -> str:
+    """A readable reason for a refused CONNACK (bad user or password, not authorised)."""
+    return (f"broker {host}:{port} refused the connection: {rc}; check --mqtt-user and the "
+            "password (--password-file or CNCTWIN_MQTT_PASSWORD)")
+
+
 class _Client:
     """A paho client whose callbacks feed a bounded queue."""
 
     def __init__(self, host: str, port: int, *, client_id: str, username: str | None,
-                 password: str | None, keepalive_s: int, max_queue: int) -> None:
+                 password: str | None, keepalive_s: int, max_queue: int,
+                 security: MqttSecurity | None = None) -> None:
         mqtt = _paho()
         self.host, self.port, self.keepalive_s = host, port, keepalive_s
         self.queue: queue.Queue[tuple[str, bytes]] = queue.Queue(maxsize=max_queue)
@@ -62,6 +157,8 @@ class _Client:
                                   client_id=client_id)
         if username is not None:
             self.client.username_pw_set(username, password)
+        if security is not None:
+            security.apply(self.client)
         self.client.on_connect = self._on_connect
         self.client.on_message = self._on_message
         self.client.on_subscribe = self._on_subscribe
@@ -86,16 +183,14 @@ class _Client:
         try:
             self.client.connect(self.host, self.port, keepalive=self.keepalive_s)
         except OSError as exc:
-            raise ConnectionError(f"cannot connect to MQTT broker {self.host}:{self.port}: "
-                                  f"{exc}") from exc
+            raise ConnectionError(connect_error(exc, self.host, self.port)) from exc
         self.client.loop_start()
         if not self.connected.wait(timeout_s):
             self.stop()
             raise TimeoutError(f"no CONNACK from {self.host}:{self.port} within {timeout_s} s")
         if getattr(self.connect_rc, "is_failure", False):
             self.stop()
-            raise ConnectionError(f"broker {self.host}:{self.port} refused the connection: "
-                                  f"{self.connect_rc}")
+            raise ConnectionError(refusal(self.connect_rc, self.host, self.port))
 
     def subscribe(self, topic: str, qos: int) -> int:
         _, mid = self.client.subscribe(topic, qos=qos)
@@ -165,6 +260,7 @@ class MqttRecorder:
         qos: int = 1,
         salvage: bool = False,
         max_queue: int = 100_000,
+        security: MqttSecurity | None = None,
     ) -> None:
         self.metadata_topic = metadata_topic
         self.fixed_topics = list(data_topics) if data_topics else None
@@ -172,7 +268,8 @@ class MqttRecorder:
         self.decoder = DatabusDecoder(name_map=name_map, cycle_time_s=cycle_time_s,
                                       salvage=salvage)
         self._client = _Client(host, port, client_id=client_id, username=username,
-                               password=password, keepalive_s=30, max_queue=max_queue)
+                               password=password, keepalive_s=30, max_queue=max_queue,
+                               security=security)
         self._subscribed: dict[str, int] = {}
         self._dropped_reported = 0
         self._errors: list[str] = []
