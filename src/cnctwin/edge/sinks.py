@@ -163,17 +163,22 @@ class MqttSink:
                 c.disconnect()
             c.loop_stop()
 
-    def _connect(self) -> None:
-        now = time.monotonic()
-        if now - self._last_attempt < self.retry_s:
-            return
-        self._last_attempt = now
+    def _new_client(self) -> Any:
+        """A paho client with this sink's user and TLS."""
         m = self._mqtt
         c = m.Client(callback_api_version=m.CallbackAPIVersion.VERSION2)
         if self.username:
             c.username_pw_set(self.username, self.password)
         if self.security is not None:
             self.security.apply(c)
+        return c
+
+    def _connect(self) -> None:
+        now = time.monotonic()
+        if now - self._last_attempt < self.retry_s:
+            return
+        self._last_attempt = now
+        c = self._new_client()
         c.on_connect = self._on_connect
         c.on_disconnect = self._on_disconnect
         c.on_publish = self._on_publish
@@ -201,12 +206,7 @@ class MqttSink:
         """
         import ssl
 
-        m = self._mqtt
-        c = m.Client(callback_api_version=m.CallbackAPIVersion.VERSION2)
-        if self.username:
-            c.username_pw_set(self.username, self.password)
-        if self.security is not None:
-            self.security.apply(c)
+        c = self._new_client()
         done = threading.Event()
         result: list[Any] = []
 

@@ -318,13 +318,8 @@ class MachineFile:
         if not isinstance(spindle_tab, Mapping):
             raise ConfigError(f"{source}: spindle must be a table ([spindle])")
         spindle_fields = {f.name for f in dataclasses.fields(SpindleMotor)}
-        spindle_values: dict[str, Any] = {}
-        for name, raw in spindle_tab.items():
-            key = f"spindle.{name}"
-            if name not in spindle_fields:
-                raise ConfigError(f"{source}: unknown key {key}; valid spindle keys: "
-                                  f"{', '.join(sorted(spindle_fields))}")
-            spindle_values[name] = _parse_value(key, raw, records, source, rotary=False)
+        spindle_values = _parse_table("spindle", spindle_tab, spindle_fields, records, source,
+                                      rotary=False, what="spindle")
         axes_tab = data.get("axes")
         axis_fields = {f.name for f in dataclasses.fields(FeedAxis)} - {"name"}
         default_axes = {ax.name: ax for ax in default.axes}
@@ -338,13 +333,8 @@ class MachineFile:
                     raise ConfigError(f"{source}: axes.{ax_name} must be a table")
                 base = default_axes.get(ax_name, FeedAxis(str(ax_name)))
                 rotary = bool(tab.get("rotary", base.rotary))
-                vals: dict[str, Any] = {}
-                for name, raw in tab.items():
-                    key = f"axes.{ax_name}.{name}"
-                    if name not in axis_fields:
-                        raise ConfigError(f"{source}: unknown key {key}; valid axis keys: "
-                                          f"{', '.join(sorted(axis_fields))}")
-                    vals[name] = _parse_value(key, raw, records, source, rotary=rotary)
+                vals = _parse_table(f"axes.{ax_name}", tab, axis_fields, records, source,
+                                    rotary=rotary, what="axis")
                 for name, v in vals.items():
                     _check_type(base, name, v, source=source, key=f"axes.{ax_name}.{name}")
                 try:
@@ -427,6 +417,20 @@ def _check_type(obj: Any, name: str, value: Any, *, source: str, key: str | None
         return
     if not ok:
         raise ConfigError(f"{source}: {key} must be {want}, not {value!r}")
+
+
+def _parse_table(prefix: str, tab: Mapping[str, Any], fields: set[str],
+                 records: dict[str, ParameterRecord], source: str, *, rotary: bool,
+                 what: str) -> dict[str, Any]:
+    """The values of one table (``[spindle]``, ``[axes.X1]``); unknown keys are errors."""
+    values: dict[str, Any] = {}
+    for name, raw in tab.items():
+        key = f"{prefix}.{name}"
+        if name not in fields:
+            raise ConfigError(f"{source}: unknown key {key}; valid {what} keys: "
+                              f"{', '.join(sorted(fields))}")
+        values[name] = _parse_value(key, raw, records, source, rotary=rotary)
+    return values
 
 
 def _parse_value(key: str, raw: Any, records: dict[str, ParameterRecord], source: str, *,
