@@ -144,6 +144,11 @@ def status_table(st: dict[str, Any]) -> Any:
             rows.append(("store", f"{s.get('store')} blocks {s.get('blocks')}"))
         elif name == "opcua":
             rows.append(("opcua", f"{s.get('endpoint')} published {s.get('published')}"))
+    ov = st.get("overload") or {}
+    if ov:
+        lost = sum(int(v) for v in ov.values())
+        rows.append(("overload", ("NONE" if lost == 0 else "LOSSES: ")
+                     + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in ov.items())))
     for msg in (st.get("issues") or [])[-3:]:
         rows.append(("issue", str(msg)[:120]))
     for k, v in rows:

@@ -443,7 +443,8 @@ class OpcUaSink:
         det = str(msg.get("detector", ""))
         score = float(msg.get("score", math.nan))
         thr = float(msg.get("threshold", math.nan))
-        text = (f"{det}: anomaly score {score:.3g} above {thr:.3g} at cycle {c}"
+        text = (f"{det}: {msg['message']} at cycle {c}" if msg.get("message") else
+                f"{det}: anomaly score {score:.3g} above {thr:.3g} at cycle {c}"
                 + (f" ({msg['time']})" if msg.get("time") else ""))
         return [(nd["Alarm.Active"], self._dv(True, "b", ts)),
                 (nd["Alarm.Message"], self._dv(text, "s", ts)),

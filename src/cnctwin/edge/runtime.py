@@ -81,6 +81,7 @@ class EdgeRuntime:
         self.c = _Counters()
         self.state = "starting"
         self._seq = 0
+        self._overload_reported: dict[str, int] = {}
         self._last_status = -1e9
         self._stop = threading.Event()
         self.final_status: dict[str, Any] | None = None
@@ -168,6 +169,37 @@ class EdgeRuntime:
             out += p.gap(gap)
         return out
 
+    # ------------------------------------------------------------------ overload
+    def overload(self) -> dict[str, int]:
+        """What was lost or refused under load, counted since the start (never silent).
+
+        ``input_dropped``: messages the live source's full receive queue dropped;
+        ``forward_dropped``: results the store-and-forward queue of the MQTT sink discarded
+        (oldest first) because the broker was away longer than its bound. (Late or repeated
+        rows are counted apart, ``late_rows`` of the status.)
+        """
+        fwd = 0
+        for s in self.sinks:
+            queue = getattr(s, "queue", None)
+            fwd += int(getattr(queue, "dropped", 0) or 0)
+        return {"input_dropped": int(getattr(self.source, "dropped", 0) or 0),
+                "forward_dropped": fwd}
+
+    def _overload_alarms(self, counts: dict[str, int]) -> list[Result]:
+        """An ``alarm`` message for every overload counter that grew since the last one."""
+        out = []
+        what = {"input_dropped": "input messages dropped (the receive queue was full)",
+                "forward_dropped": "results discarded by the forward queue (broker away "
+                                   "longer than the queue holds)"}
+        for key, total in counts.items():
+            delta = total - self._overload_reported.get(key, 0)
+            if delta > 0:
+                out.append(Result("alarm", self.c.last_cycle or 0, {
+                    "detector": "runtime-overload", "overload": key, "count": delta,
+                    "total": total, "message": f"{delta} {what[key]}; {total} in all"}))
+                self._overload_reported[key] = total
+        return out
+
     # ------------------------------------------------------------------ status
     def status(self) -> dict[str, Any]:
         """The runtime status (what ``status.json`` and the ``status`` message hold)."""
@@ -196,6 +228,7 @@ class EdgeRuntime:
             "last_gaps": [[g.after_cycle, g.before_cycle] for g in gaps[-5:]],
             "wraps": tr.wraps if tr else 0, "late_rows": tr.late if tr else 0,
             "sinks": {s.name: s.status() for s in self.sinks},
+            "overload": self.overload(),
             "issues": issues,
         }
 
@@ -204,6 +237,9 @@ class EdgeRuntime:
         if not force and now - self._last_status < self.status_every_s:
             return
         self._last_status = now
+        alarms = self._overload_alarms(self.overload())
+        if alarms:
+            self._emit(alarms, None)
         st = self.status()
         if self.state_dir is not None:
             tmp = self.state_dir / (STATUS_FILE + ".tmp")

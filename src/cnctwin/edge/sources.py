@@ -231,6 +231,12 @@ class DatabusSource:
             yield Chunk(cycles, t_ns, sig, cycle_time_s=self.cycle_time_s,
                         machine=self.machine, received_ns=time.time_ns())
 
+    @property
+    def dropped(self) -> int:
+        """Messages the receive queue dropped because it was full (counted, never silent)."""
+        return self.recorder.dropped
+
+
     def close(self) -> None:
         """Disconnect."""
         self._closed = True

@@ -286,6 +286,11 @@ class MqttRecorder:
         """Disconnect and stop the network thread."""
         self._client.stop()
 
+    @property
+    def dropped(self) -> int:
+        """Messages the network thread dropped because the receive queue was full."""
+        return int(self._client.dropped)
+
     def __enter__(self) -> MqttRecorder:
         return self.start()
 
