@@ -4,8 +4,9 @@
 it unwraps the counter, splits chunks at gaps (a ``gap`` message and every processor's
 :meth:`gap` hook run first, so nothing spans missing cycles and nothing is interpolated), and
 keeps late or repeated rows out of the processing while counting them. It numbers the
-messages (``seq``), writes ``status.json`` into the state directory and sends a ``status``
-message every ``status_every_s``.
+messages (``seq``, continued across runs and crashes from ``seq.json`` in the state
+directory), writes ``status.json`` there and sends a ``status`` message every
+``status_every_s``.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import numpy as np
 
 from cnctwin.edge.cycles import CycleTracker
 from cnctwin.edge.pipeline import Chunk, Processor, Result, Sink, Source
+from cnctwin.exceptions import ConfigError
 from cnctwin.recording import CounterGap
 
 __all__ = ["EdgeRuntime", "read_status"]
@@ -81,13 +83,29 @@ class EdgeRuntime:
         self.c = _Counters()
         self.state = "starting"
         self._seq = 0
+        self._seq_reserved = 0
+        if self.state_dir is not None:
+            self._seq = self._seq_reserved = _read_seq(self.state_dir)
         self._overload_reported: dict[str, int] = {}
         self._last_status = -1e9
         self._stop = threading.Event()
         self.final_status: dict[str, Any] | None = None
 
     # ------------------------------------------------------------------ messages
+    def _reserve(self, n: int) -> None:
+        """Persist a seq bound above the next ``n`` numbers before they are used.
+
+        The state directory keeps the bound (``seq.json``, written atomically); a runtime that
+        is killed restarts numbering from it, so a ``(machine, seq)`` pair is never given to
+        two different messages, across restarts and crashes (numbers may be skipped).
+        """
+        if self.state_dir is None or self._seq + n <= self._seq_reserved:
+            return
+        self._seq_reserved = self._seq + n + SEQ_BLOCK
+        _write_seq(self.state_dir, self._seq_reserved)
+
     def _messages(self, results: list[Result], chunk: Chunk | None) -> list[dict[str, Any]]:
+        self._reserve(len(results))
         out = []
         for r in results:
             msg: dict[str, Any] = {"seq": self._seq, "kind": r.kind, "machine": self.machine,
@@ -305,6 +323,34 @@ class EdgeRuntime:
         for s in self.sinks:
             s.close()
         self.source.close()
+        if self.state_dir is not None:  # a clean end: the next run continues without a gap
+            _write_seq(self.state_dir, self._seq)
+
+
+SEQ_FILE = "seq.json"
+SEQ_BLOCK = 1000
+"""Message numbers reserved on disk ahead of use (at most this many are skipped by a crash)."""
+
+
+def _read_seq(state_dir: Path) -> int:
+    p = state_dir / SEQ_FILE
+    if not p.exists():
+        return 0
+    try:
+        return int(json.loads(p.read_text(encoding="utf-8"))["next_seq"])
+    except (ValueError, KeyError, TypeError, OSError) as exc:
+        raise ConfigError(f"{p}: unreadable message counter ({exc}); the next seq cannot be "
+                          "known: restore the file or give a new --out directory") from None
+
+
+def _write_seq(state_dir: Path, next_seq: int) -> None:
+    p = state_dir / SEQ_FILE
+    tmp = p.with_suffix(".tmp")
+    with tmp.open("w", encoding="utf-8") as fh:
+        json.dump({"next_seq": int(next_seq)}, fh)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, p)
 
 
 def _iso(t_ns: int) -> str:
