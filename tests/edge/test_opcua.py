@@ -220,5 +220,6 @@ def test_cli_bad_rate(tmp_path: Path, wear_run: dict[str, Any],
     mfile = save_spindle_model(spindle_model, tmp_path / "m.json", source="test")
     code = main(["edge", "run", "--source", str(wear_run["path"]), "--model", str(mfile),
                  "--out", str(tmp_path / "out"), "--quiet", "--opcua",
-                 f"opc.tcp://127.0.0.1:{free_port()}/x", "--opcua-publish-hz", "0"])
+                 f"opc.tcp://127.0.0.1:{free_port()}/x", "--opcua-publish-hz", "0",
+                 "--opcua-insecure"])
     assert code == 2

@@ -57,6 +57,17 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     r.add_argument("--opcua", metavar="URL",
                    help="serve the results over OPC UA at this endpoint, e.g. "
                    "opc.tcp://0.0.0.0:4840/cnctwin (extra 'opcua')")
+    r.add_argument("--opcua-insecure", action="store_true",
+                   help="allow NoSecurity and anonymous OPC UA clients (the one explicit "
+                   "switch; default: Basic256Sha256 Sign/SignAndEncrypt and --opcua-users)")
+    r.add_argument("--opcua-cert", type=Path, metavar="FILE",
+                   help="OPC UA server certificate (DER; generated, self-signed, when absent; "
+                   "default OUT/opcua-cert.der)")
+    r.add_argument("--opcua-key", type=Path, metavar="FILE",
+                   help="its private key (PEM; default OUT/opcua-key.pem)")
+    r.add_argument("--opcua-users", type=Path, metavar="FILE",
+                   help="users file (name:hash lines; 'cnctwin edge opcua-user NAME --users "
+                   "FILE' adds one)")
     r.add_argument("--opcua-publish-hz", type=float, default=10.0,
                    help="OPC UA publish rate of the decimated 500 Hz values [Hz]")
     r.add_argument("--speed", type=float, default=0.0,
@@ -101,6 +112,14 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     s.add_argument("dir", type=Path, metavar="DIR", help="the --out directory of `edge run`")
     s.add_argument("--json", action="store_true", help="print the raw status.json")
     s.set_defaults(func=_status)
+    u = esub.add_parser("opcua-user", help="add or replace a user of the OPC UA server",
+                        description="Append NAME with a salted PBKDF2 hash of the password to "
+                        "the users file of --opcua-users. The password is read from "
+                        "CNCTWIN_OPCUA_PASSWORD or standard input, never the command line.")
+    u.add_argument("name", metavar="NAME", help="user name")
+    u.add_argument("--users", type=Path, required=True, metavar="FILE", help="users file")
+    u.set_defaults(func=_opcua_user)
+
     def _help(args: argparse.Namespace) -> int:
         p.print_help()
         return 0
@@ -244,8 +263,19 @@ def _build(args: argparse.Namespace) -> Any:
     if args.opcua:
         from cnctwin.edge.opcua import OpcUaSink
 
+        ua_security = None
+        if not args.opcua_insecure:
+            from cnctwin.edge.opcua import OpcUaSecurity, read_users
+
+            if args.opcua_users is None:
+                raise ConfigError("--opcua needs --opcua-users FILE (add a user with 'cnctwin "
+                                  "edge opcua-user NAME --users FILE'), or --opcua-insecure "
+                                  "to serve anonymous clients without security")
+            ua_security = OpcUaSecurity(args.opcua_cert or out / "opcua-cert.der",
+                                        args.opcua_key or out / "opcua-key.pem",
+                                        read_users(args.opcua_users))
         sinks.append(OpcUaSink(args.opcua, machine=machine,
-                               publish_hz=args.opcua_publish_hz))
+                               publish_hz=args.opcua_publish_hz, security=ua_security))
     return EdgeRuntime(src, procs, sinks, state_dir=out, machine=machine)
 
 
@@ -316,4 +346,32 @@ def _status(args: argparse.Namespace) -> int:
         print(json.dumps(st, indent=1))
     else:
         Console().print(status_table(st))
+    return 0
+
+
+def _opcua_user(args: argparse.Namespace) -> int:
+    import getpass
+    import os
+
+    from cnctwin.edge.opcua import hash_password
+
+    if not args.name or ":" in args.name or any(c.isspace() for c in args.name):
+        raise ConfigError(f"user name {args.name!r}: no ':' and no blanks")
+    pw = os.environ.get("CNCTWIN_OPCUA_PASSWORD")
+    if not pw:
+        pw = (getpass.getpass(f"password for {args.name}: ") if sys.stdin.isatty()
+              else sys.stdin.readline().rstrip("\n"))
+    if len(pw) < 8:
+        raise ConfigError("the password must have 8 characters or more")
+    lines = []
+    if args.users.exists():
+        lines = [ln for ln in args.users.read_text(encoding="utf-8").splitlines()
+                 if ln.partition(":")[0].strip() != args.name]
+    lines.append(f"{args.name}:{hash_password(pw)}")
+    args.users.parent.mkdir(parents=True, exist_ok=True)
+    tmp = args.users.with_suffix(args.users.suffix + ".tmp")
+    tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    tmp.chmod(0o600)
+    tmp.replace(args.users)
+    print(f"{args.users}: user {args.name} set")
     return 0

@@ -30,11 +30,14 @@ import asyncio
 import contextlib
 import json
 import math
+import os
 import threading
 import urllib.parse
 from collections import deque
 from concurrent.futures import Future
+from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -44,7 +47,17 @@ from numpy.typing import NDArray
 from cnctwin.edge.pipeline import Chunk
 from cnctwin.exceptions import ConfigError
 
-__all__ = ["DEFAULT_NAMESPACE", "EU_CODES", "OpcUaSink", "decimate_peak", "eu_unit_id"]
+__all__ = [
+    "DEFAULT_NAMESPACE",
+    "EU_CODES",
+    "OpcUaSecurity",
+    "OpcUaSink",
+    "decimate_peak",
+    "eu_unit_id",
+    "hash_password",
+    "read_users",
+    "verify_password",
+]
 
 DEFAULT_NAMESPACE = "urn:cnctwin:edge"
 _EU_NAMESPACE = "http://www.opcfoundation.org/UA/units/un/cefact"
@@ -117,6 +130,87 @@ def _dt(t_ns: int) -> datetime:
     return _EPOCH + timedelta(microseconds=int(t_ns) // 1000)
 
 
+def hash_password(password: str, *, iterations: int = 200_000) -> str:
+    """A users-file entry's hash: ``pbkdf2_sha256$ITERATIONS$SALT$HASH`` (hex).
+
+    Examples
+    --------
+    >>> h = hash_password("secret", iterations=1000)
+    >>> verify_password("secret", h), verify_password("other", h)
+    (True, False)
+    """
+    import hashlib
+    import secrets
+
+    salt = secrets.token_bytes(16)
+    digest = hashlib.pbkdf2_hmac("sha256", password.encode("utf-8"), salt, iterations)
+    return f"pbkdf2_sha256${iterations}${salt.hex()}${digest.hex()}"
+
+
+def verify_password(password: str, stored: str) -> bool:
+    """Check a password against :func:`hash_password` output (constant time)."""
+    import hashlib
+    import hmac
+
+    try:
+        algo, iterations, salt, digest = stored.split("$")
+        if algo != "pbkdf2_sha256":
+            return False
+        got = hashlib.pbkdf2_hmac("sha256", password.encode("utf-8"), bytes.fromhex(salt),
+                                  int(iterations))
+    except ValueError:
+        return False
+    return hmac.compare_digest(got.hex(), digest)
+
+
+def read_users(path: str | os.PathLike[str]) -> dict[str, str]:
+    """The users file: one ``name:HASH`` line per user (``#`` comments), HASH from
+    :func:`hash_password` (``cnctwin edge opcua-user NAME --users FILE`` adds one).
+
+    Raises
+    ------
+    ConfigError
+        Missing file, a line that is not ``name:pbkdf2_sha256$...`` (with its number).
+    """
+    p = Path(path)
+    try:
+        lines = p.read_text(encoding="utf-8").splitlines()
+    except OSError as exc:
+        raise ConfigError(f"--opcua-users {p}: {exc.strerror or exc}") from None
+    users: dict[str, str] = {}
+    for n, line in enumerate(lines, 1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        name, sep, stored = line.partition(":")
+        if not sep or not name or not stored.startswith("pbkdf2_sha256$"):
+            raise ConfigError(f"{p} line {n}: expected 'name:pbkdf2_sha256$...' (add users "
+                              "with 'cnctwin edge opcua-user NAME --users FILE')")
+        users[name.strip()] = stored.strip()
+    if not users:
+        raise ConfigError(f"{p}: no user; add one with 'cnctwin edge opcua-user NAME --users "
+                          f"{p}'")
+    return users
+
+
+@dataclass(frozen=True)
+class OpcUaSecurity:
+    """Security of the OPC UA server: Basic256Sha256 (Sign, SignAndEncrypt) and users.
+
+    Attributes
+    ----------
+    cert_file, key_file : Path
+        The server's application certificate (DER) and private key (PEM); generated
+        (self-signed, one year) when they do not exist.
+    users : dict
+        User name -> password hash (:func:`read_users`); anonymous access is refused.
+    """
+
+    cert_file: Path
+    key_file: Path
+    users: dict[str, str]
+
+
 class OpcUaSink:
     """Publish torque, speed, hole records, wear, temperature and alarms over OPC UA.
 
@@ -165,7 +259,7 @@ class OpcUaSink:
                  thermal: Any = None, wear: Any = None, wear_baseline_holes: int = 6,
                  wear_set_size: int | None = 6, alarm_hold_s: float = 1.0,
                  hole_history_s: float = 300.0, start_timeout_s: float = 10.0,
-                 max_pending: int = 64) -> None:
+                 max_pending: int = 64, security: OpcUaSecurity | None = None) -> None:
         try:
             import asyncua  # noqa: F401
         except ImportError as exc:  # pragma: no cover - depends on the environment
@@ -193,6 +287,7 @@ class OpcUaSink:
         self.wear_baseline_holes, self.wear_set_size = wear_baseline_holes, wear_set_size
         self.alarm_hold_s, self.hole_history_s = alarm_hold_s, hole_history_s
         self.max_pending = max_pending
+        self.security = security
         self.published = 0
         self.windows = 0
         self.last_error = ""
@@ -250,11 +345,29 @@ class OpcUaSink:
 
         for name in ("asyncua", "asyncua.server"):  # the server logs every session at INFO
             logging.getLogger(name).setLevel(logging.WARNING)
-        server = Server()
+        sec = self.security
+        server = Server(user_manager=_UserManager(sec.users) if sec is not None else None)
         await server.init()
         server.set_endpoint(self.endpoint)
         server.set_server_name(f"cnctwin edge ({self.machine})")
-        server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+        if sec is None:
+            server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+        else:
+            from asyncua.crypto.cert_gen import setup_self_signed_certificate
+            from cryptography.x509.oid import ExtendedKeyUsageOID
+
+            uri = f"urn:cnctwin:edge:{self.machine}"
+            await server.set_application_uri(uri)
+            sec.cert_file.parent.mkdir(parents=True, exist_ok=True)
+            await setup_self_signed_certificate(
+                sec.key_file, sec.cert_file, uri, self.host if self.host != "0.0.0.0"
+                else "localhost", [ExtendedKeyUsageOID.SERVER_AUTH],
+                {"commonName": f"cnctwin edge {self.machine}"})
+            await server.load_certificate(str(sec.cert_file))
+            await server.load_private_key(str(sec.key_file))
+            server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_Sign,
+                                        ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt])
+            server.set_security_IDs(["Username"])  # no anonymous access
         idx = await server.register_namespace(self.namespace_uri)
         self._idx = idx
         m = self.machine
@@ -543,3 +656,19 @@ _HOLE_KEYS: dict[str, str] = {
     "DeviationXMaxAbs": "dev_x_maxabs_mm", "DeviationYMaxAbs": "dev_y_maxabs_mm",
     "DeviationZMaxAbs": "dev_z_maxabs_mm", "DeviationZRms": "dev_z_rms_mm", "Record": "*row",
 }
+
+
+class _UserManager:
+    """asyncua user manager over a users file: a known name with its password, or nobody."""
+
+    def __init__(self, users: dict[str, str]) -> None:
+        self.users = users
+
+    def get_user(self, iserver: Any, username: str | None = None, password: str | None = None,
+                 certificate: Any = None) -> Any:
+        from asyncua.server.user_managers import User, UserRole
+
+        stored = self.users.get(username or "")
+        if stored is None or password is None or not verify_password(password, stored):
+            return None
+        return User(role=UserRole.User, name=username)
