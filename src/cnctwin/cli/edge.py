@@ -54,6 +54,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     r.add_argument("--password-file", type=Path, metavar="FILE",
                    help="file holding the MQTT password (or CNCTWIN_MQTT_PASSWORD); never on "
                    "the command line")
+    r.add_argument("--mqtt-client-id", metavar="ID",
+                   help="MQTT client id of the live source (default cnctwin-edge-<machine>): "
+                   "the key of its persistent session")
+    r.add_argument("--session-expiry-s", type=int, default=86_400, metavar="S",
+                   help="MQTT 5 session expiry of the live source [s]: the broker keeps what "
+                   "arrives while the runtime is down for this long (86400; 0 = clean session, "
+                   "nothing kept)")
     r.add_argument("--opcua", metavar="URL",
                    help="serve the results over OPC UA at this endpoint, e.g. "
                    "opc.tcp://0.0.0.0:4840/cnctwin (extra 'opcua')")
@@ -188,6 +195,7 @@ def _build(args: argparse.Namespace) -> Any:
         StoreSink,
         TorqueProcessor,
         parse_mqtt_url,
+        session_client_id,
     )
 
     machine_name, model, machine_file = _machine_and_model(args)
@@ -203,13 +211,23 @@ def _build(args: argparse.Namespace) -> Any:
         if not u.topic:
             raise ConfigError("give the Databus metadata topic: mqtt://host:port/<topic>")
         name_map = json.loads(args.name_map.read_text()) if args.name_map else None
+        if args.session_expiry_s < 0:
+            raise ConfigError(f"--session-expiry-s {args.session_expiry_s}: give 0 (clean "
+                              "session) or a positive number of seconds")
+        client_id = args.mqtt_client_id or session_client_id(args.machine, u.topic)
         src = DatabusSource(u.host, u.port, metadata_topic=u.topic, name_map=name_map,
                             username=u.username, password=u.password, machine=args.machine,
-                            idle_timeout_s=args.idle_timeout_s, security=security)
+                            idle_timeout_s=args.idle_timeout_s, security=security,
+                            client_id=client_id, session_expiry_s=args.session_expiry_s)
         try:
             src.start()  # metadata first: its applicationName names the machine by default
         except (ConnectionError, TimeoutError) as exc:
             raise ConfigError(f"--source {u.host}:{u.port}: {exc}") from None
+        if args.session_expiry_s > 0:  # one line, also with --quiet: the operator must know
+            state = ("resumed: what the broker queued while the runtime was down follows"
+                     if src.recorder.session_present else "new")
+            print(f"MQTT session {client_id} ({state}; expiry {args.session_expiry_s} s)",
+                  file=sys.stderr)
         if not src.machine:
             src.machine = str((src.recorder.decoder.metadata or {}).get("applicationName", ""))
     else:

@@ -23,7 +23,12 @@ from cnctwin.edge.pipeline import Chunk, Result
 from cnctwin.edge.processors import AnomalyProcessor, HoleProcessor, TorqueProcessor
 from cnctwin.edge.runtime import EdgeRuntime, read_status
 from cnctwin.edge.sinks import JsonLinesSink, MqttSink, StoreSink
-from cnctwin.edge.sources import DatabusSource, ReplaySource, parse_mqtt_url
+from cnctwin.edge.sources import (
+    DatabusSource,
+    ReplaySource,
+    parse_mqtt_url,
+    session_client_id,
+)
 
 __all__ = [
     "AnomalyProcessor",
@@ -43,4 +48,5 @@ __all__ = [
     "parse_mqtt_url",
     "read_status",
     "save_spindle_model",
+    "session_client_id",
 ]

@@ -304,8 +304,14 @@ class EdgeRuntime:
                 if self._stop.is_set() or (max_cycles is not None
                                            and self.c.cycles >= max_cycles):
                     break
-            else:
-                pass
+            if self._stop.is_set():
+                # a live source disconnects first, then hands over what it already received
+                # (and acknowledged): processed, not lost
+                drain = getattr(self.source, "drain", None)
+                if drain is not None:
+                    for chunk in drain():
+                        if len(chunk):
+                            self.process(chunk)
         finally:
             if close:
                 self.finish()

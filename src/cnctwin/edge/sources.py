@@ -23,7 +23,7 @@ from cnctwin.exceptions import ConfigError
 from cnctwin.iotools.mqtt import MqttSecurity
 from cnctwin.recording import CYCLE_COUNTER_MODULUS, Recording
 
-__all__ = ["DatabusSource", "MqttUrl", "ReplaySource", "parse_mqtt_url"]
+__all__ = ["DatabusSource", "MqttUrl", "ReplaySource", "parse_mqtt_url", "session_client_id"]
 
 
 @dataclass(frozen=True)
@@ -54,6 +54,29 @@ def parse_mqtt_url(url: str, *, default_topic: str = "") -> MqttUrl:
     return MqttUrl(u.hostname, u.port or 1883, topic or default_topic,
                    urllib.parse.unquote(u.username) if u.username else None,
                    urllib.parse.unquote(u.password) if u.password else None)
+
+
+def session_client_id(machine: str, metadata_topic: str) -> str:
+    """Stable MQTT client id of the runtime for a machine: the key of its persistent session.
+
+    ``cnctwin-edge-<machine>`` (characters outside ``[A-Za-z0-9_-]`` replaced by ``_``, at most
+    64 characters); without a machine name, a short hash of the metadata topic.
+
+    Examples
+    --------
+    >>> session_client_id("DMU 50/1", "ie/m/j/simatic/v1/s7c1/dp")
+    'cnctwin-edge-DMU_50_1'
+    >>> session_client_id("", "ie/m/j/simatic/v1/s7c1/dp")
+    'cnctwin-edge-tcc0936660f'
+    """
+    import hashlib
+    import re
+
+    if machine:
+        slug = re.sub(r"[^A-Za-z0-9_-]", "_", machine)
+    else:
+        slug = "t" + hashlib.sha1(metadata_topic.encode()).hexdigest()[:10]
+    return f"cnctwin-edge-{slug}"[:64]
 
 
 def _events_between(events: pd.DataFrame, lo: int, hi: int) -> pd.DataFrame:
@@ -166,6 +189,12 @@ class DatabusSource:
         Broker credentials.
     machine : str, optional
         Machine name (default the metadata's ``applicationName``).
+    client_id : str, optional
+        Stable MQTT client id (:func:`session_client_id`); needed for a persistent session.
+    session_expiry_s : int, default 0
+        MQTT 5 session expiry [s]: with a ``client_id``, the broker keeps what the control
+        publishes while the runtime is down (restart, crash, kill -9) for this long and
+        delivers it on reconnect (QoS 1). 0: a clean session, nothing is kept.
     """
 
     def __init__(self, host: str, port: int = 1883, *, metadata_topic: str,
@@ -173,12 +202,15 @@ class DatabusSource:
                  idle_timeout_s: float | None = None, cycle_time_s: float = 0.002,
                  username: str | None = None, password: str | None = None,
                  machine: str = "", ready_timeout_s: float = 30.0,
-                 security: MqttSecurity | None = None) -> None:
+                 security: MqttSecurity | None = None, client_id: str = "",
+                 session_expiry_s: int = 0) -> None:
         from cnctwin.iotools.mqtt import MqttRecorder
 
         self.recorder = MqttRecorder(host, port, metadata_topic=metadata_topic,
                                      name_map=name_map, cycle_time_s=cycle_time_s,
-                                     username=username, password=password, security=security)
+                                     username=username, password=password, security=security,
+                                     client_id=client_id, session_expiry_s=session_expiry_s,
+                                     qos=1)
         self.window_s = window_s
         self.idle_timeout_s = idle_timeout_s
         self.cycle_time_s = cycle_time_s
@@ -211,31 +243,49 @@ class DatabusSource:
                     return
                 continue
             last_value = time.monotonic()
-            if not self.machine:
-                self.machine = rec.meta.machine
-            hf = rec.hf
-            if "CYCLE" in hf.columns:
-                raw = hf["CYCLE"].to_numpy(dtype=np.float64)
-                ok = np.isfinite(raw)
-                if not ok.all():
-                    self.issues.append(f"{int((~ok).sum())} rows without a CYCLE value "
-                                       "skipped (the counter is the time base)")
-                hf = hf[ok]
-                cycles = raw[ok].astype(np.int64)
-                self.counter_modulus = CYCLE_COUNTER_MODULUS
-            else:
-                cycles = hf.index.to_numpy(dtype=np.int64)
-            t_ns = hf["time"].to_numpy(dtype="datetime64[ns]").view(np.int64)
-            sig = {c: hf[c].to_numpy(dtype=np.float64) for c in hf.columns
-                   if c not in ("time", "CYCLE")}
-            yield Chunk(cycles, t_ns, sig, cycle_time_s=self.cycle_time_s,
-                        machine=self.machine, received_ns=time.time_ns())
+            yield self._chunk(rec)
+
+    def drain(self) -> Iterator[Chunk]:
+        """Disconnect, then yield what was already received (and acknowledged to the broker).
+
+        Called by :meth:`~cnctwin.edge.EdgeRuntime.run` on a stop (SIGTERM, Ctrl-C): messages
+        in the receive queue are processed instead of being lost; what the control publishes
+        after the disconnect stays with the broker in the persistent session.
+        """
+        self.recorder.stop()
+        while True:
+            if self.recorder.poll(0.0) == 0:
+                break
+        rec = self.recorder.collect(duration_s=0.0)
+        self.issues.extend(rec.meta.issues)
+        if rec.n_cycles:
+            yield self._chunk(rec)
+
+    def _chunk(self, rec: Recording) -> Chunk:
+        if not self.machine:
+            self.machine = rec.meta.machine
+        hf = rec.hf
+        if "CYCLE" in hf.columns:
+            raw = hf["CYCLE"].to_numpy(dtype=np.float64)
+            ok = np.isfinite(raw)
+            if not ok.all():
+                self.issues.append(f"{int((~ok).sum())} rows without a CYCLE value "
+                                   "skipped (the counter is the time base)")
+            hf = hf[ok]
+            cycles = raw[ok].astype(np.int64)
+            self.counter_modulus = CYCLE_COUNTER_MODULUS
+        else:
+            cycles = hf.index.to_numpy(dtype=np.int64)
+        t_ns = hf["time"].to_numpy(dtype="datetime64[ns]").view(np.int64)
+        sig = {c: hf[c].to_numpy(dtype=np.float64) for c in hf.columns
+               if c not in ("time", "CYCLE")}
+        return Chunk(cycles, t_ns, sig, cycle_time_s=self.cycle_time_s,
+                     machine=self.machine, received_ns=time.time_ns())
 
     @property
     def dropped(self) -> int:
         """Messages the receive queue dropped because it was full (counted, never silent)."""
         return self.recorder.dropped
-
 
     def close(self) -> None:
         """Disconnect."""

@@ -144,17 +144,27 @@ class _Client:
 
     def __init__(self, host: str, port: int, *, client_id: str, username: str | None,
                  password: str | None, keepalive_s: int, max_queue: int,
-                 security: MqttSecurity | None = None) -> None:
+                 security: MqttSecurity | None = None, session_expiry_s: int = 0) -> None:
         mqtt = _paho()
+        if session_expiry_s > 0 and not client_id:
+            raise ConfigError("a persistent MQTT session needs a stable client_id")
         self.host, self.port, self.keepalive_s = host, port, keepalive_s
+        self.session_expiry_s = int(session_expiry_s)
+        self.session_present = False
         self.queue: queue.Queue[tuple[str, bytes]] = queue.Queue(maxsize=max_queue)
         self.dropped = 0
         self.connected = threading.Event()
         self.connect_rc: Any = None
         self.subacks: set[int] = set()
         self._sub_lock = threading.Lock()
-        self.client = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2,
-                                  client_id=client_id)
+        if self.session_expiry_s > 0:
+            # MQTT 5 persistent session: the broker keeps the subscriptions and queues QoS 1
+            # messages for this client id while it is away (up to the expiry interval)
+            self.client = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2,
+                                      client_id=client_id, protocol=mqtt.MQTTv5)
+        else:
+            self.client = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2,
+                                      client_id=client_id)
         if username is not None:
             self.client.username_pw_set(username, password)
         if security is not None:
@@ -166,6 +176,7 @@ class _Client:
     def _on_connect(self, client: Any, userdata: Any, flags: Any, rc: Any,
                     properties: Any = None) -> None:
         self.connect_rc = rc
+        self.session_present = bool(getattr(flags, "session_present", False))
         self.connected.set()
 
     def _on_subscribe(self, client: Any, userdata: Any, mid: int, rcs: Any,
@@ -181,7 +192,16 @@ class _Client:
 
     def start(self, timeout_s: float) -> None:
         try:
-            self.client.connect(self.host, self.port, keepalive=self.keepalive_s)
+            if self.session_expiry_s > 0:
+                from paho.mqtt.packettypes import PacketTypes
+                from paho.mqtt.properties import Properties
+
+                props = Properties(PacketTypes.CONNECT)
+                props.SessionExpiryInterval = self.session_expiry_s
+                self.client.connect(self.host, self.port, keepalive=self.keepalive_s,
+                                    clean_start=False, properties=props)
+            else:
+                self.client.connect(self.host, self.port, keepalive=self.keepalive_s)
         except OSError as exc:
             raise ConnectionError(connect_error(exc, self.host, self.port)) from exc
         self.client.loop_start()
@@ -234,6 +254,13 @@ class MqttRecorder:
         Keep values with unknown ids (see :class:`~cnctwin.iotools.databus.DatabusDecoder`).
     max_queue : int, default 100000
         Messages buffered between the network thread and the decoder.
+    session_expiry_s : int, default 0
+        With a ``client_id``: an MQTT 5 persistent session (clean start off, this session
+        expiry interval [s]); the broker keeps the subscriptions and queues the QoS 1 messages
+        that arrive while the recorder is away, and delivers them on the next start. 0: a clean
+        session (MQTT 3.1.1), nothing is kept. Data that a resumed session delivers before the
+        (retained) metadata is held, up to ``max_queue`` messages, and decoded once the
+        metadata is known.
 
     Examples
     --------
@@ -261,6 +288,7 @@ class MqttRecorder:
         salvage: bool = False,
         max_queue: int = 100_000,
         security: MqttSecurity | None = None,
+        session_expiry_s: int = 0,
     ) -> None:
         self.metadata_topic = metadata_topic
         self.fixed_topics = list(data_topics) if data_topics else None
@@ -269,7 +297,10 @@ class MqttRecorder:
                                       salvage=salvage)
         self._client = _Client(host, port, client_id=client_id, username=username,
                                password=password, keepalive_s=30, max_queue=max_queue,
-                               security=security)
+                               security=security, session_expiry_s=session_expiry_s)
+        self._max_pending = max_queue
+        self._pending: list[tuple[str, bytes]] = []
+        self._pending_dropped = 0
         self._subscribed: dict[str, int] = {}
         self._dropped_reported = 0
         self._errors: list[str] = []
@@ -288,8 +319,13 @@ class MqttRecorder:
 
     @property
     def dropped(self) -> int:
-        """Messages the network thread dropped because the receive queue was full."""
-        return int(self._client.dropped)
+        """Messages dropped: the receive queue was full, or data waited too long for metadata."""
+        return int(self._client.dropped) + self._pending_dropped
+
+    @property
+    def session_present(self) -> bool:
+        """The broker resumed a persistent session (queued messages follow)."""
+        return bool(self._client.session_present)
 
     def __enter__(self) -> MqttRecorder:
         return self.start()
@@ -329,12 +365,24 @@ class MqttRecorder:
                     and topic.startswith(self.metadata_topic[:-1])):
                 self.decoder.update_metadata(payload, topic=topic)
                 self._subscribe_data()
+                pending, self._pending = self._pending, []
+                for t, p in pending:
+                    self._decode(t, p)
+            elif self.decoder.metadata is None:
+                # a resumed session delivers the queued data before the retained metadata
+                if len(self._pending) < self._max_pending:
+                    self._pending.append((topic, payload))
+                else:
+                    self._pending_dropped += 1
             else:
-                try:
-                    self.decoder.decode(payload, topic=topic)
-                except FormatError as exc:
-                    # a bad message must not stop the stream: keep the error as an issue
-                    self.decoder.issues.append(f"message skipped: {exc}")
+                self._decode(topic, payload)
+
+    def _decode(self, topic: str, payload: bytes) -> None:
+        try:
+            self.decoder.decode(payload, topic=topic)
+        except FormatError as exc:
+            # a bad message must not stop the stream: keep the error as an issue
+            self.decoder.issues.append(f"message skipped: {exc}")
 
     @property
     def ready(self) -> bool:
@@ -360,12 +408,12 @@ class MqttRecorder:
 
     def _recording(self) -> Recording:
         rec = self.decoder.recording(clear=True)
-        dropped = self._client.dropped - self._dropped_reported
+        dropped = self.dropped - self._dropped_reported
         if dropped:
             rec.meta.issues.append(f"{dropped} MQTT messages dropped: the receive queue was "
                                    "full (decode faster or raise max_queue)")
             rec.meta.partial = True
-            self._dropped_reported = self._client.dropped
+            self._dropped_reported = self.dropped
         return rec
 
     def collect(
