@@ -7,6 +7,7 @@ Messages are dicts built by the runtime (``seq``, ``kind``, ``machine``, ``cycle
 from __future__ import annotations
 
 import contextlib
+import random
 import threading
 import time
 from os import PathLike
@@ -23,7 +24,21 @@ from cnctwin.exceptions import ConfigError
 from cnctwin.iotools.mqtt import MqttSecurity, connect_error, refusal
 from cnctwin.recording import Recording, RecordingMeta, find_gaps
 
-__all__ = ["JsonLinesSink", "MqttSink", "StoreSink", "dumps"]
+__all__ = ["JsonLinesSink", "MqttSink", "StoreSink", "dumps", "reconnect_delay_s"]
+
+
+def reconnect_delay_s(failures: int, *, base_s: float, max_s: float) -> float:
+    """Wait before the next connection attempt after ``failures`` failed ones in a row [s].
+
+    Exponential backoff: ``base_s * 2**(failures - 1)``, at most ``max_s`` (``base_s`` after
+    a connection that was up and got lost, ``failures = 0``).
+
+    Examples
+    --------
+    >>> [reconnect_delay_s(k, base_s=2.0, max_s=60.0) for k in range(7)]
+    [2.0, 2.0, 4.0, 8.0, 16.0, 32.0, 60.0]
+    """
+    return float(min(base_s * 2.0 ** max(failures - 1, 0), max_s))
 
 
 def dumps(message: dict[str, Any]) -> bytes:
@@ -71,10 +86,11 @@ class MqttSink:
 
     Every message goes through a :class:`~cnctwin.edge.forward.ForwardQueue` on disk and is
     removed when the broker acknowledged it (QoS 1). While the broker is unreachable the queue
-    grows (bounded; the oldest are dropped and counted); the sink retries the connection every
-    ``retry_s`` and then sends the backlog oldest first. A lost connection discards the client
-    (and its in-flight messages, which are still in the queue) and a new one is made, so only
-    the queue decides what is sent and in which order.
+    grows (bounded; the oldest are dropped and counted); the sink retries the connection with
+    exponential backoff (``retry_s``, doubled after each failed attempt up to ``max_retry_s``,
+    +-10 % jitter; paho's own reconnect is off) and then sends the backlog oldest first. A lost
+    connection discards the client (and its in-flight messages, which are still in the queue)
+    and a new one is made, so only the queue decides what is sent and in which order.
 
     Parameters
     ----------
@@ -89,7 +105,9 @@ class MqttSink:
     max_queue_messages : int, default 200000
         Queue bound (at ~20 messages/s about 2.8 h of backlog).
     retry_s : float, default 2.0
-        Seconds between connection attempts [s].
+        First wait before reconnecting [s].
+    max_retry_s : float, default 60.0
+        Longest wait between attempts while the broker stays away [s].
     max_inflight : int, default 100
         Messages published but not yet acknowledged.
     username, password : str, optional
@@ -101,6 +119,7 @@ class MqttSink:
     def __init__(self, host: str, port: int = 1883, *, state_dir: str | PathLike[str],
                  machine: str, topic_prefix: str = "cnctwin",
                  max_queue_messages: int = 200_000, retry_s: float = 2.0,
+                 max_retry_s: float = 60.0,
                  max_inflight: int = 100, username: str | None = None,
                  password: str | None = None, security: MqttSecurity | None = None) -> None:
         from cnctwin.iotools.mqtt import _paho
@@ -110,6 +129,7 @@ class MqttSink:
         self.machine = machine or "machine"
         self.topic_prefix = topic_prefix.rstrip("/")
         self.retry_s = retry_s
+        self.max_retry_s = max(max_retry_s, retry_s)
         self.max_inflight = max_inflight
         self.username, self.password = username, password
         self.security = security
@@ -123,6 +143,10 @@ class MqttSink:
         self._inflight: dict[int, int] = {}  # mid -> queue id
         self._last_id = 0
         self._last_attempt = -1e9
+        self._failures = 0  # failed connection attempts in a row (the backoff exponent)
+        self._delay_s = 0.0
+        self._rng = random.Random()  # jitter, so that a plant's runtimes do not retry in step
+        self.attempts = 0
         self.connects = 0
         self.disconnects = 0
         self.last_error = ""
@@ -136,8 +160,10 @@ class MqttSink:
                     properties: Any = None) -> None:
         if getattr(rc, "is_failure", False):
             self.last_error = refusal(rc, self.host, self.port)
+            self._failed()
             self._lost.set()
             return
+        self._failures = 0
         self._connected.set()
 
     def _on_disconnect(self, client: Any, userdata: Any, *args: Any) -> None:
@@ -173,11 +199,20 @@ class MqttSink:
             self.security.apply(c)
         return c
 
+    def _failed(self) -> None:
+        """One more failed attempt: the next waits longer (exponential backoff, jitter)."""
+        self._failures += 1
+        self._delay_s = reconnect_delay_s(self._failures, base_s=self.retry_s,
+                                          max_s=self.max_retry_s) \
+            * self._rng.uniform(0.9, 1.1)
+
     def _connect(self) -> None:
         now = time.monotonic()
-        if now - self._last_attempt < self.retry_s:
+        if now - self._last_attempt < self._delay_s:
             return
         self._last_attempt = now
+        self.attempts += 1
+        self._delay_s = self.retry_s  # a lost connection is retried after retry_s
         c = self._new_client()
         c.on_connect = self._on_connect
         c.on_disconnect = self._on_disconnect
@@ -188,6 +223,7 @@ class MqttSink:
             c.connect(self.host, self.port, keepalive=30)
         except OSError as exc:
             self.last_error = connect_error(exc, self.host, self.port)
+            self._failed()
             return
         c.loop_start()
         self._client = c
@@ -250,6 +286,7 @@ class MqttSink:
             if time.monotonic() - self._last_attempt > max(self.retry_s, 5.0):
                 self.last_error = "no CONNACK"
                 self._drop_client()
+                self._failed()
             return
         ids: list[int] = []
         with self._lock:
@@ -291,6 +328,10 @@ class MqttSink:
                 "queued": len(self.queue), "dropped_oldest": self.queue.dropped,
                 "sent": self.queue.sent, "connects": self.connects,
                 "disconnects": self.disconnects, "last_error": self.last_error,
+                "failed_attempts": self._failures,
+                "retry_in_s": round(max(self._delay_s - (time.monotonic()
+                                                         - self._last_attempt), 0.0), 3)
+                if self._client is None else 0.0,
                 "topic": self.topic("<kind>")}
 
     def close(self, *, timeout_s: float = 5.0) -> None:
