@@ -30,6 +30,12 @@ def test_edge_run_and_status(tmp_path: Path, wear_run: dict[str, Any], wear_reco
     rows = [m["row"] for m in lines if m["kind"] == "hole"]
     assert [r["torque_mean_nm"] for r in rows] == pytest.approx(
         batch["torque_mean_nm"].tolist(), rel=1e-12)
+    # status.json is strict JSON (RFC 8259 has no NaN: unknown values are null)
+    def no_constant(name: str) -> Any:
+        raise AssertionError(f"status.json holds a bare {name}")
+
+    status = json.loads((out / "status.json").read_text(), parse_constant=no_constant)
+    assert status["state"] == "finished"
     assert main(["edge", "status", str(out)]) == 0
     text = capsys.readouterr().out
     assert "holes" in text and "finished" in text

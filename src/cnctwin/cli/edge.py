@@ -135,6 +135,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def _fmt(v: Any, spec: str = ".3g") -> str:
+    if v is None:  # not known yet (null in status.json)
+        return "-"
     if isinstance(v, float):
         return "-" if math.isnan(v) else format(v, spec)
     return str(v)
@@ -148,7 +150,7 @@ def status_table(st: dict[str, Any]) -> Any:
               show_header=False)
     rate = st.get("cycles_per_s_recent")
     if not isinstance(rate, float) or math.isnan(rate):
-        rate = st.get("cycles_per_s", float("nan"))
+        rate = st.get("cycles_per_s")
     need = st.get("machine_rate_cycles_per_s", 500.0)
     rows = [
         ("cycles", f"{st.get('cycles', 0)} (last {st.get('last_cycle')})"),
