@@ -110,3 +110,15 @@ def test_live_page_receives_events(server: str, tmp_path: Path, live_dir: Path) 
     assert ticks and min(ticks) >= 22.0 and 45.0 <= max(ticks) <= 52.4
     table = re.search(r'<table id="live-holes">(.*?)</table>', dom, re.S).group(1)  # type: ignore[union-attr]
     assert table.count("<tr>") == 1 + 12  # header + the 12 holes of the run
+
+
+def test_api_docs_page_renders_without_a_cdn(server: str, tmp_path: Path) -> None:
+    # every asset of the page is served by the dashboard itself (the machine has no internet,
+    # so a CDN reference would leave the page empty)
+    with urllib.request.urlopen(server + "/api/docs", timeout=10) as r:
+        html = r.read().decode()
+    assert not re.search(r"""(src|href)=["']?https?://""", html), html
+    dom = _dump_dom(server + "/api/docs", tmp_path)
+    # Swagger UI ran and listed the operations of openapi.json
+    assert "swagger-ui" in dom and "opblock" in dom
+    assert "/api/recordings" in dom

@@ -65,6 +65,16 @@ def _plotly_js() -> Path:
     return p
 
 
+def _swagger_dir() -> Path:
+    """Swagger UI's bundle, shipped by the ``fastapi-offline`` package (served locally, no CDN)."""
+    try:
+        import fastapi_offline
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ConfigError("the dashboard's API page needs fastapi-offline: "
+                          "pip install 'cnctwin[web]'") from exc
+    return Path(fastapi_offline.__file__).parent / "static"
+
+
 def plot_payload(time_s: NDArray[np.float64], cycles: NDArray[np.int64],
                  values: NDArray[np.float64], *, px: int, start_s: float | None,
                  end_s: float | None) -> dict[str, Any]:
@@ -434,7 +444,8 @@ def create_app(
         dash.catalog.close()
 
     app = FastAPI(title=f"{title} dashboard", default_response_class=JsonResponse,
-                  docs_url="/api/docs", redoc_url=None, lifespan=lifespan)
+                  docs_url=None, redoc_url=None, lifespan=lifespan)
+    swagger = _swagger_dir()
     app.state.dashboard = dash
     if token is not None:
         _add_token_auth(app, token, title)
@@ -449,6 +460,25 @@ def create_app(
     @app.get("/static/plotly.min.js", include_in_schema=False)
     def _plotly() -> Any:
         return FileResponse(plotly_js, media_type="application/javascript",
+                            headers={"Cache-Control": "max-age=86400"})
+
+    @app.get("/api/docs", include_in_schema=False)
+    def _api_docs() -> Any:
+        from fastapi.openapi.docs import get_swagger_ui_html
+
+        # FastAPI's default page loads Swagger UI from a CDN; every asset here is local
+        return get_swagger_ui_html(openapi_url="/openapi.json", title=f"{title} API",
+                                   swagger_js_url="/static/swagger/swagger-ui-bundle.js",
+                                   swagger_css_url="/static/swagger/swagger-ui.css",
+                                   swagger_favicon_url="/static/swagger/favicon.png")
+
+    @app.get("/static/swagger/{name}", include_in_schema=False)
+    def _swagger(name: str) -> Any:
+        files = {"swagger-ui-bundle.js": "application/javascript",
+                 "swagger-ui.css": "text/css", "favicon.png": "image/png"}
+        if name not in files:
+            raise StoreError(f"no static file swagger/{name!r}")
+        return FileResponse(swagger / name, media_type=files[name],
                             headers={"Cache-Control": "max-age=86400"})
 
     @app.get("/static/{name}", include_in_schema=False)
