@@ -98,3 +98,26 @@ def test_sse_event_format() -> None:
     assert sse_event('{"a": 1}', event="hole", event_id="7") == \
         'event: hole\nid: 7\ndata: {"a": 1}\n\n'
     assert sse_event("a\nb") == "data: a\ndata: b\n\n"
+
+
+def test_client_leaving_mid_stream_closes_cleanly(tmp_path: Path) -> None:
+    # issue 14: a browser tab closed while the stream waits for the next line logged
+    # "RuntimeError: aclose(): asynchronous generator is already running"
+    (tmp_path / "results.jsonl").write_text(
+        '{"kind": "torque", "seq": 0}\n{"kind": "torque", "seq": 1}\n')
+    live = LiveSource(tmp_path)
+
+    async def leave_after_two() -> list[str]:
+        gen = live.events(from_start=True, poll_s=0.02, heartbeat_s=5.0)
+        got = [await gen.__anext__(), await gen.__anext__()]
+        # the third event waits for a line that never comes: the pending tail is running
+        task = asyncio.ensure_future(gen.__anext__())
+        await asyncio.sleep(0.1)
+        task.cancel()  # what the server does when the client disconnects
+        with pytest.raises(asyncio.CancelledError):
+            await task
+        await gen.aclose()  # must not raise
+        return got
+
+    got = asyncio.run(leave_after_two())
+    assert [e.split("\n")[0] for e in got] == ["event: torque", "event: torque"]

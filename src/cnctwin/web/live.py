@@ -11,6 +11,7 @@ shrinks (a new run) is followed from its start again.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import os
 from collections.abc import AsyncIterator
@@ -141,6 +142,11 @@ class LiveSource:
                 yield sse_event(line, event=kind, event_id=None if seq is None else str(seq))
             yield sse_event(json.dumps({"events": n}), event="end")
         finally:
+            # the client went away: the tail generator may be inside __anext__ in the pending
+            # task; cancel that task and let it finish before closing the generator, else
+            # aclose() raises "asynchronous generator is already running"
             if pending is not None:
                 pending.cancel()
+                with contextlib.suppress(asyncio.CancelledError, StopAsyncIteration):
+                    await pending
             await lines.aclose()  # type: ignore[attr-defined]
