@@ -140,7 +140,8 @@ def test_queue_survives_restart(tmp_path: Path) -> None:
     q2.close()
 
 
-def test_cli_live_databus(broker: Broker, tmp_path: Path) -> None:
+def test_cli_live_databus(broker: Broker, tmp_path: Path,
+                          capfd: pytest.CaptureFixture[str]) -> None:
     from cnctwin.cli import main
     from cnctwin.edge import save_spindle_model
 
@@ -176,6 +177,10 @@ def test_cli_live_databus(broker: Broker, tmp_path: Path) -> None:
         pub.disconnect()
         rx.close()
     assert topics == {"plant/mill-7/torque"}  # machine from the metadata's applicationName
+    err = capfd.readouterr().err
+    # the operator sees what it waits for, and which session it got
+    assert f"waiting for the Databus metadata on {META}" in err
+    assert "MQTT session cnctwin-edge-" in err and "(new;" in err
     tau = np.concatenate([m["torque_nm"] for m in sorted(rx.of_kind("torque"),
                                                          key=lambda m: m["seq"])])
     # thesis Eq. 4.4 by hand: 1.04 * 3.0 - 8.42e-5 * 2400 - 0.35 = 2.56792 Nm

@@ -221,6 +221,8 @@ def _build(args: argparse.Namespace) -> Any:
                             username=u.username, password=u.password, machine=args.machine,
                             idle_timeout_s=args.idle_timeout_s, security=security,
                             client_id=client_id, session_expiry_s=args.session_expiry_s)
+        print(f"connecting to {u.host}:{u.port}, waiting for the Databus metadata on "
+              f"{u.topic} (up to {src.ready_timeout_s:.0f} s) ...", file=sys.stderr)
         try:
             src.start()  # metadata first: its applicationName names the machine by default
         except (ConnectionError, TimeoutError) as exc:
