@@ -45,6 +45,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     r.add_argument("--publish", metavar="URL",
                    help="mqtt://host:port/<topic prefix> for results (default prefix cnctwin)")
     r.add_argument("--store", metavar="URL", help="also append results to this store")
+    r.add_argument("--rotate-mb", type=float, default=256.0, metavar="MB",
+                   help="rotate OUT/results.jsonl at this size [MB] (256; the full path writes "
+                   "~2.2 GB per machine-day)")
+    r.add_argument("--keep-files", type=int, default=40, metavar="N",
+                   help="keep this many rotated results files, delete older ones (40, about "
+                   "10 GB and 4.5 machine-days; deletions are counted in status.json)")
     r.add_argument("--tls-ca", type=Path, metavar="FILE",
                    help="MQTT over TLS: the CA certificate (PEM) of the broker(s)")
     r.add_argument("--tls-cert", type=Path, metavar="FILE",
@@ -269,7 +275,12 @@ def _build(args: argparse.Namespace) -> Any:
 
         procs.append(TwinCompareProcessor(machine_file, window_s=args.twin_window_s))
     out: Path = args.out
-    sinks: list[Any] = [JsonLinesSink(out / "results.jsonl")]
+    if args.rotate_mb <= 0 or args.keep_files < 1:
+        raise ConfigError(f"--rotate-mb {args.rotate_mb} --keep-files {args.keep_files}: give "
+                          "a positive size and keep at least 1 file")
+    sinks: list[Any] = [JsonLinesSink(out / "results.jsonl",
+                                      rotate_bytes=int(args.rotate_mb * 1e6),
+                                      keep_files=args.keep_files)]
     if args.publish:
         u = parse_mqtt_url(args.publish, default_topic="cnctwin")
         sink = MqttSink(u.host, u.port, state_dir=out, machine=machine,

@@ -16,7 +16,7 @@ import json
 import os
 from collections.abc import AsyncIterator
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 from cnctwin.exceptions import ConfigError
 
@@ -38,37 +38,58 @@ async def tail_lines(path: Path, *, from_start: bool, poll_s: float = 0.2,
                      ) -> AsyncIterator[str]:
     """Complete lines appended to ``path``, forever (from its start or from its end).
 
-    A missing file is waited for; a file that shrinks is read again from the start.
+    A missing file is waited for; a file that shrinks is read again from the start; a file
+    that is rotated (renamed and replaced by a new one, ``JsonLinesSink(rotate_bytes=...)``) is
+    read to its end through the open handle before the new file is followed from its start,
+    so no line is skipped across a rotation.
     """
-    pos = 0
-    started = False
+    f: IO[bytes] | None = None
     buf = b""
-    while True:
-        try:
-            size = os.stat(path).st_size
-        except FileNotFoundError:
-            size = -1
-        if size >= 0:
-            if not started:
-                pos = 0 if from_start else size
+    started = False
+
+    def lines_of(chunk: bytes) -> list[str]:
+        nonlocal buf
+        buf += chunk
+        *lines, buf = buf.split(b"\n")
+        return [ln.decode("utf-8", errors="replace") for ln in lines if ln.strip()]
+
+    try:
+        while True:
+            if f is None:
+                try:
+                    f = path.open("rb")
+                except FileNotFoundError:
+                    started = True  # created later: read it from its start
+                    await asyncio.sleep(poll_s)
+                    continue
+                if not started and not from_start:
+                    f.seek(0, os.SEEK_END)
                 started = True
-            if size < pos:  # truncated or replaced: a new run
-                pos, buf = 0, b""
-            if size > pos:
-                with path.open("rb") as f:
-                    f.seek(pos)
-                    chunk = f.read(size - pos)
-                pos += len(chunk)
-                buf += chunk
-                *lines, buf = buf.split(b"\n")
-                for line in lines:
-                    if line.strip():
-                        yield line.decode("utf-8", errors="replace")
+            chunk = f.read()
+            if chunk:
+                for line in lines_of(chunk):
+                    yield line
                 continue
-        elif not started:
-            started = True  # created later: read it from its start
-            from_start = True
-        await asyncio.sleep(poll_s)
+            try:
+                st: os.stat_result | None = os.stat(path)
+            except FileNotFoundError:
+                st = None
+            if st is not None and st.st_ino != os.fstat(f.fileno()).st_ino:
+                # rotated: what was written to the old file before the rename is read above
+                # (a last read here closes the race), then the new file from its start
+                for line in lines_of(f.read()):
+                    yield line
+                f.close()
+                f, buf = None, b""
+                continue
+            if st is not None and st.st_size < f.tell():  # truncated: a new run
+                f.seek(0)
+                buf = b""
+                continue
+            await asyncio.sleep(poll_s)
+    finally:
+        if f is not None:
+            f.close()
 
 
 class LiveSource:
