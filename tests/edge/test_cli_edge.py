@@ -26,6 +26,9 @@ def test_edge_run_and_status(tmp_path: Path, wear_run: dict[str, Any], wear_reco
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     batch = hole_records([wear_recording], model=model)
     assert summary["holes"] == len(batch) == 3 and summary["gaps"] == 0
+    # a fault-free run (the simulator injects nothing): no alarm, also not at the spindle
+    # stop, where the constant-speed twin misses the braking current (issue 14)
+    assert summary["alarms"] == 0
     lines = [json.loads(x) for x in (out / "results.jsonl").read_text().splitlines()]
     rows = [m["row"] for m in lines if m["kind"] == "hole"]
     assert [r["torque_mean_nm"] for r in rows] == pytest.approx(

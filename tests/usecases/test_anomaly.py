@@ -61,6 +61,7 @@ def test_detector_conformance(cls: type[Detector]) -> None:
 
 def test_physics_residual_detects_step_with_short_delay() -> None:
     df = _stream(6000)
+    df["speed_rpm"] = 400.0  # the constant-speed twin applies everywhere
     onset = 4000
     df.loc[onset:, "current_a"] += 0.3  # a 0.3 A excess over the twin (~7 % of 4 A)
     t = np.arange(len(df)) / FS
@@ -107,8 +108,37 @@ def test_tapping_detector_sees_fluctuation_only_in_reverse() -> None:
     assert np.max(scores[~fwd]) > 5.0
 
 
+def test_physics_residual_does_not_judge_speed_changes() -> None:
+    # a fault-free run-up and braking: the constant-speed twin misses the rotor's inertia
+    # current (J dw/dt / Kt), so a stop looked like a fault (issue 14: the live physics
+    # detector alarmed at the spindle stop). Those samples, and 0.3 s after, are not judged;
+    # a real excess at constant speed still is.
+    n = 6000
+    rng = np.random.default_rng(4)
+    speed = np.full(n, 2400.0)
+    speed[:500] = np.linspace(0.0, 2400.0, 500)  # run-up in 1 s (learned)
+    speed[5500:5625] = np.linspace(2400.0, 0.0, 125)  # braking in 0.25 s, 4x the current
+    speed[5625:] = 0.0
+    # causal: the drive's current follows the speed command, never leads it
+    accel = np.diff(speed, prepend=speed[0]) * FS * 2 * np.pi / 60  # rad/s^2
+    kt, j = 1.04, 0.0045  # thesis spindle Kt; J of a motor spindle [kg m^2]
+    pred = np.where(speed > 0, (8.42e-5 * speed + 0.35) / kt, 0.0)
+    current = pred + j * accel / kt + rng.normal(0, 0.02, n)  # inertia: +1.1, -4.4 A
+    df = pd.DataFrame({"current_a": current, "predicted_current_a": pred, "speed_rpm": speed})
+    t = np.arange(n) / FS
+    res = backtest(PhysicsResidualDetector(), df, time_s=t, learn_until_s=4.0)
+    assert res.false_alarms == 0
+    plain = backtest(PhysicsResidualDetector(speed=None), df, time_s=t, learn_until_s=4.0)
+    assert plain.false_alarms >= 1  # the earlier behaviour alarms at the braking
+    df.loc[5000:5400, "current_a"] += 0.3  # a real excess at constant speed
+    res = backtest(PhysicsResidualDetector(), df, time_s=t, learn_until_s=4.0,
+                   fault_onsets_s=[10.0])
+    assert res.misses == 0 and res.false_alarms == 0
+
+
 def test_backtest_counts_false_alarms_per_hour() -> None:
     df = _stream(6000)
+    df["speed_rpm"] = 400.0
     df.loc[5000:5010, "current_a"] += 1.0  # a glitch with no fault behind it
     t = np.arange(len(df)) / FS
     res = backtest(PhysicsResidualDetector(smoothing=1.0), df, time_s=t, learn_until_s=4.0)

@@ -151,7 +151,8 @@ def test_replay_refuses_a_stream_without_a_needed_input() -> None:
     from cnctwin.exceptions import NotScoredError
     from cnctwin.usecases.replay import _check_inputs, make_detector
 
-    data = pd.DataFrame({"current_a": np.ones(10), "predicted_current_a": np.full(10, np.nan)})
+    data = pd.DataFrame({"current_a": np.ones(10), "predicted_current_a": np.full(10, np.nan),
+                         "speed_rpm": np.full(10, 2400.0)})
     with pytest.raises(NotScoredError, match="predicted_current_a"):
         _check_inputs(make_detector("physics", fs_hz=500.0), "physics", data)
     data["predicted_current_a"] = 1.0

@@ -155,6 +155,21 @@ class PhysicsResidualDetector(Detector):
         EWMA time constant [samples] (25 samples = 50 ms at 500 Hz).
     threshold_sigma : float, default 5
         Learned standard deviations that count as normal.
+    speed : str or None, default 'speed_rpm'
+        Key of the spindle speed. The twin's prediction is the current at constant speed
+        (thesis Eq. 4.4 at zero cutting torque); while the speed changes (run-up, braking,
+        a new S word) the current also accelerates the rotor (J dw/dt / Kt, tens of amperes
+        when braking) and the drive's speed loop settles, so those samples are neither learned
+        nor judged (score NaN). None: every sample counts (the earlier behaviour).
+    settle_samples : int, default 150
+        Samples after the last speed change that are still not judged (150 = 0.3 s at 500 Hz:
+        the speed loop and the current filter settle).
+    speed_tol_rpm : float, default 1
+        A speed change is a step of more than ``speed_tol_rpm`` from one sample to the next
+        (a commanded ramp of 500 rpm/s or more moves 1 rpm per 2 ms cycle), or a drift of more
+        than ``max(10 speed_tol_rpm, 1 % of the speed)`` from the speed at the last change
+        [rpm]. The speed command (``CMD_SPEED``) is noise-free; on a noisy actual speed fewer
+        samples are judged.
     """
 
     def __init__(
@@ -164,32 +179,67 @@ class PhysicsResidualDetector(Detector):
         predicted: str = "predicted_current_a",
         smoothing: float = 25.0,
         threshold_sigma: float = 5.0,
+        speed: str | None = "speed_rpm",
+        settle_samples: int = 150,
+        speed_tol_rpm: float = 1.0,
     ) -> None:
         if smoothing < 1:
             raise ConfigError(f"smoothing must be >= 1 sample, not {smoothing}")
+        if settle_samples < 0 or speed_tol_rpm < 0:
+            raise ConfigError(f"settle_samples ({settle_samples}) and speed_tol_rpm "
+                              f"({speed_tol_rpm}) must be >= 0")
         self.measured = measured
         self.predicted = predicted
         self.smoothing = smoothing
         self.threshold_sigma = threshold_sigma
-        self.inputs = (measured, predicted)
+        self.speed = speed
+        self.settle_samples = settle_samples
+        self.speed_tol_rpm = speed_tol_rpm
+        self.inputs = (measured, predicted) if speed is None else (measured, predicted, speed)
         self._alpha = 1.0 / smoothing
         self._ewma: float | None = None
         self._stats = _Welford()
+        self._n_ref: float | None = None
+        self._n_prev: float | None = None
+        self._since_change = 0
 
     def _params(self) -> dict[str, Any]:
         return {"measured": self.measured, "predicted": self.predicted,
-                "smoothing": self.smoothing, "threshold_sigma": self.threshold_sigma}
+                "smoothing": self.smoothing, "threshold_sigma": self.threshold_sigma,
+                "speed": self.speed, "settle_samples": self.settle_samples,
+                "speed_tol_rpm": self.speed_tol_rpm}
 
     def _smooth(self, x: Mapping[str, float]) -> float:
         r = float(x[self.measured]) - float(x[self.predicted])
         self._ewma = r if self._ewma is None else self._ewma + self._alpha * (r - self._ewma)
         return self._ewma
 
+    def _steady(self, x: Mapping[str, float]) -> bool:
+        """Track speed changes; True once the speed has been steady for settle_samples."""
+        if self.speed is None:
+            return True
+        n = float(x[self.speed])
+        if not math.isfinite(n):
+            return True  # no speed signal: judged as before (signal_stream flags it)
+        prev, self._n_prev = self._n_prev, n
+        if (self._n_ref is None or prev is None or abs(n - prev) > self.speed_tol_rpm
+                or abs(n - self._n_ref) > max(10.0 * self.speed_tol_rpm,
+                                              0.01 * abs(self._n_ref))):
+            self._n_ref = n
+            self._since_change = 0
+            return False
+        self._since_change += 1
+        return self._since_change > self.settle_samples
+
     def learn_one(self, x: Mapping[str, float]) -> None:
-        self._stats.update(self._smooth(x))
+        s = self._smooth(x)
+        if self._steady(x):
+            self._stats.update(s)
 
     def score_one(self, x: Mapping[str, float]) -> float:
         s = self._smooth(x)
+        if not self._steady(x):
+            return math.nan  # speed changing: the constant-speed twin does not apply
         std = self._stats.std
         if not math.isfinite(std) or std == 0.0:
             return 0.0
