@@ -202,6 +202,7 @@ def _build(args: argparse.Namespace) -> Any:
         ReplaySource,
         StoreSink,
         TorqueProcessor,
+        last_emitted_cycle,
         parse_mqtt_url,
         session_client_id,
     )
@@ -223,10 +224,17 @@ def _build(args: argparse.Namespace) -> Any:
             raise ConfigError(f"--session-expiry-s {args.session_expiry_s}: give 0 (clean "
                               "session) or a positive number of seconds")
         client_id = args.mqtt_client_id or session_client_id(args.machine, u.topic)
+        # what a crash cut off from the broker's acknowledgements is redelivered: skip the
+        # cycles the results already hold (exactly once across restarts)
+        resume = last_emitted_cycle(args.out / "results.jsonl")
+        if resume is not None:
+            print(f"resuming after cycle {resume} (the last in {args.out / 'results.jsonl'})",
+                  file=sys.stderr)
         src = DatabusSource(u.host, u.port, metadata_topic=u.topic, name_map=name_map,
                             username=u.username, password=u.password, machine=args.machine,
                             idle_timeout_s=args.idle_timeout_s, security=security,
-                            client_id=client_id, session_expiry_s=args.session_expiry_s)
+                            client_id=client_id, session_expiry_s=args.session_expiry_s,
+                            resume_after_cycle=resume)
         print(f"connecting to {u.host}:{u.port}, waiting for the Databus metadata on "
               f"{u.topic} (up to {src.ready_timeout_s:.0f} s) ...", file=sys.stderr)
         try:

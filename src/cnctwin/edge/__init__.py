@@ -21,7 +21,7 @@ from cnctwin.edge.forward import ForwardQueue
 from cnctwin.edge.model_file import load_spindle_model, save_spindle_model
 from cnctwin.edge.pipeline import Chunk, Result
 from cnctwin.edge.processors import AnomalyProcessor, HoleProcessor, TorqueProcessor
-from cnctwin.edge.runtime import EdgeRuntime, read_status
+from cnctwin.edge.runtime import EdgeRuntime, last_emitted_cycle, read_status
 from cnctwin.edge.sinks import JsonLinesSink, MqttSink, StoreSink
 from cnctwin.edge.sources import (
     DatabusSource,
@@ -44,6 +44,7 @@ __all__ = [
     "Result",
     "StoreSink",
     "TorqueProcessor",
+    "last_emitted_cycle",
     "load_spindle_model",
     "parse_mqtt_url",
     "read_status",

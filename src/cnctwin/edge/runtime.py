@@ -29,7 +29,7 @@ from cnctwin.edge.pipeline import Chunk, Processor, Result, Sink, Source
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import CounterGap
 
-__all__ = ["EdgeRuntime", "read_status"]
+__all__ = ["EdgeRuntime", "last_emitted_cycle", "read_status"]
 
 STATUS_FILE = "status.json"
 
@@ -391,3 +391,36 @@ def read_status(state_dir: str | PathLike[str]) -> dict[str, Any]:
                                 f"--out {state_dir}` first")
     doc: dict[str, Any] = json.loads(p.read_text(encoding="utf-8"))
     return doc
+
+
+def last_emitted_cycle(results: str | PathLike[str], *, tail_bytes: int = 1 << 20
+                       ) -> int | None:
+    """The last cycle a runtime wrote a torque value for into ``results`` (a JSON lines file).
+
+    Read from the end of the file (its last ``tail_bytes``; a line a crash cut short is
+    skipped); when the file holds no torque message yet, the newest rotated file
+    (``results.<time>.jsonl``) is read. None when there is none: a first run.
+
+    The results file is what the runtime really emitted, so after a crash (``kill -9``) this
+    is the resume point of a live source: the broker redelivers messages whose
+    acknowledgement the crash cut off, and their cycles are skipped, not emitted twice.
+    """
+    p = Path(results)
+    candidates = [p, *sorted(p.parent.glob(f"{p.stem}.*{p.suffix}"), reverse=True)]
+    for f in candidates:
+        if not f.is_file():
+            continue
+        with f.open("rb") as fh:
+            fh.seek(0, os.SEEK_END)
+            size = fh.tell()
+            fh.seek(max(size - tail_bytes, 0))
+            lines = fh.read().split(b"\n")
+        for line in reversed(lines):
+            if b'"first_cycle"' not in line:
+                continue
+            try:
+                m = json.loads(line)
+                return int(m["first_cycle"]) + int(m["n"]) - 1
+            except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+                continue
+    return None

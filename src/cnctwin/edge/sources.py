@@ -195,6 +195,12 @@ class DatabusSource:
         MQTT 5 session expiry [s]: with a ``client_id``, the broker keeps what the control
         publishes while the runtime is down (restart, crash, kill -9) for this long and
         delivers it on reconnect (QoS 1). 0: a clean session, nothing is kept.
+    resume_after_cycle : int, optional
+        The last cycle already processed (:func:`~cnctwin.edge.runtime.last_emitted_cycle`
+        of the results). Rows at or before it, which the broker redelivers after a crash cut
+        their acknowledgement off, are skipped and counted (``replayed_rows`` and an issue),
+        until the first newer row. Compared modulo the SINUMERIK counter (2**31) when the
+        ``CYCLE`` column is mapped.
     """
 
     def __init__(self, host: str, port: int = 1883, *, metadata_topic: str,
@@ -203,7 +209,7 @@ class DatabusSource:
                  username: str | None = None, password: str | None = None,
                  machine: str = "", ready_timeout_s: float = 30.0,
                  security: MqttSecurity | None = None, client_id: str = "",
-                 session_expiry_s: int = 0) -> None:
+                 session_expiry_s: int = 0, resume_after_cycle: int | None = None) -> None:
         from cnctwin.iotools.mqtt import MqttRecorder
 
         self.recorder = MqttRecorder(host, port, metadata_topic=metadata_topic,
@@ -219,6 +225,8 @@ class DatabusSource:
         self.issues: list[str] = []
         self.counter_modulus = 0
         self.live = True
+        self.resume_after_cycle = resume_after_cycle
+        self.replayed_rows = 0
         self._started = False
         self._closed = False
 
@@ -276,11 +284,31 @@ class DatabusSource:
             self.counter_modulus = CYCLE_COUNTER_MODULUS
         else:
             cycles = hf.index.to_numpy(dtype=np.int64)
+        if self.resume_after_cycle is not None and len(cycles):
+            hf, cycles = self._skip_processed(hf, cycles)
         t_ns = hf["time"].to_numpy(dtype="datetime64[ns]").view(np.int64)
         sig = {c: hf[c].to_numpy(dtype=np.float64) for c in hf.columns
                if c not in ("time", "CYCLE")}
         return Chunk(cycles, t_ns, sig, cycle_time_s=self.cycle_time_s,
                      machine=self.machine, received_ns=time.time_ns())
+
+    def _skip_processed(self, hf: pd.DataFrame, cycles: np.ndarray
+                        ) -> tuple[pd.DataFrame, np.ndarray]:
+        """Drop the rows a previous run already processed (redelivered after a crash)."""
+        last = int(self.resume_after_cycle)  # type: ignore[arg-type]
+        if self.counter_modulus:
+            m = self.counter_modulus
+            behind = ((last - cycles) % m) < m // 2
+        else:
+            behind = cycles <= last
+        k = int(behind.sum())
+        if k:
+            self.replayed_rows += k
+            self.issues.append(f"{k} rows at or before cycle {last} skipped: already processed "
+                               "before the restart (redelivered by the broker)")
+        if not behind.all():
+            self.resume_after_cycle = None  # past the resume point: stop checking
+        return hf[~behind], cycles[~behind]
 
     @property
     def dropped(self) -> int:
