@@ -3,6 +3,8 @@ Chromium; the DOM must hold the plots drawn by plotly.js (served locally, no net
 
 from __future__ import annotations
 
+import contextlib
+import json
 import os
 import re
 import subprocess
@@ -32,16 +34,13 @@ def live_dir(wear12: dict[str, Any], model_file: Path,
     return live
 
 
-@pytest.fixture(scope="module")
-def server(wear12: dict[str, Any], c4a_file: Path, model_file: Path, live_dir: Path,
-           tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+@contextlib.contextmanager
+def _serve(args: list[str], log_path: Path) -> Iterator[str]:
+    """`cnctwin web ARGS --port P` as a process; yields its URL once /healthz answers."""
     port = free_port()
-    live = live_dir
-    log = (tmp_path_factory.mktemp("srv") / "server.log").open("w")
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "cnctwin", "web", "--recording", str(wear12["path"]),
-         "--recording", str(c4a_file), "--model", str(model_file), "--live", str(live),
-         "--port", str(port)], stdout=log, stderr=subprocess.STDOUT)
+    log = log_path.open("w")
+    proc = subprocess.Popen([sys.executable, "-m", "cnctwin", "web", *args, "--port", str(port)],
+                            stdout=log, stderr=subprocess.STDOUT)
     url = f"http://127.0.0.1:{port}"
     try:
         deadline = time.monotonic() + 30
@@ -64,6 +63,15 @@ def server(wear12: dict[str, Any], c4a_file: Path, model_file: Path, live_dir: P
         except subprocess.TimeoutExpired:
             proc.kill()
         log.close()
+
+
+@pytest.fixture(scope="module")
+def server(wear12: dict[str, Any], c4a_file: Path, model_file: Path, live_dir: Path,
+           tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    with _serve(["--recording", str(wear12["path"]), "--recording", str(c4a_file),
+                 "--model", str(model_file), "--live", str(live_dir)],
+                tmp_path_factory.mktemp("srv") / "server.log") as url:
+        yield url
 
 
 def _dump_dom(url: str, tmp_path: Path) -> str:
@@ -122,3 +130,31 @@ def test_api_docs_page_renders_without_a_cdn(server: str, tmp_path: Path) -> Non
     # Swagger UI ran and listed the operations of openapi.json
     assert "swagger-ui" in dom and "opblock" in dom
     assert "/api/recordings" in dom
+
+
+def test_live_page_starts_a_new_view_for_a_new_run(wear12: dict[str, Any], model_file: Path,
+                                                    tmp_path: Path) -> None:
+    # issue 14: a second `edge run` into the same --out appended to the same results, and the
+    # live page drew both runs over each other (time running backwards). Each run now begins
+    # with a `run` message and the page starts a new view on it.
+    from cnctwin.cli import main
+
+    live = tmp_path / "live"
+    for _ in range(2):
+        assert main(["edge", "run", "--source", str(wear12["path"]), "--model",
+                     str(model_file), "--out", str(live), "--quiet", "--learn-s", "2"]) == 0
+    lines = [json.loads(x) for x in (live / "results.jsonl").read_text().splitlines()]
+    starts = [k for k, m in enumerate(lines) if m["kind"] == "run"]
+    assert len(starts) == 2 and starts[0] == 0
+    seqs = [m["seq"] for m in lines]
+    assert seqs == sorted(set(seqs))  # seq goes on across the runs
+    n_points_one_run = sum(m["n"] for m in lines[starts[1]:] if m["kind"] == "torque")
+    with _serve(["--live", str(live)], tmp_path / "server.log") as url:
+        dom = _dump_dom(url + f"/live?limit={len(lines)}", tmp_path)
+    assert "stream ended" in dom
+    assert dom.count("run started") == 2
+    table = re.search(r'<table id="live-holes">(.*?)</table>', dom, re.S).group(1)  # type: ignore[union-attr]
+    assert table.count("<tr>") == 1 + 12  # the second run's 12 holes, not 24
+    points = int(re.search(r'id="live-plot"[^>]*data-points="(\d+)"', dom)  # type: ignore[union-attr]
+                 .group(1))
+    assert 0 < points <= min(n_points_one_run, 30 * 500 + 1)  # one run, last 30 s window

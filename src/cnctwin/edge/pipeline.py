@@ -42,6 +42,8 @@ RESULT_KINDS: dict[str, str] = {
             "ratio and departures per axis",
     "gap": "the CYCLE counter jumped: cycles missing (never invented)",
     "status": "runtime status (rates, lag, counts, queue, gaps)",
+    "run": "a run of the runtime began (first message of every run; consumers and the live "
+           "page start a new view, so two runs into one state directory are never mixed)",
 }
 """Kinds of :class:`Result` the runtime produces."""
 

@@ -299,6 +299,11 @@ class EdgeRuntime:
         """
         self._on_status = on_status
         self.state = "running"
+        src = self.source
+        self._emit([Result("run", -1, {
+            "started": _iso(time.time_ns()), "source": type(src).__name__,
+            "live": bool(getattr(src, "live", False)),
+            "resume_after_cycle": getattr(src, "resume_after_cycle", None)})], None)
         try:
             for chunk in self.source.chunks():
                 if len(chunk):

@@ -154,6 +154,21 @@ const cnctwin = (() => {
       if (k) { xs.splice(0, k); ys.splice(0, k); }
       if (!pending) { pending = true; requestAnimationFrame(redraw); }
     });
+    es.addEventListener("run", (ev) => {
+      // a new run of the runtime into the same directory: start a new view, so the plot
+      // never mixes two runs (time running backwards)
+      const m = JSON.parse(ev.data);
+      if (t0 !== null || holes.length) {
+        xs.length = 0; ys.length = 0; t0 = null; holes.length = 0;
+        table($("live-holes"), [], [], 200);
+        redraw();
+      }
+      const li = document.createElement("li");
+      li.className = "run";
+      li.textContent = `run started ${m.started || ""} (${m.source || ""})`;
+      events.prepend(li);
+      plot.dataset.run = m.started || "";
+    });
     es.addEventListener("hole", (ev) => {
       const m = JSON.parse(ev.data);
       holes.push(m.row);
