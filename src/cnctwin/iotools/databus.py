@@ -190,6 +190,15 @@ class DatabusDecoder:
             If the message has no ``connections`` list or a definition lacks ``id``/``name``.
         """
         doc = _load(message, topic)
+        try:
+            self._update_metadata(doc, topic)
+        except FormatError:
+            raise
+        except (TypeError, AttributeError, KeyError, IndexError, ValueError) as exc:
+            raise FormatError(f"unexpected metadata structure ({type(exc).__name__}: {exc})",
+                              path=topic) from None
+
+    def _update_metadata(self, doc: dict[str, Any], topic: str) -> None:
         conns = doc.get("connections")
         if not isinstance(conns, list):
             raise FormatError("metadata has no 'connections' list", path=topic,
@@ -198,9 +207,27 @@ class DatabusDecoder:
         topics: dict[str, dict[str, Any]] = {}
         names_seen: dict[str, str] = {}
         for ci, conn in enumerate(conns):
-            for di, dp in enumerate(conn.get("dataPoints") or []):
+            if not isinstance(conn, dict):
+                raise FormatError("connection is not an object", path=topic,
+                                  position=f"connections[{ci}]")
+            dps = conn.get("dataPoints") or []
+            if not isinstance(dps, list):
+                raise FormatError("'dataPoints' is not a list", path=topic,
+                                  position=f"connections[{ci}]", field="dataPoints")
+            for di, dp in enumerate(dps):
+                if not isinstance(dp, dict):
+                    raise FormatError("data point is not an object", path=topic,
+                                      position=f"connections[{ci}].dataPoints[{di}]")
                 defs = dp.get("dataPointDefinitions") or []
+                if not isinstance(defs, list) or not all(isinstance(d, dict) for d in defs):
+                    raise FormatError("'dataPointDefinitions' is not a list of objects",
+                                      path=topic, position=f"connections[{ci}].dataPoints"
+                                      f"[{di}]", field="dataPointDefinitions")
                 t = dp.get("topic")
+                if t is not None and not isinstance(t, str):
+                    raise FormatError(f"topic {t!r} is not a string", path=topic,
+                                      position=f"connections[{ci}].dataPoints[{di}]",
+                                      field="topic")
                 if t:
                     topics[t] = {"publishType": dp.get("publishType", ""),
                                  "ids": [str(d.get("id")) for d in defs],
@@ -245,6 +272,17 @@ class DatabusDecoder:
         if self.metadata is None:
             raise FormatError("data message before any metadata message: subscribe to the "
                               "metadata topic first", path=topic)
+        try:
+            return self._decode(message, topic)
+        except FormatError:
+            raise
+        except (TypeError, AttributeError, KeyError, IndexError, ValueError,
+                OverflowError) as exc:  # a shape the checks below did not foresee
+            raise FormatError(f"unexpected message structure ({type(exc).__name__}: {exc})",
+                              path=topic) from None
+
+    def _decode(self, message: str | bytes | dict[str, Any], topic: str,
+                ) -> list[DatabusValue]:
         doc = _load(message, topic)
         seq = doc.get("seq")
         seq_i = int(seq) if isinstance(seq, (int, str)) and str(seq).isdigit() else None
@@ -255,14 +293,22 @@ class DatabusDecoder:
             self._last_seq[topic] = seq_i
         out: list[DatabusValue] = []
         if "vals" in doc:
+            if not isinstance(doc["vals"], list):
+                raise FormatError("'vals' is not a list", path=topic, field="vals")
             for i, v in enumerate(doc["vals"]):
                 out.append(self._one(v, v.get("ts") if isinstance(v, dict) else None,
                                      topic, f"vals[{i}]", seq_i))
         elif "records" in doc:
+            if not isinstance(doc["records"], list):
+                raise FormatError("'records' is not a list", path=topic, field="records")
             for r_i, rec in enumerate(doc["records"]):
-                for i, v in enumerate(rec.get("vals") or []):
-                    out.append(self._one(v, v.get("ts", rec.get("ts")), topic,
-                                         f"records[{r_i}].vals[{i}]", seq_i))
+                vals = rec.get("vals") if isinstance(rec, dict) else None
+                if not isinstance(vals, list):
+                    raise FormatError("record without a 'vals' list", path=topic,
+                                      position=f"records[{r_i}]", field="vals")
+                for i, v in enumerate(vals):
+                    ts = v.get("ts", rec.get("ts")) if isinstance(v, dict) else None
+                    out.append(self._one(v, ts, topic, f"records[{r_i}].vals[{i}]", seq_i))
         elif "val" in doc:
             info = self._topics.get(topic)
             if info is None or len(info["ids"]) != 1:
@@ -296,8 +342,10 @@ class DatabusDecoder:
                               field="ts")
         try:
             t = pd.Timestamp(ts)
-        except (ValueError, TypeError):
-            raise FormatError(f"timestamp {ts!r} is not a date-time", path=topic,
+            if pd.isna(t):
+                raise ValueError("NaT")
+        except (ValueError, TypeError, OverflowError):
+            raise FormatError(f"timestamp {str(ts)[:80]!r} is not a date-time", path=topic,
                               position=pos, field="ts") from None
         t = t.tz_localize("UTC") if t.tzinfo is None else t.tz_convert("UTC")
         value, lost = _value(v.get("val"))
@@ -307,7 +355,7 @@ class DatabusDecoder:
         qc_raw = v.get("qc")
         try:
             qc = int(qc_raw) if qc_raw is not None else None
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise FormatError(f"qc {qc_raw!r} is not an integer", path=topic, position=pos,
                               field="qc") from None
         return DatabusValue(topic=topic, id=vid, name=info["name"], column=info["column"],

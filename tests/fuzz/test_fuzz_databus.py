@@ -1,0 +1,136 @@
+"""Fuzzed Databus messages and metadata (issue 14, point 6).
+
+Every input ends either in accepted values (losses in ``decoder.issues``) or in a project
+exception (:class:`cnctwin.exceptions.CnctwinError`) whose message names the topic; never a
+raw ValueError/KeyError/TypeError/AttributeError/IndexError from inside the parser. Seeds:
+the documented message structure (data-formats.md §2), mutated by hypothesis: truncation,
+byte flips, removed brackets, NaN/Inf/huge numbers, wrong JSON types, non-UTF-8 bytes, empty
+and very large messages. The example budget is bounded for CI (``max_examples``).
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from cnctwin.exceptions import CnctwinError
+from cnctwin.iotools.databus import DatabusDecoder
+
+TOPIC = "ie/d/j/simatic/v1/s7c1/dp/r/PLC_1/default"
+META_TOPIC = "ie/m/j/simatic/v1/s7c1/dp"
+META: dict[str, Any] = {"seq": 1, "hashVersion": 123, "applicationName": "S7 Connector",
+                        "connections": [{"name": "PLC_1", "type": "s7", "dataPoints": [
+                            {"name": "default", "topic": TOPIC, "publishType": "bulk",
+                             "dataPointDefinitions": [
+                                 {"name": "Load", "id": "101", "dataType": "LReal"},
+                                 {"name": "Counter", "id": "102", "dataType": "LInt"},
+                                 {"name": "State", "id": "103", "dataType": "String"}]}]}]}
+DATA: dict[str, Any] = {"seq": 7, "vals": [
+    {"id": "101", "qc": 3, "ts": "2021-03-10T22:23:04.146Z", "val": 80.5},
+    {"id": "102", "qc": 3, "ts": "2021-03-10T22:23:04.146Z", "val": "9007199254740993"},
+    {"id": "103", "qc": 2, "ts": "2021-03-10T22:23:04.156Z", "val": "RUN"}]}
+SETTINGS = settings(max_examples=300, deadline=None,
+                    suppress_health_check=[HealthCheck.too_slow])
+
+json_leaf = st.one_of(st.none(), st.booleans(), st.integers(-2**70, 2**70),
+                      st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=20))
+json_any = st.recursive(json_leaf, lambda kids: st.one_of(
+    st.lists(kids, max_size=4), st.dictionaries(st.text(max_size=8), kids, max_size=4)),
+    max_leaves=12)
+
+
+def _mutations(doc: dict[str, Any]) -> st.SearchStrategy[bytes]:
+    raw = json.dumps(doc).encode()
+
+    def truncate(k: int) -> bytes:
+        return raw[:k]
+
+    def flip(pos_byte: tuple[int, int]) -> bytes:
+        pos, b = pos_byte
+        pos %= len(raw)
+        return raw[:pos] + bytes([b]) + raw[pos + 1:]
+
+    def drop_bracket(k: int) -> bytes:
+        idx = [i for i, c in enumerate(raw) if c in b"[]{}"]
+        i = idx[k % len(idx)]
+        return raw[:i] + raw[i + 1:]
+
+    return st.one_of(
+        st.integers(0, len(raw)).map(truncate),
+        st.tuples(st.integers(0, 10**6), st.integers(0, 255)).map(flip),
+        st.integers(0, 10**6).map(drop_bracket),
+        st.binary(max_size=64),  # arbitrary bytes, non-UTF-8 included
+        st.just(b""),
+        st.just(raw[:-1] + b"," + b" " * 200_000 + b"}"),  # a very large message
+    )
+
+
+def _swap_values(doc: dict[str, Any], path: list[Any], value: Any) -> dict[str, Any]:
+    """``doc`` with the node at ``path`` (keys/indices, clipped to what exists) replaced."""
+    out = json.loads(json.dumps(doc))
+    node = out
+    for i, key in enumerate(path):
+        if isinstance(node, dict) and node:
+            k = sorted(node)[key % len(node)] if isinstance(key, int) else key
+            if i == len(path) - 1 or not isinstance(node[k], dict | list):
+                node[k] = value
+                return out
+            node = node[k]
+        elif isinstance(node, list) and node:
+            j = key % len(node) if isinstance(key, int) else 0
+            if i == len(path) - 1 or not isinstance(node[j], dict | list):
+                node[j] = value
+                return out
+            node = node[j]
+        else:
+            break
+    return out
+
+
+def _check(exc: BaseException, topic: str) -> None:
+    assert isinstance(exc, CnctwinError), f"{type(exc).__name__}: {exc}"
+    assert topic in str(exc), f"the error does not name the topic: {exc}"
+
+
+@SETTINGS
+@given(_mutations(DATA))
+def test_data_bytes(payload: bytes) -> None:
+    dec = DatabusDecoder(META)
+    try:
+        dec.decode(payload, topic=TOPIC)
+    except Exception as exc:  # noqa: BLE001 - the property is about the type
+        _check(exc, TOPIC)
+
+
+@SETTINGS
+@given(st.lists(st.integers(0, 50), min_size=1, max_size=4), json_any)
+def test_data_wrong_types(path: list[int], value: Any) -> None:
+    dec = DatabusDecoder(META)
+    try:
+        dec.decode(json.dumps(_swap_values(DATA, path, value)).encode(), topic=TOPIC)
+    except Exception as exc:  # noqa: BLE001
+        _check(exc, TOPIC)
+
+
+@SETTINGS
+@given(_mutations(META))
+def test_metadata_bytes(payload: bytes) -> None:
+    dec = DatabusDecoder()
+    try:
+        dec.update_metadata(payload, topic=META_TOPIC)
+    except Exception as exc:  # noqa: BLE001
+        _check(exc, META_TOPIC)
+
+
+@SETTINGS
+@given(st.lists(st.integers(0, 50), min_size=1, max_size=6), json_any)
+def test_metadata_wrong_types(path: list[int], value: Any) -> None:
+    dec = DatabusDecoder()
+    try:
+        dec.update_metadata(json.dumps(_swap_values(META, path, value)).encode(),
+                            topic=META_TOPIC)
+    except Exception as exc:  # noqa: BLE001
+        _check(exc, META_TOPIC)
