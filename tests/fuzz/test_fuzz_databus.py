@@ -101,7 +101,7 @@ def test_data_bytes(payload: bytes) -> None:
     dec = DatabusDecoder(META)
     try:
         dec.decode(payload, topic=TOPIC)
-    except Exception as exc:  # noqa: BLE001 - the property is about the type
+    except Exception as exc:
         _check(exc, TOPIC)
 
 
@@ -111,7 +111,7 @@ def test_data_wrong_types(path: list[int], value: Any) -> None:
     dec = DatabusDecoder(META)
     try:
         dec.decode(json.dumps(_swap_values(DATA, path, value)).encode(), topic=TOPIC)
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:
         _check(exc, TOPIC)
 
 
@@ -121,7 +121,7 @@ def test_metadata_bytes(payload: bytes) -> None:
     dec = DatabusDecoder()
     try:
         dec.update_metadata(payload, topic=META_TOPIC)
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:
         _check(exc, META_TOPIC)
 
 
@@ -132,5 +132,5 @@ def test_metadata_wrong_types(path: list[int], value: Any) -> None:
     try:
         dec.update_metadata(json.dumps(_swap_values(META, path, value)).encode(),
                             topic=META_TOPIC)
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:
         _check(exc, META_TOPIC)
