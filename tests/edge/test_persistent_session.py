@@ -216,3 +216,38 @@ def test_redelivered_rows_are_skipped_modulo_the_counter() -> None:
     assert kept["x"].tolist() == [3.0, 4.0, 5.0, 6.0]
     assert src.replayed_rows == 3 and "3 rows at or before cycle" in src.issues[-1]
     assert src.resume_after_cycle is None  # past the resume point: no more checks
+
+
+def test_recorder_subscribes_again_after_a_broker_restart(broker: Broker) -> None:
+    # a broker restarted without persistence has no session for us: paho reconnects by
+    # itself, and the recorder must subscribe again or the data stops without a word
+    nmap = {"Cycle": "CYCLE", "Spindle_Current": "CURRENT|SP1"}
+    rec = MqttRecorder("127.0.0.1", broker.port, metadata_topic=META, name_map=nmap,
+                       client_id="persistent-2", session_expiry_s=60)
+    pub = publisher(broker.port)
+    pub.publish(META, json.dumps(_metadata()).encode(), qos=1,
+                retain=True).wait_for_publish(timeout=5)
+    pub.loop_stop()
+    pub.disconnect()
+    rec.start()
+    try:
+        rec.wait_ready(timeout_s=10)
+        broker.stop()
+        time.sleep(1.0)
+        broker.start()  # same port, empty: no sessions, no retained metadata
+        end = time.monotonic() + 20
+        while rec._client.resubscribes == 0:  # paho reconnects after 1-2 s
+            assert time.monotonic() < end, "the recorder did not reconnect within 20 s"
+            time.sleep(0.05)
+        pub = publisher(broker.port)
+        # the connector publishes its metadata again after the broker restart, then data
+        pub.publish(META, json.dumps(_metadata()).encode(), qos=1,
+                    retain=True).wait_for_publish(timeout=5)
+        time.sleep(0.5)  # the renewed subscriptions are acknowledged
+        _publish(pub, 0, 200)
+        got = rec.collect(until=lambda d: len(d.values) >= 400, timeout_s=10)
+        pub.loop_stop()
+        pub.disconnect()
+    finally:
+        rec.stop()
+    assert got.n_cycles == 200

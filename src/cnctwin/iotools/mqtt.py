@@ -151,6 +151,8 @@ class _Client:
         self.host, self.port, self.keepalive_s = host, port, keepalive_s
         self.session_expiry_s = int(session_expiry_s)
         self.session_present = False
+        self.topics: dict[str, int] = {}  # subscriptions, renewed after a session loss
+        self.resubscribes = 0
         self.queue: queue.Queue[tuple[str, bytes]] = queue.Queue(maxsize=max_queue)
         self.dropped = 0
         self.connected = threading.Event()
@@ -177,6 +179,14 @@ class _Client:
                     properties: Any = None) -> None:
         self.connect_rc = rc
         self.session_present = bool(getattr(flags, "session_present", False))
+        if self.connected.is_set() and not self.session_present \
+                and not getattr(rc, "is_failure", False):
+            # a reconnect (paho's own) to a broker that has no session for us (restarted
+            # without persistence, or the session expired): subscribe again, else the data
+            # would stop without a word
+            self.resubscribes += 1
+            for topic, qos in list(self.topics.items()):
+                client.subscribe(topic, qos=qos)
         self.connected.set()
 
     def _on_subscribe(self, client: Any, userdata: Any, mid: int, rcs: Any,
@@ -213,6 +223,7 @@ class _Client:
             raise ConnectionError(refusal(self.connect_rc, self.host, self.port))
 
     def subscribe(self, topic: str, qos: int) -> int:
+        self.topics[topic] = qos
         _, mid = self.client.subscribe(topic, qos=qos)
         return int(mid)
 
