@@ -417,3 +417,16 @@ def test_air_cut_statistics_fig_3_8_and_3_9_on_the_full_sweep(full_sweep) -> Non
     # the smoothed absolute current leaves Iq above field weakening (Fig. 3.8c): their means
     # correlate far less than Iq with the HF current
     assert corr.loc["CURRENT_ABS_SMOOTHED|SP1 (LF) mean", "IQ_ACT|SP1 (LF) mean"] < 0.9
+
+
+def test_cutting_torque_sign_in_reverse_rotation() -> None:
+    # issue 16 (a surviving mutant): friction always opposes the rotation. Thesis Eq. 4.4
+    # by hand with Kt 1.04 Nm/A, B 8.42e-5 Nm/rpm, tau_f 0.35 Nm:
+    #   forward  n = +2400 rpm, I = +3.0 A: 3.12 - 0.20208 - 0.35 = +2.56792 Nm
+    #   reverse  n = -2400 rpm, I = -3.0 A: -3.12 + 0.20208 + 0.35 = -2.56792 Nm
+    # (tapping: the extraction turns the spindle the other way; the cut torque changes sign)
+    m = SpindleModel(1.04, 8.42e-5, 0.35)
+    tau = m.cutting_torque(np.array([3.0, -3.0]), np.array([2400.0, -2400.0]))
+    np.testing.assert_allclose(tau, [2.56792, -2.56792], rtol=1e-12)
+    # and the inverse: the current the twin predicts in reverse is negative by the same law
+    np.testing.assert_allclose(m.predict_current_a(-2.56792, -2400.0), -3.0, rtol=1e-12)
