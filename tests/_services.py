@@ -43,13 +43,30 @@ def require_mosquitto() -> str:
 class Broker:
     """A mosquitto process on a fixed free loopback port; stop() and start() again."""
 
-    def __init__(self, exe: str) -> None:
+    def __init__(self, exe: str, *, persistence_dir: Path | None = None) -> None:
         self.exe = exe
         self.port = free_port()
         self.proc: subprocess.Popen[bytes] | None = None
+        self.persistence_dir = persistence_dir
+
+    def _args(self) -> list[str]:
+        if self.persistence_dir is None:
+            return [self.exe, "-p", str(self.port)]
+        # sessions, subscriptions and queued messages kept across a restart of the broker
+        # (written on shutdown), as a plant's broker is configured
+        self.persistence_dir.mkdir(parents=True, exist_ok=True)
+        conf = self.persistence_dir / "mosquitto.conf"
+        import getpass
+
+        # `user`: run as root, mosquitto would switch to the user 'mosquitto', which cannot
+        # write into the test's directory
+        conf.write_text(f"listener {self.port} 127.0.0.1\nallow_anonymous true\n"
+                        f"persistence true\npersistence_location {self.persistence_dir}/\n"
+                        f"user {getpass.getuser()}\n")
+        return [self.exe, "-c", str(conf)]
 
     def start(self) -> None:
-        self.proc = subprocess.Popen([self.exe, "-p", str(self.port)],
+        self.proc = subprocess.Popen(self._args(),
                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         for _ in range(100):  # up to 5 s
             try:

@@ -15,6 +15,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,7 @@ import pytest
 from cnctwin.edge import save_spindle_model
 from cnctwin.iotools.mqtt import MqttRecorder
 from cnctwin.spindle import SpindleModel
+from tests._services import require_mosquitto
 from tests.edge.conftest import Broker, publisher
 from tests.edge.test_mqtt_edge import DATA, META, _bulk, _metadata
 
@@ -103,8 +105,19 @@ def _wait_cycles(path: Path, n: int, proc: subprocess.Popen[bytes], timeout_s: f
     raise AssertionError(f"fewer than {n} cycles in {path} after {timeout_s} s")
 
 
-def test_runtime_process_loses_nothing_across_kill_and_stop(broker: Broker,
+@pytest.fixture()
+def persistent_broker(tmp_path: Path) -> Iterator[Broker]:
+    b = Broker(require_mosquitto(), persistence_dir=tmp_path / "mosquitto")
+    b.start()
+    try:
+        yield b
+    finally:
+        b.stop()
+
+
+def test_runtime_process_loses_nothing_across_kill_and_stop(persistent_broker: Broker,
                                                             tmp_path: Path) -> None:
+    broker = persistent_broker
     model = save_spindle_model(SpindleModel(1.04, 8.42e-5, 0.35), tmp_path / "spindle.json")
     nmap = tmp_path / "map.json"
     nmap.write_text(json.dumps({"Cycle": "CYCLE", "Spindle_Current": "CURRENT|SP1",
@@ -167,6 +180,14 @@ def test_runtime_process_loses_nothing_across_kill_and_stop(broker: Broker,
         assert "(resumed:" in run.session()  # the operator is told
         assert any("resuming after cycle 999" in line for line in run.err)
         _wait_cycles(results, 2000, run.proc, 60)
+        # the broker is stopped for 10 s under the running runtime (the acceptance of issue 14);
+        # it keeps the sessions on disk, the runtime's paho client reconnects by itself
+        pub.loop_stop()
+        pub.disconnect()
+        broker.stop()
+        time.sleep(10.0)
+        broker.start()
+        pub = publisher(broker.port)
         _publish(pub, 2000, 1000)
         run.proc.send_signal(signal.SIGTERM)
         assert run.wait(30) == 0, "".join(run.err)[-2000:]

@@ -275,8 +275,14 @@ class EdgeRuntime:
 
     # ------------------------------------------------------------------ loop
     def stop(self) -> None:
-        """Ask :meth:`run` to finish after the current chunk (thread-safe)."""
+        """Ask :meth:`run` to finish after the current chunk (thread-safe).
+
+        A live source is interrupted too, so an idle stream (no data arriving) stops as well.
+        """
         self._stop.set()
+        interrupt = getattr(self.source, "interrupt", None)
+        if interrupt is not None:
+            interrupt()
 
     def run(self, *, max_cycles: int | None = None,
             on_status: Callable[[dict[str, Any]], None] | None = None,

@@ -229,6 +229,7 @@ class DatabusSource:
         self.replayed_rows = 0
         self._started = False
         self._closed = False
+        self._interrupted = False
 
     def start(self) -> DatabusSource:
         """Connect, subscribe and wait for the metadata (bounded by ``ready_timeout_s``)."""
@@ -242,7 +243,7 @@ class DatabusSource:
         """One chunk per poll window with values."""
         self.start()
         last_value = time.monotonic()
-        while not self._closed:
+        while not self._closed and not self._interrupted:
             rec = self.recorder.collect(duration_s=self.window_s)
             self.issues.extend(rec.meta.issues)
             if rec.n_cycles == 0:
@@ -252,6 +253,11 @@ class DatabusSource:
                 continue
             last_value = time.monotonic()
             yield self._chunk(rec)
+
+    def interrupt(self) -> None:
+        """End :meth:`chunks` after the current poll window, also when no data arrives
+        (thread-safe; :meth:`~cnctwin.edge.EdgeRuntime.stop` calls it on SIGTERM)."""
+        self._interrupted = True
 
     def drain(self) -> Iterator[Chunk]:
         """Disconnect, then yield what was already received (and acknowledged to the broker).
