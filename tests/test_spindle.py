@@ -430,3 +430,24 @@ def test_cutting_torque_sign_in_reverse_rotation() -> None:
     np.testing.assert_allclose(tau, [2.56792, -2.56792], rtol=1e-12)
     # and the inverse: the current the twin predicts in reverse is negative by the same law
     np.testing.assert_allclose(m.predict_current_a(-2.56792, -2400.0), -3.0, rtol=1e-12)
+
+
+def test_fit_friction_range_is_inclusive_and_errors_match_scipy() -> None:
+    # issue 16 (surviving mutants): the upper bound of the speed range is inclusive, and the
+    # standard errors of slope and offset are the ordinary least-squares ones. Independent
+    # truth: scipy.stats.linregress (its stderr and intercept_stderr).
+    from scipy.stats import linregress
+
+    n = np.array([1000.0, 2000.0, 3000.0, 4000.0, 5000.0])
+    i = 8.1e-5 * n + 0.34 + np.array([0.012, -0.007, -0.015, 0.004, 0.009])
+    fit = fit_friction(n, i, lo_rpm=2000.0, hi_rpm=4000.0)
+    assert fit.n_points == 3 and (fit.lo_rpm, fit.hi_rpm) == (2000.0, 4000.0)
+    ref = linregress(n[1:4], i[1:4])
+    assert fit.slope_a_per_rpm == pytest.approx(ref.slope, rel=1e-12)
+    assert fit.offset_a == pytest.approx(ref.intercept, rel=1e-12)
+    assert fit.slope_std == pytest.approx(ref.stderr, rel=1e-9)
+    assert fit.offset_std == pytest.approx(ref.intercept_stderr, rel=1e-9)
+    full = fit_friction(n, i)
+    ref = linregress(n, i)
+    assert full.offset_std == pytest.approx(ref.intercept_stderr, rel=1e-9)
+    assert full.r2 == pytest.approx(ref.rvalue**2, rel=1e-12)
