@@ -16,7 +16,16 @@ def test_cli_servo_on_real_c4a(tmp_path: Path, capsys: pytest.CaptureFixture[str
                  str(tmp_path), "--bootstrap", "20"])
     assert code == 0
     out = capsys.readouterr().out
-    assert "kv_m_min_mm" in out
+    # issue 16: a short summary first, one row per axis; the reasons behind --verbose
+    assert "summary (details: --verbose)" in out
+    assert "kv_m_min_mm = 1.70" in out  # Y1 1.7072, X1 1.6997 (m/min)/mm, docs/own-machine.md
+    assert "CTRL_POS is not recorded" not in out and "signal relations" not in out
+    assert len(out.splitlines()) < 60
+    code = main(["servo", str(C4A_FILE), "--axis", "Y1", "--axis", "X1", "--bootstrap", "20",
+                 "--verbose"])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "kv_m_min_mm" in out and "signal relations" in out
     assert "not identified" in out and "CTRL_POS" in out
     assert "behaves as" not in out  # declared unit (catalog, mm/s) agrees with the data
     assert (tmp_path / "tool_path_Y1_X1.png").stat().st_size > 10_000

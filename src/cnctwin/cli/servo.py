@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
+from typing import Any
 
 __all__ = ["register"]
 
@@ -28,6 +29,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    help="axis to analyse (repeatable; default every axis with DES_POS and "
                         "ENC_POS)")
     p.add_argument("--out", type=Path, default=None, help="directory for the PNG figures")
+    p.add_argument("--verbose", "-v", action="store_true",
+                   help="every signal relation, the identification method of each parameter, "
+                   "why the others were not identified, and the notes (default: a summary)")
     p.add_argument("--plane", nargs=2, default=None, metavar=("H", "V"),
                    help="axes of the tool-path figure (default the first two analysed)")
     p.add_argument("--magnify", type=float, default=50.0,
@@ -52,6 +56,26 @@ def _fmt(x: float) -> str:
     if x is None or not math.isfinite(x):
         return "-"
     return f"{x:.5g}"
+
+
+def _relations_table(axis: str, rep: Any, escape: Any) -> Any:
+    """The signal relations of one axis as a rich table (``--verbose``)."""
+    from rich.table import Table
+
+    rt = Table(title=f"{axis}: signal relations", title_justify="left")
+    for col in ("relation", "rms", "max |r|", "tolerance", "within tol", "ref rms", "unit",
+                "note"):
+        rt.add_column(col)
+    for r in rep.relations.values():
+        if r.checkable:
+            rt.add_row(r.name, _fmt(r.rms), _fmt(r.max_abs), _fmt(r.tolerance),
+                       f"{100 * r.fraction_within:.1f} %", _fmt(r.reference_rms), r.unit,
+                       escape(", ".join(f"{k}={_fmt(v) if isinstance(v, float) else v}"
+                                        for k, v in list(r.details.items())[:4])))
+        else:
+            rt.add_row(r.name, "-", "-", "-", "-", "-", "", escape(f"not checkable: "
+                                                                    f"{r.reason}"))
+    return rt
 
 
 def _cmd_servo(args: argparse.Namespace) -> int:
@@ -86,39 +110,47 @@ def _cmd_servo(args: argparse.Namespace) -> int:
                 and (rec.has("ENC_POS", a) or rec.has("ENC1_POS", a))]
     console.print(f"[bold]{escape(str(args.file))}[/bold]: {rec.n_cycles} cycles, "
                   f"axes {', '.join(axes) or '-'}")
+    summary = Table(title="summary (details: --verbose)", title_justify="left")
+    for col in ("axis", "following-error check (rms)", "identified (± 1 s.e.)",
+                "not identified (why: --verbose)"):
+        summary.add_column(col)
     for axis in axes:
-        console.rule(f"[bold]{axis}")
+        if args.verbose:
+            console.rule(f"[bold]{axis}")
         rep = check_relations(rec, axis)
-        rt = Table(title=f"{axis}: signal relations", title_justify="left")
-        for col in ("relation", "rms", "max |r|", "tolerance", "within tol", "ref rms", "unit",
-                    "note"):
-            rt.add_column(col)
-        for r in rep.relations.values():
-            if r.checkable:
-                rt.add_row(r.name, _fmt(r.rms), _fmt(r.max_abs), _fmt(r.tolerance),
-                           f"{100 * r.fraction_within:.1f} %", _fmt(r.reference_rms), r.unit,
-                           escape(", ".join(f"{k}={_fmt(v) if isinstance(v, float) else v}"
-                                            for k, v in list(r.details.items())[:4])))
-            else:
-                rt.add_row(r.name, "-", "-", "-", "-", "-", "", escape(f"not checkable: "
-                                                                        f"{r.reason}"))
-        console.print(rt)
+        if args.verbose:
+            console.print(_relations_table(axis, rep, escape))
+        fe = rep.relations.get("following_error")
+        fe_txt = (f"{_fmt(fe.rms)} {fe.unit}" if fe is not None and fe.checkable else "-")
         try:
             ident = identify_axis(rec, axis, n_bootstrap=args.bootstrap)
         except IdentificationError as exc:
-            console.print(f"[yellow]{axis}: not identified: {escape(str(exc))}[/yellow]")
+            if args.verbose:
+                console.print(f"[yellow]{axis}: not identified: {escape(str(exc))}[/yellow]")
+            summary.add_row(axis, fe_txt, "-", escape(f"nothing: {exc}"[:120]))
+            continue
+        rows = list(ident.rows())
+        summary.add_row(
+            axis, fe_txt,
+            escape("\n".join(f"{name} = {_fmt(value)} ± {_fmt(se)} "
+                              f"{'' if unit == '-' else unit}".rstrip()
+                              for name, value, se, unit, _ in rows) or "-"),
+            escape(", ".join(ident.not_identified) or "-"))
+        if not args.verbose:
             continue
         it = Table(title=f"{axis}: identification (FFW mode {ident.ffw_mode}, jerk filter "
                          f"{ident.jerk_type or 'n/a'})", title_justify="left")
         for col in ("parameter", "value", "± (1 s.e.)", "unit", "method"):
             it.add_column(col)
-        for name, value, se, unit, method in ident.rows():
+        for name, value, se, unit, method in rows:
             it.add_row(name, _fmt(value), _fmt(se), unit, escape(method))
         console.print(it)
         for name, reason in ident.not_identified.items():
             console.print(f"  [dim]not identified[/dim] {name}: {escape(reason)}")
         for note in ident.notes:
             console.print(f"  [cyan]note[/cyan] {escape(note)}")
+    if axes:
+        console.print(summary)
     if args.out is not None and axes:
         from cnctwin.servo.figures import plot_error_signals, plot_tool_path
 
