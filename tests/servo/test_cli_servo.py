@@ -36,3 +36,12 @@ def test_cli_servo_unknown_axis(capsys: pytest.CaptureFixture[str]) -> None:
     code = main(["servo", str(C4A_FILE), "--axis", "Q9"])
     assert code == 2
     assert "Q9" in capsys.readouterr().err
+
+
+def test_cli_servo_default_path_plane_is_linear(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    # issue 16: the real file lists C1 and B1 (deg) first; the default tool path is X1-Y1 (mm)
+    code = main(["servo", str(C4A_FILE), "--out", str(tmp_path), "--bootstrap", "5"])
+    assert code == 0
+    assert (tmp_path / "tool_path_X1_Y1.png").stat().st_size > 10_000
+    assert not list(tmp_path.glob("tool_path_C1*")) and not list(tmp_path.glob("tool_path_B1*"))

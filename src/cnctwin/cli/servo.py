@@ -156,8 +156,14 @@ def _cmd_servo(args: argparse.Namespace) -> int:
 
         args.out.mkdir(parents=True, exist_ok=True)
         written = []
-        plane = tuple(args.plane) if args.plane else (tuple(axes[:2]) if len(axes) >= 2
+        # default plane: the first two linear axes (DES_POS in mm); a path over rotary axes
+        # (deg) is no tool path
+        linear = [a for a in axes if rec.meta.units.get(f"DES_POS|{a}", "mm") == "mm"]
+        plane = tuple(args.plane) if args.plane else (tuple(linear[:2]) if len(linear) >= 2
                                                       else None)
+        if plane is None:
+            console.print("no tool-path figure: fewer than two linear axes (DES_POS in mm); "
+                          "choose two with --plane H V")
         if plane is not None:
             fig = plot_tool_path(rec, (plane[0], plane[1]), magnify=args.magnify)
             path = args.out / f"tool_path_{plane[0]}_{plane[1]}.png"
