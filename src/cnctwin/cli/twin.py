@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+import orjson
 
 from cnctwin.exceptions import ConfigError
 
@@ -142,8 +143,9 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     doc: dict[str, Any] = {"recording": str(args.recording), "machine": str(args.machine),
                            **cmp.to_dict()}
     tmp = args.out / "compare.json.tmp"
-    tmp.write_text(json.dumps(doc, indent=2, allow_nan=False, default=_nan_none) + "\n",
-                   encoding="utf-8")
+    # orjson: strict JSON, a value that could not be computed (NaN) is null
+    tmp.write_bytes(orjson.dumps(doc, option=orjson.OPT_INDENT_2 | orjson.OPT_SERIALIZE_NUMPY)
+                    + b"\n")
     _report(cmp, args.out / "compare.html", args.recording, args.machine)
     tmp.replace(args.out / "compare.json")
     table = Table(title=f"{args.recording.name} against {args.machine.name}")
@@ -160,7 +162,3 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     out.print(f"wrote {args.out / 'compare.json'} and {args.out / 'compare.html'}")
     flagged = doc["flagged"]
     return 3 if (flagged and args.fail_on_departure) else 0
-
-
-def _nan_none(o: object) -> object:
-    raise TypeError(f"not JSON serialisable: {o!r}")

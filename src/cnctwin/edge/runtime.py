@@ -12,7 +12,6 @@ directory), writes ``status.json`` there and sends a ``status`` message every
 from __future__ import annotations
 
 import json
-import math
 import os
 import threading
 import time
@@ -23,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import orjson
 
 from cnctwin.edge.cycles import CycleTracker
 from cnctwin.edge.pipeline import Chunk, Processor, Result, Sink, Source
@@ -262,9 +262,10 @@ class EdgeRuntime:
         st = self.status()
         if self.state_dir is not None:
             tmp = self.state_dir / (STATUS_FILE + ".tmp")
-            # strict JSON: a value not known yet (NaN) is null, as RFC 8259 has no NaN
-            tmp.write_text(json.dumps(_json_safe(st), indent=1, default=str, allow_nan=False),
-                           encoding="utf-8")
+            # strict JSON: orjson writes a value not known yet (NaN) as null (RFC 8259 has no
+            # NaN), as the results are encoded
+            tmp.write_bytes(orjson.dumps(st, option=orjson.OPT_INDENT_2
+                                         | orjson.OPT_SERIALIZE_NUMPY, default=str))
             os.replace(tmp, self.state_dir / STATUS_FILE)
         self._emit([Result("status", self.c.last_cycle or 0,
                            {k: v for k, v in st.items() if k not in ("machine",)})], None)
@@ -375,17 +376,6 @@ def _write_seq(state_dir: Path, next_seq: int) -> None:
 def _iso(t_ns: int) -> str:
     sec, ns = divmod(int(t_ns), 1_000_000_000)
     return time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(sec)) + f".{ns // 1000:06d}Z"
-
-
-def _json_safe(obj: Any) -> Any:
-    """``obj`` with every non-finite float replaced by None (null in JSON)."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
-    return obj
 
 
 def read_status(state_dir: str | PathLike[str]) -> dict[str, Any]:
