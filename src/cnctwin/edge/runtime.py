@@ -26,6 +26,7 @@ import orjson
 
 from cnctwin.edge.cycles import CycleTracker
 from cnctwin.edge.pipeline import Chunk, Processor, Result, Sink, Source
+from cnctwin.edge.sinks import rotated_files
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import CounterGap
 
@@ -407,7 +408,7 @@ def last_emitted_cycle(results: str | PathLike[str], *, tail_bytes: int = 1 << 2
     acknowledgement the crash cut off, and their cycles are skipped, not emitted twice.
     """
     p = Path(results)
-    candidates = [p, *sorted(p.parent.glob(f"{p.stem}.*{p.suffix}"), reverse=True)]
+    candidates = [p, *reversed(rotated_files(p))]
     for f in candidates:
         if not f.is_file():
             continue

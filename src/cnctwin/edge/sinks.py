@@ -42,6 +42,15 @@ def reconnect_delay_s(failures: int, *, base_s: float, max_s: float) -> float:
     return float(min(base_s * 2.0 ** max(failures - 1, 0), max_s))
 
 
+def rotated_files(path: str | PathLike[str]) -> list[Path]:
+    """The files :class:`JsonLinesSink` rotated ``path`` into, oldest first.
+
+    ``<stem>.<UTC time of the rotation>.jsonl``: the time stamp sorts by name.
+    """
+    p = Path(path)
+    return sorted(p.parent.glob(f"{p.stem}.*{p.suffix}"))
+
+
 def dumps(message: dict[str, Any]) -> bytes:
     """One message as compact JSON bytes (NaN becomes null)."""
     return orjson.dumps(message, option=orjson.OPT_SERIALIZE_NUMPY)
@@ -93,7 +102,7 @@ class JsonLinesSink:
 
     def rotated_files(self) -> list[Path]:
         """The rotated files, oldest first."""
-        return sorted(self.path.parent.glob(f"{self.path.stem}.*{self.path.suffix}"))
+        return rotated_files(self.path)
 
     def write(self, messages: list[dict[str, Any]], chunk: Chunk | None) -> None:
         lines = [dumps(m) + b"\n" for m in messages
