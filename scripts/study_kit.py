@@ -71,17 +71,12 @@ def main(argv: list[str] | None = None) -> int:
     # (0.642 / 0.639 A); 2400 rpm takes the 3200 rpm value, +-0.01 A stated
     air_at = {2400.0: air[3200.0], 3200.0: air[3200.0]}
     cuts = [k for k in st if k.startswith("cut")]
-    kt_eff = {}
-    for k in cuts:
-        s = st[k]
-        di = s["current_a"] - air_at[round(s["speed_rpm"] / 100) * 100.0]
-        kt_eff[k] = s["f_xy"] / di
+    # cutting current above the air current at the cut's speed
+    di = {k: st[k]["current_a"] - air_at[round(st[k]["speed_rpm"] / 100) * 100.0]
+          for k in cuts}
+    kt_eff = {k: st[k]["f_xy"] / di[k] for k in cuts}
     cal = "cut 3200 rpm, a_p 6 mm (Normal_1)"
-    thesis = {}
-    for k in cuts:
-        s = st[k]
-        di = s["current_a"] - air_at[round(s["speed_rpm"] / 100) * 100.0]
-        thesis[k] = 100.0 * (kt_eff[cal] * di / s["f_xy"] - 1.0)
+    thesis = {k: 100.0 * (kt_eff[cal] * di[k] / st[k]["f_xy"] - 1.0) for k in cuts}
     law = fit_flux_law([st[k]["speed_rpm"] for k in (cal, "cut 2400 rpm, a_p 6 mm (SF_1)")],
                        [kt_eff[cal], kt_eff["cut 2400 rpm, a_p 6 mm (SF_1)"]])
     kt_n = {k: kt_eff[k] * st[k]["speed_rpm"] for k in cuts}

@@ -267,9 +267,8 @@ class DatabusSource:
         after the disconnect stays with the broker in the persistent session.
         """
         self.recorder.stop()
-        while True:
-            if self.recorder.poll(0.0) == 0:
-                break
+        while self.recorder.poll(0.0):  # decode everything already in the receive queue
+            pass
         rec = self.recorder.collect(duration_s=0.0)
         self.issues.extend(rec.meta.issues)
         if rec.n_cycles:

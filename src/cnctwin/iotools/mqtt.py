@@ -159,14 +159,11 @@ class _Client:
         self.connect_rc: Any = None
         self.subacks: set[int] = set()
         self._sub_lock = threading.Lock()
-        if self.session_expiry_s > 0:
-            # MQTT 5 persistent session: the broker keeps the subscriptions and queues QoS 1
-            # messages for this client id while it is away (up to the expiry interval)
-            self.client = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2,
-                                      client_id=client_id, protocol=mqtt.MQTTv5)
-        else:
-            self.client = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2,
-                                      client_id=client_id)
+        # MQTT 5 for a persistent session: the broker keeps the subscriptions and queues QoS 1
+        # messages for this client id while it is away (up to the expiry interval)
+        self.client = mqtt.Client(
+            callback_api_version=mqtt.CallbackAPIVersion.VERSION2, client_id=client_id,
+            protocol=mqtt.MQTTv5 if self.session_expiry_s > 0 else mqtt.MQTTv311)
         if username is not None:
             self.client.username_pw_set(username, password)
         if security is not None:
