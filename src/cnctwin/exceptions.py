@@ -19,6 +19,7 @@ from __future__ import annotations
 
 __all__ = [
     "CnctwinError",
+    "ClusterError",
     "CnctwinWarning",
     "ConfigError",
     "FormatError",
@@ -142,3 +143,7 @@ class NotScoredError(CnctwinError, ValueError):
 
 class StoreError(CnctwinError, RuntimeError):
     """A storage backend failed or was asked for something it does not hold."""
+
+
+class ClusterError(CnctwinError, ConnectionError):
+    """The Dask scheduler of a fleet job cannot be reached or lost its workers."""

@@ -1732,6 +1732,8 @@ def part_program(
     max_file_mb: float | None = None,
     chunk_cycles: int = 50_000,
     progress: ProgressFn | None = None,
+    start_time: pd.Timestamp | str | None = None,
+    first_hole: int = 0,
 ) -> ScenarioResult:
     """Any part program of the supported G-code subset on a machine description.
 
@@ -1753,6 +1755,10 @@ def part_program(
         ``surface_z_mm``; without it the program runs in air (no process load).
     surface_z_mm : float, default 0
         Workpiece top surface [mm].
+    start_time : Timestamp or str, optional
+        UTC time of the first cycle; default the scenarios' common start time.
+    first_hole : int, default 0
+        Holes the drill has made before this program (its flank wear starts there).
 
     Returns
     -------
@@ -1797,7 +1803,7 @@ def part_program(
             hook = DrillingProcess(cfg, material=mat, feed_mm_per_rev=feeds[0],
                                    speed_rpm=max(speeds), hole_depth_mm=20.0,
                                    surface_z_mm=surface_z_mm, faults=(), rng=rng, truth=None,
-                                   daq=None, progress=pf)
+                                   daq=None, progress=pf, first_hole=first_hole)
         else:
             if mat.milling is None:
                 raise ConfigError(f"material {material!r} has no milling coefficients; the "
@@ -1810,7 +1816,9 @@ def part_program(
         "process": kind, "material": material})
     _write_program(o, path.name, text, res.paths)
     sink, rpath = _make_sink(o, stem, fmt, max_file_mb)
-    sim = _simulate(prog, cfg, seed=seed, hook=hook, sink=sink, chunk_cycles=chunk_cycles)
+    sim = simulate(prog, cfg.machine, seed=seed, start_cycle=START_CYCLE,
+                   start_time=START_TIME if start_time is None else start_time, cutting=hook,
+                   sink=sink, chunk_cycles=chunk_cycles)
     _collect(res, sim, sink, rpath, None, None)
     rec = res.recording
     res.truth["limits"] = drive_limits_check(rec, cfg.machine, text)

@@ -36,7 +36,9 @@ __all__ = [
 ]
 
 
-def open(url_or_path: str | os.PathLike[str], *, create: bool = True) -> Store:
+def open(
+    url_or_path: str | os.PathLike[str], *, create: bool = True, read_only: bool = False
+) -> Store:
     """Open (and by default create) a store.
 
     Parameters
@@ -47,6 +49,9 @@ def open(url_or_path: str | os.PathLike[str], *, create: bool = True) -> Store:
     create : bool, default True
         Create the directory / schema if missing; with False a missing store raises
         :class:`~cnctwin.exceptions.StoreError`.
+    read_only : bool, default False
+        Open an embedded store's catalog read-only, so that several processes (the fleet's
+        workers) can read it at once; PostgreSQL serves concurrent readers anyway.
 
     Returns
     -------
@@ -61,7 +66,7 @@ def open(url_or_path: str | os.PathLike[str], *, create: bool = True) -> Store:
         If the store is missing (``create=False``) or the server cannot be reached.
     """
     if isinstance(url_or_path, os.PathLike):
-        return DuckDBStore(url_or_path, create=create)
+        return DuckDBStore(url_or_path, create=create and not read_only, read_only=read_only)
     text = str(url_or_path)
     scheme = text.split("://", 1)[0].lower() if "://" in text else ""
     if scheme in ("postgresql", "postgres"):
@@ -69,16 +74,18 @@ def open(url_or_path: str | os.PathLike[str], *, create: bool = True) -> Store:
 
         return PostgresStore(text, create=create)
     if scheme == "duckdb":
-        return DuckDBStore(text[len("duckdb://"):], create=create)
+        return DuckDBStore(text[len("duckdb://"):], create=create and not read_only,
+                           read_only=read_only)
     if scheme == "file":
         parsed = urllib.parse.urlparse(text)
-        return DuckDBStore(urllib.request.url2pathname(parsed.path), create=create)
+        return DuckDBStore(urllib.request.url2pathname(parsed.path),
+                           create=create and not read_only, read_only=read_only)
     if scheme:
         raise ConfigError(
             f"store URL scheme {scheme!r} is not supported; use a directory path, "
             "file:///path, duckdb:///path or postgresql://user@host:port/db"
         )
-    return DuckDBStore(text, create=create)
+    return DuckDBStore(text, create=create and not read_only, read_only=read_only)
 
 
 def __getattr__(name: str) -> object:

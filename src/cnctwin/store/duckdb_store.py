@@ -34,6 +34,7 @@ import json
 import os
 import urllib.parse
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -62,7 +63,7 @@ from cnctwin.store.base import (
     to_utc,
 )
 
-__all__ = ["DuckDBStore", "hf_table"]
+__all__ = ["DuckDBStore", "StagedRecording", "hf_table", "stage_recording"]
 
 _NS_PER_DAY = 86_400 * 10**9
 _DUCK_TYPES = {"int64": "BIGINT", "Int64": "BIGINT", "float64": "DOUBLE",
@@ -145,6 +146,138 @@ def hf_table(rec: Recording, recording_id: str, rows: slice | None = None) -> pa
     return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
 
 
+@dataclass(frozen=True)
+class StagedRecording:
+    """A recording written to a store's files but not yet in its catalog.
+
+    Made by :func:`stage_recording` (in any process, without the catalog), entered by
+    :meth:`DuckDBStore.commit` (in the one process that holds the catalog for writing).
+
+    Attributes
+    ----------
+    root : str
+        Store directory.
+    recording_id : str
+        Id.
+    row : dict
+        Catalog row.
+    files : list of dict
+        Rows of the ``files`` table.
+    tmp_to_final : list of (str, str)
+        Staged file (absolute) -> final path (relative to ``root``).
+    """
+
+    root: str
+    recording_id: str
+    row: dict[str, Any]
+    files: list[dict[str, Any]]
+    tmp_to_final: list[tuple[str, str]]
+
+
+def _write_parquet(root: Path, table: pa.Table, rel: str, *, floats: Sequence[str] = (),
+                   compression: str = "zstd", row_group_cycles: int = 65_536) -> str:
+    path = root / rel
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    pq.write_table(
+        table,
+        tmp,
+        compression=compression,
+        row_group_size=row_group_cycles,
+        use_dictionary=[c for c in table.column_names if c not in floats],
+        use_byte_stream_split=list(floats) if floats else False,
+    )
+    return str(tmp)
+
+
+def stage_recording(
+    root: str | os.PathLike[str], rec: Recording, recording_id: str, *,
+    row_group_cycles: int = 65_536, compression: str = "zstd",
+) -> StagedRecording:
+    """Write a recording's files into a store directory under temporary names.
+
+    Needs no catalog connection, so any number of processes can stage at once (the fleet's
+    parallel ingest); :meth:`DuckDBStore.commit` then enters it into the catalog.
+
+    Parameters
+    ----------
+    root : str or path-like
+        Store directory.
+    rec : Recording
+        The recording.
+    recording_id : str
+        Its id (:func:`~cnctwin.store.base.default_recording_id`).
+    row_group_cycles, compression
+        As :class:`DuckDBStore`.
+
+    Returns
+    -------
+    StagedRecording
+    """
+    root = Path(root).expanduser().resolve()
+    rid = check_recording_id(recording_id)
+    mdir = f"machine={_path_part(rec.meta.machine)}"
+    files: list[dict[str, Any]] = []
+    tmp_to_final: list[tuple[str, str]] = []
+    # HF, one file per UTC day
+    if rec.n_cycles:
+        t_ns = rec.hf["time"].to_numpy(dtype="datetime64[ns]").view(np.int64)
+        days = t_ns // _NS_PER_DAY
+        cycles = rec.cycles
+        for day in np.unique(days):
+            mask = days == day
+            idx = np.flatnonzero(mask)
+            day_str = str(np.datetime64(int(day), "D"))
+            rel = f"hf/{mdir}/day={day_str}/{rid}.parquet"
+            if idx.size == idx[-1] - idx[0] + 1:
+                table = hf_table(rec, rid, slice(int(idx[0]), int(idx[-1]) + 1))
+            else:  # time not monotonic across days: take the rows of this day
+                table = hf_table(rec, rid).take(pa.array(idx))
+            tmp = _write_parquet(root, table, rel, floats=rec.columns, compression=compression,
+                                 row_group_cycles=row_group_cycles)
+            tmp_to_final.append((tmp, rel))
+            files.append(
+                {
+                    "kind": "hf", "name": "", "path": rel, "day": day_str,
+                    "start_time": pd.Timestamp(int(t_ns[idx].min()), tz="UTC"),
+                    "end_time": pd.Timestamp(int(t_ns[idx].max()), tz="UTC"),
+                    "first_cycle": int(cycles[idx[0]]), "last_cycle": int(cycles[idx[-1]]),
+                    "n_rows": int(idx.size),
+                }
+            )
+    # LF and events, one file each per recording
+    for kind, frame in (("lf", normalize_lf(rec.lf)), ("events", normalize_events(rec.events))):
+        rel = f"{kind}/{mdir}/{rid}.parquet"
+        frame.insert(0, "recording_id", rid)
+        table = pa.Table.from_pandas(frame, preserve_index=False)
+        tmp_to_final.append((_write_parquet(root, table, rel, compression=compression,
+                                           row_group_cycles=row_group_cycles), rel))
+        files.append(
+            {"kind": kind, "name": "", "path": rel, "day": None, "start_time": None,
+             "end_time": None, "first_cycle": None, "last_cycle": None,
+             "n_rows": len(frame)}
+        )
+    external: dict[str, dict[str, Any]] = {}
+    for i, (name, ch) in enumerate(rec.external.items()):
+        rel = f"external/{mdir}/{rid}/{i:03d}_{_path_part(name)}.parquet"
+        data = ch.data.copy()
+        index_name = data.index.name or "time_s"
+        data = data.reset_index(names=index_name)
+        table = pa.Table.from_pandas(data, preserve_index=False)
+        tmp_to_final.append((_write_parquet(root, table, rel, compression=compression,
+                                           row_group_cycles=row_group_cycles), rel))
+        files.append(
+            {"kind": "external", "name": name, "path": rel, "day": None, "start_time": None,
+             "end_time": None, "first_cycle": None, "last_cycle": None,
+             "n_rows": len(data)}
+        )
+        external[name] = {"path": rel, **external_meta(ch)}
+    row = catalog_row(rec, rid)
+    row["external"] = json.dumps(external)
+    row["ingested_at"] = pd.Timestamp.now(tz="UTC")
+    return StagedRecording(str(root), rid, row, files, tmp_to_final)
+
+
 class DuckDBStore(Store):
     """Recordings in Parquet files under ``root`` with a DuckDB catalog.
 
@@ -215,20 +348,6 @@ class DuckDBStore(Store):
     def _abs(self, rel: str) -> Path:
         return self.root / rel
 
-    def _write_parquet(self, table: pa.Table, rel: str, *, floats: Sequence[str] = ()) -> str:
-        path = self._abs(rel)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        pq.write_table(
-            table,
-            tmp,
-            compression=self.compression,
-            row_group_size=self.row_group_cycles,
-            use_dictionary=[c for c in table.column_names if c not in floats],
-            use_byte_stream_split=list(floats) if floats else False,
-        )
-        return str(tmp)
-
     def _existing_files(self, recording_id: str) -> list[str]:
         rows = _run(
             self.con,
@@ -241,62 +360,32 @@ class DuckDBStore(Store):
         rid = check_recording_id(
             recording_id if recording_id is not None else default_recording_id(rec)
         )
-        mdir = f"machine={_path_part(rec.meta.machine)}"
-        files: list[dict[str, Any]] = []
-        tmp_to_final: list[tuple[str, str]] = []
-        # HF, one file per UTC day
-        if rec.n_cycles:
-            t_ns = rec.hf["time"].to_numpy(dtype="datetime64[ns]").view(np.int64)
-            days = t_ns // _NS_PER_DAY
-            cycles = rec.cycles
-            for day in np.unique(days):
-                mask = days == day
-                idx = np.flatnonzero(mask)
-                day_str = str(np.datetime64(int(day), "D"))
-                rel = f"hf/{mdir}/day={day_str}/{rid}.parquet"
-                if idx.size == idx[-1] - idx[0] + 1:
-                    table = hf_table(rec, rid, slice(int(idx[0]), int(idx[-1]) + 1))
-                else:  # time not monotonic across days: take the rows of this day
-                    table = hf_table(rec, rid).take(pa.array(idx))
-                tmp = self._write_parquet(table, rel, floats=rec.columns)
-                tmp_to_final.append((tmp, rel))
-                files.append(
-                    {
-                        "kind": "hf", "name": "", "path": rel, "day": day_str,
-                        "start_time": pd.Timestamp(int(t_ns[idx].min()), tz="UTC"),
-                        "end_time": pd.Timestamp(int(t_ns[idx].max()), tz="UTC"),
-                        "first_cycle": int(cycles[idx[0]]), "last_cycle": int(cycles[idx[-1]]),
-                        "n_rows": int(idx.size),
-                    }
-                )
-        # LF and events, one file each per recording
-        for kind, frame in (("lf", normalize_lf(rec.lf)), ("events", normalize_events(rec.events))):
-            rel = f"{kind}/{mdir}/{rid}.parquet"
-            frame.insert(0, "recording_id", rid)
-            table = pa.Table.from_pandas(frame, preserve_index=False)
-            tmp_to_final.append((self._write_parquet(table, rel), rel))
-            files.append(
-                {"kind": kind, "name": "", "path": rel, "day": None, "start_time": None,
-                 "end_time": None, "first_cycle": None, "last_cycle": None,
-                 "n_rows": len(frame)}
-            )
-        external: dict[str, dict[str, Any]] = {}
-        for i, (name, ch) in enumerate(rec.external.items()):
-            rel = f"external/{mdir}/{rid}/{i:03d}_{_path_part(name)}.parquet"
-            data = ch.data.copy()
-            index_name = data.index.name or "time_s"
-            data = data.reset_index(names=index_name)
-            table = pa.Table.from_pandas(data, preserve_index=False)
-            tmp_to_final.append((self._write_parquet(table, rel), rel))
-            files.append(
-                {"kind": "external", "name": name, "path": rel, "day": None, "start_time": None,
-                 "end_time": None, "first_cycle": None, "last_cycle": None,
-                 "n_rows": len(data)}
-            )
-            external[name] = {"path": rel, **external_meta(ch)}
-        row = catalog_row(rec, rid)
-        row["external"] = json.dumps(external)
-        row["ingested_at"] = pd.Timestamp.now(tz="UTC")
+        staged = stage_recording(self.root, rec, rid, row_group_cycles=self.row_group_cycles,
+                                 compression=self.compression)
+        return self.commit(staged)
+
+    def commit(self, staged: StagedRecording) -> str:
+        """Enter a recording staged by :func:`stage_recording` into the catalog.
+
+        The staged files are renamed into place and the catalog rows written in one
+        transaction: a crash before it leaves only hidden ``.tmp`` files (no catalog entry),
+        one after it a complete entry. Returns the recording id.
+
+        Raises
+        ------
+        StoreError
+            If the staged files belong to another store or are gone (staged by a process
+            that crashed and cleaned up, or committed already).
+        """
+        if Path(staged.root).resolve() != self.root:
+            raise StoreError(f"recording {staged.recording_id!r} was staged for the store "
+                             f"{staged.root}, not {self.root}")
+        missing = [t for t, _ in staged.tmp_to_final if not Path(t).exists()]
+        if missing:
+            raise StoreError(f"recording {staged.recording_id!r}: staged file {missing[0]} is "
+                             "gone (committed already, or removed); ingest it again")
+        rid, row, files, tmp_to_final = (staged.recording_id, staged.row, staged.files,
+                                         staged.tmp_to_final)
         old = set(self._existing_files(rid))
         new = {rel for _, rel in tmp_to_final}
         con = self.con
