@@ -21,7 +21,7 @@ _COMMAND_MODULES: tuple[str, ...] = ("cnctwin.cli.io", "cnctwin.cli.store", "cnc
                                       "cnctwin.cli.servo", "cnctwin.cli.calibrate",
                                       "cnctwin.cli.twin",
                                       "cnctwin.cli.usecases",
-                                      "cnctwin.cli.demo", "cnctwin.cli.edge",
+                                      "cnctwin.cli.demo", "cnctwin.cli.edge", "cnctwin.cli.fleet",
                                       "cnctwin.cli.web")
 
 

@@ -27,8 +27,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         description="Run a thesis scenario of the physics simulator. Writes Capture4Analysis "
         "JSON, external-sensor CSVs and truth.json (every true parameter) to --out.",
     )
-    p.add_argument("name", nargs="?", choices=sorted(SCENARIOS),
-                   help="scenario (or --program for your own part program)")
+    p.add_argument("name", nargs="?", choices=[*sorted(SCENARIOS), "fleet"],
+                   help="scenario (or --program for your own part program); 'fleet' writes a "
+                   "synthetic fleet (--machines, --days, --cycles-per-day) with hidden faults")
     p.add_argument("--program", type=Path, metavar="PART.mpf",
                    help="simulate this part program (supported G-code subset) instead of a "
                    "scenario; prints the cycle time and the peak loads against the drive limits")
@@ -65,6 +66,18 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="recording format: c4a (Capture4Analysis JSON) or parquet (chunk directory); "
         "default: the scenario's (parquet for tool_wear_run, c4a otherwise)",
     )
+    f = p.add_argument_group("fleet (cnctwin simulate fleet)")
+    f.add_argument("--machines", type=int, default=20, help="machines (default 20)")
+    f.add_argument("--days", type=int, default=5, help="days from --start-day (default 5)")
+    f.add_argument("--cycles-per-day", type=int, default=2,
+                   help="recorded part cycles per machine and day (default 2; ~21 s each)")
+    f.add_argument("--start-day", default="2026-03-02", help="first day (UTC, YYYY-MM-DD)")
+    f.add_argument("--fault-fraction", type=float, default=0.4,
+                   help="fraction of machines with a hidden fault (default 0.4)")
+    f.add_argument("--scheduler", metavar="ADDR",
+                   help="simulate on this Dask scheduler (default: an embedded cluster)")
+    f.add_argument("--workers", type=int, metavar="N",
+                   help="worker processes of the embedded cluster (default: the cores)")
     p.set_defaults(func=_cmd_simulate)
 
 
@@ -86,6 +99,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
     from cnctwin.sim.scenarios import part_program, run_scenario
 
+    if args.name == "fleet":
+        return _cmd_fleet(args)
     if (args.name is None) == (args.program is None):
         raise ConfigError("give a scenario NAME or --program PART.mpf (one of them)")
     if args.material is not None and args.program is None:
@@ -135,3 +150,22 @@ def _print_limits(lim: dict[str, Any]) -> None:
     print("; ".join(parts))
     for w in lim["warnings"]:
         print(f"warning: {w}", file=sys.stderr)
+
+
+def _cmd_fleet(args: argparse.Namespace) -> int:
+    from cnctwin.cli.fleet import run_cluster_tasks
+    from cnctwin.sim.fleet import plan_fleet, simulate_fleet_cycle
+
+    if args.program is not None or args.machine is not None or args.overrides:
+        raise ConfigError("simulate fleet draws every machine itself: --program, --machine "
+                          "and --set do not apply")
+    plan = plan_fleet(machines=args.machines, days=args.days,
+                      cycles_per_day=args.cycles_per_day, seed=args.seed,
+                      start_day=args.start_day, fault_fraction=args.fault_fraction)
+    out = Path(args.out)
+    plan.write(out)
+    paths = run_cluster_tasks(args, "simulate", simulate_fleet_cycle, plan.cycles,
+                              out=str(out.resolve()))
+    print(f"{len(paths)} recordings of {len(plan.machines)} machines x {len(plan.days)} days "
+          f"in {out}; {len(plan.faults)} hidden faults in {out / 'truth.json'}")
+    return 0

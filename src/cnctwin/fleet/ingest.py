@@ -281,6 +281,7 @@ def ingest_recordings(
                     continue
                 st.commit(o.staged)
                 committed.add(str(o.recording_id))
+                _sweep_stale(st.root, o.staged.tmp_to_final)
     # a second copy of the same content in this job is "already" stored
     first: dict[str, int] = {}
     outcomes = []
@@ -291,3 +292,12 @@ def ingest_recordings(
             first[o.sha256] = i
         outcomes.append(o)
     return IngestReport(outcomes)
+
+
+def _sweep_stale(root: Path, tmp_to_final: Sequence[tuple[str, str]]) -> None:
+    """Remove files staged for the same final paths by a worker that died before its result
+    reached the driver (``<final>.<pid>.tmp``)."""
+    for _, rel in tmp_to_final:
+        final = root / rel
+        for stale in final.parent.glob(f"{final.name}.*.tmp"):
+            stale.unlink(missing_ok=True)
