@@ -18,8 +18,8 @@ Warnings for numerical hazards derive from :class:`CnctwinWarning` (a ``UserWarn
 from __future__ import annotations
 
 __all__ = [
-    "CnctwinError",
     "ClusterError",
+    "CnctwinError",
     "CnctwinWarning",
     "ConfigError",
     "FormatError",

@@ -9,8 +9,6 @@ the server cannot be reached the PostgreSQL tests are skipped, or fail when ``CI
 from __future__ import annotations
 
 import json
-import os
-import uuid
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -21,52 +19,6 @@ from cnctwin.iotools import read_capture4analysis
 from cnctwin.recording import Recording
 from cnctwin.store import Store
 from cnctwin.store import open as open_store
-
-DEFAULT_PG_URL = "postgresql://postgres@127.0.0.1:5432/postgres"
-
-
-# ---------------------------------------------------------------------------- PostgreSQL
-def _pg_admin_url() -> str:
-    return os.environ.get("CNCTWIN_PG_URL", DEFAULT_PG_URL)
-
-
-def _with_database(url: str, database: str) -> str:
-    import urllib.parse
-
-    parts = urllib.parse.urlsplit(url)
-    return urllib.parse.urlunsplit(parts._replace(path=f"/{database}"))
-
-
-@pytest.fixture(scope="session")
-def pg_database() -> Iterator[str]:
-    """URL of a fresh PostgreSQL database for this session (dropped afterwards)."""
-    import psycopg
-
-    admin = _pg_admin_url()
-    try:
-        conn = psycopg.connect(admin, autocommit=True, connect_timeout=5)
-    except psycopg.Error as exc:
-        msg = (
-            f"PostgreSQL not reachable at {admin}; install/start postgresql or set "
-            f"CNCTWIN_PG_URL ({exc})"
-        )
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail(msg)
-        pytest.skip(msg)
-    name = f"cnctwin_test_{uuid.uuid4().hex[:12]}"
-    with conn:
-        conn.execute(f'CREATE DATABASE "{name}"')
-    try:
-        yield _with_database(admin, name)
-    finally:
-        with psycopg.connect(admin, autocommit=True, connect_timeout=5) as c:
-            c.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
-
-
-@pytest.fixture
-def pg_url(pg_database: str) -> str:
-    """URL of a fresh schema (``?schema=t_<hex>``) in the session database."""
-    return f"{pg_database}?schema=t_{uuid.uuid4().hex[:10]}"
 
 
 # ---------------------------------------------------------------------------- stores

@@ -211,7 +211,8 @@ def _print_alarms(alarms: pd.DataFrame) -> None:
     for c in ("machine", "day", "kind", "axis", "change", "z"):
         t.add_column(c)
     for _, a in alarms.iterrows():
-        t.add_row(str(a["machine"]), str(a["day"]), str(a["kind"]), "-" if pd.isna(a["axis"]) else str(a["axis"]),
+        axis = "-" if pd.isna(a["axis"]) else str(a["axis"])
+        t.add_row(str(a["machine"]), str(a["day"]), str(a["kind"]), axis,
                   f"{a['relative_change']:+.1%}", f"{a['z']:.0f}")
     _console().print(t)
 

@@ -1,0 +1,212 @@
+"""Fleet jobs on real Dask clusters (issue: fleet scale on Dask).
+
+* A scheduler and two workers started with ``dask scheduler`` / ``dask worker`` run
+  ``fleet ingest`` + ``fleet holes`` + ``fleet health`` from the command line; the results
+  equal the embedded LocalCluster's and the single-process batch functions' on the same data,
+  and the alarms name exactly the injected faults (machine, kind, axis, first day).
+* Killing a worker during a job gives the identical result.
+* Ingest is idempotent and crash-consistent; bad files and partitions are reported, counted
+  and skipped; an unreachable scheduler is an error, not a fall-back.
+
+The fleet (conftest): 20 machines x 2 days x 1 part cycle, seed 11, parameters drawn per
+machine, faults hidden in ``truth.json`` and recovered here only through the public commands.
+"""
+
+from __future__ import annotations
+
+import shutil
+import threading
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import pytest
+
+from tests.fleet.conftest import DaskCluster, cnctwin
+
+pytestmark = pytest.mark.xdist_group("fleet")
+
+HEALTH_KEY = ["machine", "day", "component", "parameter"]
+
+
+def _sorted(df: pd.DataFrame, key: list[str]) -> pd.DataFrame:
+    return df.sort_values(key, ignore_index=True)
+
+
+def _alarm_set(alarms: pd.DataFrame) -> set[tuple[str, str, Any]]:
+    return {(m, k, None if pd.isna(a) else a)
+            for m, k, a in zip(alarms["machine"], alarms["kind"], alarms["axis"], strict=True)}
+
+
+def test_cli_cluster_equals_embedded_and_single_process(
+    fleet_dir: Path, fleet_store: Path, dask_cluster: DaskCluster, reference_health: pd.DataFrame,
+    truth: list[dict[str, Any]], tmp_path: Path,
+) -> None:
+    store = tmp_path / "store"
+    res = tmp_path / "res"
+    sched = ["--scheduler", dask_cluster.address]
+    out = cnctwin("fleet", "ingest", str(fleet_dir), "--store", str(store), *sched)
+    assert "40 ingested, 0 already stored, 0 failed (of 40)" in out.stdout
+    cnctwin("fleet", "holes", "--store", str(store), "--out", str(res), *sched)
+    out = cnctwin("fleet", "health", "--store", str(store), "--out", str(res), *sched)
+    assert dask_cluster.address.split("://")[1].split(":")[0] in out.stderr or "Dask" in out.stderr
+    health = pd.read_parquet(res / "health.parquet")
+    alarms = pd.read_parquet(res / "alarms.parquet")
+    holes = pd.read_parquet(res / "holes.parquet")
+
+    # the same job on the embedded cluster (store filled by the embedded ingest)
+    emb = tmp_path / "emb"
+    cnctwin("fleet", "health", "--store", str(fleet_store), "--out", str(emb), "--workers", "2")
+    cnctwin("fleet", "holes", "--store", str(fleet_store), "--out", str(emb), "--workers", "2")
+    pd.testing.assert_frame_equal(_sorted(health, HEALTH_KEY),
+                                  _sorted(pd.read_parquet(emb / "health.parquet"), HEALTH_KEY))
+    pd.testing.assert_frame_equal(alarms, pd.read_parquet(emb / "alarms.parquet"))
+    hk = ["machine", "day", "recording_id", "hole"]
+    pd.testing.assert_frame_equal(_sorted(holes, hk),
+                                  _sorted(pd.read_parquet(emb / "holes.parquet"), hk))
+    # ... and the single-process batch functions (tests/fleet/conftest.py reference_health)
+    pd.testing.assert_frame_equal(_sorted(health, HEALTH_KEY),
+                                  _sorted(reference_health, HEALTH_KEY))
+
+    # 20 machines x 2 days x 3 holes; every partition complete
+    assert len(holes) == 120
+    assert not holes["partial"].any() and not health["partial"].any()
+    # the faults: exactly the injected (machine, kind, axis), alarmed from their first day on
+    assert len(truth) == 8
+    assert _alarm_set(alarms) == {(f["machine"], f["kind"], f["axis"]) for f in truth}
+    for f in truth:
+        days = sorted(alarms.loc[(alarms["machine"] == f["machine"])
+                                 & (alarms["kind"] == f["kind"]), "day"])
+        all_days = sorted(health.loc[health["machine"] == f["machine"], "day"].unique())
+        assert days == [d for d in all_days if d >= f["from_day"]], f
+
+
+def test_killed_worker_gives_identical_result(
+    fleet_store: Path, reference_health: pd.DataFrame
+) -> None:
+    from distributed import Client
+
+    from cnctwin.fleet import health_partition, partitions, run_job
+
+    cluster = DaskCluster(2).start()
+    try:
+        parts = partitions(str(fleet_store))[:20]  # machines M001..M010
+        killed = threading.Event()
+        seen: list[int] = []
+
+        def progress(done: int, total: int) -> None:
+            seen.append(done)
+            if done == 5 and not killed.is_set():
+                cluster.kill_worker(0)
+                killed.set()
+
+        with Client(cluster.address, timeout="10s") as client:
+            health = run_job(health_partition, parts, client=client, progress=progress,
+                             store_url=str(fleet_store))
+            assert killed.is_set()
+            assert len(client.scheduler_info()["workers"]) == 1
+    finally:
+        cluster.stop()
+    assert seen[-1] == len(parts) == 20
+    ref = reference_health[reference_health["machine"].isin({p.machine for p in parts})]
+    pd.testing.assert_frame_equal(_sorted(health, HEALTH_KEY), _sorted(ref, HEALTH_KEY))
+
+
+def test_ingest_idempotent_crash_consistent_and_bad_input(
+    fleet_dir: Path, dask_cluster: DaskCluster, tmp_path: Path
+) -> None:
+    sched = ["--scheduler", dask_cluster.address]
+    from cnctwin.fleet import find_recordings
+    from cnctwin.iotools import read_recording
+    from cnctwin.store import default_recording_id
+    from cnctwin.store import open as open_store
+    from cnctwin.store.duckdb_store import stage_recording
+
+    # a subset of the fleet plus a corrupt file
+    src = tmp_path / "in"
+    for m in ("M001", "M002"):
+        shutil.copytree(fleet_dir / m, src / m)
+    (src / "M002" / "broken.json").write_text('{"Header": {"Initial": ', encoding="utf-8")
+    store = tmp_path / "store"
+    recs = [p for p in find_recordings([src]) if p.suffix != ".json"]
+    assert len(recs) == 4
+
+    # a worker killed mid-ingest: its files are staged (hidden .tmp), the catalog is untouched
+    open_store(store).close()
+    rec = read_recording(recs[0])
+    rid = default_recording_id(rec)  # the id the rerun gives it
+    staged = stage_recording(store, rec, rid)
+    assert all(Path(t).exists() and t.endswith(".tmp") for t, _ in staged.tmp_to_final)
+    with open_store(store) as st:
+        assert st.recordings().empty
+
+    out = cnctwin("fleet", "ingest", str(src), "--store", str(store), *sched)
+    assert "4 ingested, 0 already stored, 1 failed (of 5)" in out.stdout
+    assert "broken.json" in out.stderr and "skipped" in out.stderr
+    assert "Traceback" not in out.stderr
+    with open_store(store) as st:
+        cat = st.recordings()
+    assert len(cat) == 4 and set(cat["machine"]) == {"M001", "M002"}
+    assert not list(store.rglob("*.tmp")), "the rerun completes and clears the staged files"
+
+    out = cnctwin("fleet", "ingest", str(src), str(src / "M001"), "--store", str(store),
+                  *sched)
+    assert "0 ingested, 4 already stored, 1 failed (of 5)" in out.stdout
+    with open_store(store) as st:
+        assert len(st.recordings()) == 4
+
+    # a partition whose HF file is gone: reported partial, the job completes
+    hf = sorted((store / "hf" / "machine=M002").rglob("*.parquet"))[0]
+    hf.unlink()
+    res = tmp_path / "res"
+    out = cnctwin("fleet", "quality", "--store", str(store), "--out", str(res), *sched)
+    assert "partial partitions" in out.stderr
+    q = pd.read_parquet(res / "quality.parquet")
+    bad = q[q["partial"]]
+    assert len(bad) == 1 and bad["machine"].iloc[0] == "M002"
+    assert "cannot load" in bad["issues"].iloc[0]
+    assert len(q[~q["partial"]]) == 3
+    assert (q.loc[~q["partial"], "coverage"] == 1.0).all()
+
+
+def test_unreachable_scheduler_is_an_error(fleet_store: Path, tmp_path: Path) -> None:
+    from tests._services import free_port
+
+    addr = f"tcp://127.0.0.1:{free_port()}"
+    res = cnctwin("fleet", "health", "--store", str(fleet_store), "--out",
+                  str(tmp_path / "r"), "--scheduler", addr, check=False)
+    assert res.returncode != 0
+    assert f"cannot reach the Dask scheduler at {addr}" in res.stderr
+    assert not (tmp_path / "r").exists(), "no fall-back to the embedded cluster"
+    res = cnctwin("fleet", "ingest", str(tmp_path), "--store", str(tmp_path / "s"),
+                  "--scheduler", addr, check=False)
+    assert res.returncode != 0
+    assert f"cannot reach the Dask scheduler at {addr}" in res.stderr
+    assert "Traceback" not in res.stderr
+
+
+@pytest.mark.postgres
+def test_postgres_store_same_as_duckdb(
+    fleet_dir: Path, fleet_store: Path, pg_url: str, truth: list[dict[str, Any]],
+    dask_cluster: DaskCluster, tmp_path: Path,
+) -> None:
+    sched = ["--scheduler", dask_cluster.address]
+    faulty = sorted({f["machine"] for f in truth})[:2]  # alarms to compare, too
+    machines = [a for m in faulty for a in ("--machine", m)]
+    out = cnctwin("fleet", "ingest", str(fleet_dir), "--store", pg_url, *sched)
+    assert "40 ingested" in out.stdout
+    out = cnctwin("fleet", "ingest", str(fleet_dir), "--store", pg_url, *sched)
+    assert "0 ingested, 40 already stored" in out.stdout
+    tables = {"holes": ["holes.parquet"], "wear": ["wear.parquet"],
+              "health": ["health.parquet", "alarms.parquet"], "quality": ["quality.parquet"],
+              "compare": ["compare.parquet"]}
+    for job, names in tables.items():
+        pg_res, dk_res = tmp_path / f"pg-{job}", tmp_path / f"dk-{job}"
+        cnctwin("fleet", job, "--store", pg_url, "--out", str(pg_res), *machines, *sched)
+        cnctwin("fleet", job, "--store", str(fleet_store), "--out", str(dk_res), *machines,
+                *sched)
+        for name in names:
+            a = pd.read_parquet(pg_res / name)
+            b = pd.read_parquet(dk_res / name)
+            assert len(b) > 0, (job, name)
+            pd.testing.assert_frame_equal(a, b, obj=f"{job}/{name}")
