@@ -83,6 +83,23 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    "FILE' adds one)")
     r.add_argument("--opcua-publish-hz", type=float, default=10.0,
                    help="OPC UA publish rate of the decimated 500 Hz values [Hz]")
+    r.add_argument("--mtconnect", metavar="URL",
+                   help="serve an MTConnect agent (/probe, /current, /sample) at "
+                   "http://HOST:PORT while the runtime runs (docs/mtconnect.md)")
+    r.add_argument("--mtconnect-buffer", type=int, default=131_072, metavar="N",
+                   help="observations in the agent's circular buffer (default 131072)")
+    r.add_argument("--mtconnect-sample-hz", type=float, default=10.0, metavar="HZ",
+                   help="rate of the drive-signal samples in MTConnect (default 10 Hz)")
+    r.add_argument("--mtconnect-token-file", type=Path, metavar="FILE",
+                   help="access token for the agent (required on a non-loopback host; or "
+                   "CNCTWIN_MTCONNECT_TOKEN)")
+    r.add_argument("--mtconnect-insecure", action="store_true",
+                   help="serve the agent on a non-loopback host without a token")
+    r.add_argument("--shdr", metavar="URL",
+                   help="serve an SHDR adapter at tcp://HOST:PORT for an MTConnect agent "
+                   "(cppagent) to read")
+    r.add_argument("--shdr-insecure", action="store_true",
+                   help="listen for SHDR on a non-loopback host (SHDR has no authentication)")
     r.add_argument("--speed", type=float, default=0.0,
                    help="replay pace: 1 = real time, N = N x, 0 = as fast as possible")
     r.add_argument("--chunk-cycles", type=int, default=50, help="cycles per chunk (replay)")
@@ -178,6 +195,11 @@ def status_table(st: dict[str, Any]) -> Any:
             rows.append(("store", f"{s.get('store')} blocks {s.get('blocks')}"))
         elif name == "opcua":
             rows.append(("opcua", f"{s.get('endpoint')} published {s.get('published')}"))
+        elif name == "mtconnect":
+            rows.append(("mtconnect", f"{s.get('agent') or '-'} observations "
+                                      f"{s.get('observations')}, next sequence "
+                                      f"{s.get('next_sequence')}, SHDR clients "
+                                      f"{s.get('shdr_clients')}"))
     ov = st.get("overload") or {}
     if ov:
         lost = sum(int(v) for v in ov.values())
@@ -317,7 +339,30 @@ def _build(args: argparse.Namespace) -> Any:
                                         read_users(args.opcua_users))
         sinks.append(OpcUaSink(args.opcua, machine=machine,
                                publish_hz=args.opcua_publish_hz, security=ua_security))
+    if args.mtconnect or args.shdr:
+        sinks.append(_mtconnect_sink(args, machine))
     return EdgeRuntime(src, procs, sinks, state_dir=out, machine=machine)
+
+
+def _mtconnect_sink(args: argparse.Namespace, machine: str) -> Any:
+    import os
+
+    from cnctwin.edge.mtconnect_server import MTConnectSink, parse_listen_url
+
+    agent = (parse_listen_url(args.mtconnect, scheme="http", option="--mtconnect")
+             if args.mtconnect else None)
+    shdr = parse_listen_url(args.shdr, scheme="tcp", option="--shdr") if args.shdr else None
+    token = None
+    if args.mtconnect_token_file is not None:
+        try:
+            token = args.mtconnect_token_file.read_text(encoding="utf-8").strip() or None
+        except OSError as exc:
+            raise ConfigError(f"--mtconnect-token-file {args.mtconnect_token_file}: "
+                              f"{exc.strerror or exc}") from None
+    token = token or os.environ.get("CNCTWIN_MTCONNECT_TOKEN", "").strip() or None
+    return MTConnectSink(machine, agent=agent, shdr=shdr, buffer_size=args.mtconnect_buffer,
+                         sample_hz=args.mtconnect_sample_hz, token=token,
+                         insecure=args.mtconnect_insecure, shdr_insecure=args.shdr_insecure)
 
 
 def _machine_and_model(args: argparse.Namespace) -> tuple[str, Any, Any]:

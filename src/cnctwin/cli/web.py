@@ -32,6 +32,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    "cutting torque and the twin comparison of every recording")
     p.add_argument("--live", type=Path, metavar="DIR",
                    help="--out directory of `cnctwin edge run` to follow on the live page")
+    p.add_argument("--fleet", type=Path, metavar="DIR",
+                   help="result directory of `cnctwin fleet ... --out DIR`: the fleet page "
+                   "(/fleet) ranks its machines by alarms, wear, drift and data quality")
     p.add_argument("--salvage", action="store_true",
                    help="read damaged recordings with salvage=True (kept, flagged partial)")
     p.add_argument("--host", default="127.0.0.1", help="interface to listen on (127.0.0.1)")
@@ -46,7 +49,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def _cmd_web(args: argparse.Namespace) -> int:
-    if args.store is None and not args.recording and args.live is None:
+    if args.store is None and not args.recording and args.live is None and args.fleet is None:
         raise ConfigError("give --store PATH_OR_URL and/or --recording PATH (a file or a "
                           "directory of recordings) and/or --live DIR (`cnctwin edge run "
                           "--out DIR`); `cnctwin ingest FILE --store PATH` fills a store")
@@ -76,7 +79,8 @@ def _cmd_web(args: argparse.Namespace) -> int:
 
         machine = load_machine(args.machine)
     app = create_app(store_url=args.store, recordings=args.recording, model=args.model,
-                     machine=machine, live=args.live, salvage=args.salvage, token=token)
+                     machine=machine, live=args.live, fleet=args.fleet, salvage=args.salvage,
+                     token=token)
     print(f"cnctwin web: serving on http://{args.host}:{args.port}/ (Ctrl-C stops)", flush=True)
     uvicorn.run(app, host=args.host, port=args.port, log_level="warning")
     return 0

@@ -357,6 +357,7 @@ def create_app(
     model: SpindleModel | str | os.PathLike[str] | None = None,
     machine: MachineFile | str | os.PathLike[str] | None = None,
     live: str | os.PathLike[str] | None = None,
+    fleet: str | os.PathLike[str] | None = None,
     title: str = "cnctwin",
     cache_size: int = 4,
     salvage: bool = False,
@@ -382,6 +383,10 @@ def create_app(
     live : path-like, optional
         ``--out`` directory of a ``cnctwin edge run`` (or its ``results.jsonl``) to follow
         on the live page.
+    fleet : path-like, optional
+        Result directory of the fleet jobs (``cnctwin fleet ... --out DIR``): the fleet page
+        ``/fleet`` and ``GET /api/fleet`` rank its machines by alarms, wear, drift and data
+        quality.
     title : str, default 'cnctwin'
         Shown in the page header.
     cache_size : int, default 4
@@ -409,7 +414,11 @@ def create_app(
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise ConfigError("the dashboard needs FastAPI: pip install 'cnctwin[web]'") from exc
 
-    if store_url is None and not recordings and live is None:
+    if fleet is not None:
+        from cnctwin.fleet.summary import read_fleet_tables
+
+        read_fleet_tables(fleet)  # fails early, naming the directory
+    if store_url is None and not recordings and live is None and fleet is None:
         raise ConfigError("nothing to show: give a store (--store PATH_OR_URL), recording "
                           "files or directories (--recording PATH) and/or an edge run's "
                           "state directory (--live DIR)")
@@ -515,6 +524,30 @@ def create_app(
     def _compare_page(entry_id: str) -> Any:
         e = dash.catalog.entry(entry_id)
         return HTMLResponse(pages.compare_page(dash.title, e, dash.compare_payload(entry_id)))
+
+    def _fleet_rows(sort: str) -> tuple[list[dict[str, Any]], list[str]]:
+        from cnctwin.fleet.summary import fleet_summary, read_fleet_tables
+
+        if fleet is None:
+            return [], []
+        tables = read_fleet_tables(fleet)  # read per request: a rerun job shows at once
+        table = fleet_summary(tables, sort=sort)
+        rows = [{str(k): (None if isinstance(v, float) and v != v else v)
+                 for k, v in r.items()} for r in table.to_dict("records")]
+        return rows, sorted(tables)
+
+    @app.get("/fleet", response_class=HTMLResponse, include_in_schema=False)
+    def _fleet_page(sort: str = "alarms") -> Any:
+        rows, tables = _fleet_rows(sort)
+        return HTMLResponse(pages.fleet_page(dash.title, rows, sort=sort, tables=tables,
+                                             source=str(fleet) if fleet is not None else None))
+
+    @app.get("/api/fleet")
+    def api_fleet(sort: str = "alarms") -> Any:
+        """Machines of the fleet results ranked (``sort``: alarms, wear, drift, quality)."""
+        rows, tables = _fleet_rows(sort)
+        return JsonResponse({"source": str(fleet) if fleet is not None else None,
+                             "tables": tables, "sort": sort, "machines": rows})
 
     @app.get("/live", response_class=HTMLResponse, include_in_schema=False)
     def _live_page() -> Any:

@@ -17,7 +17,7 @@ from typing import Any
 from cnctwin.signals import parse_column
 from cnctwin.web.sources import Entry
 
-__all__ = ["live_page", "machine_page", "overview_page", "recording_page"]
+__all__ = ["fleet_page", "live_page", "machine_page", "overview_page", "recording_page"]
 
 
 def _e(v: object) -> str:
@@ -53,7 +53,8 @@ def _page(title: str, body: str, *, page: str, config: dict[str, Any] | None = N
 {scripts}<script src="/static/app.js"></script>
 </head><body data-page="{_e(page)}">
 <header><a class="brand" href="/">cnctwin</a>
-<nav><a href="/">fleet</a> <a href="/live">live</a> <a href="/api/docs">API</a></nav></header>
+<nav><a href="/">fleet</a> <a href="/fleet">fleet results</a> <a href="/live">live</a>
+<a href="/api/docs">API</a></nav></header>
 <main>
 {body}
 </main>
@@ -284,3 +285,54 @@ def live_page(title: str, results: str | None) -> str:
 <div><h2>Alarms and gaps</h2><ul id="live-events"></ul></div></div>
 """
     return _page(f"{title}: live", body, page="live", config={"results": results})
+
+
+_FLEET_SORTS = (("alarms", "alarms"), ("wear", "wear"), ("drift", "drift"),
+                ("quality", "data quality"))
+
+
+def fleet_page(title: str, rows: Sequence[dict[str, Any]], *, source: str | None,
+               sort: str, tables: Sequence[str]) -> str:
+    """Machines ranked by alarms, wear, drift or data quality (``cnctwin fleet`` results),
+    each linking to its machine page."""
+    if source is None:
+        body = f"""
+<h1>{_e(title)}: fleet results</h1>
+<p>No fleet results to show. Run a fleet job and serve its result directory:</p>
+<pre>cnctwin fleet health --store STORE --out RES
+cnctwin fleet wear --store STORE --out RES
+cnctwin fleet quality --store STORE --out RES
+cnctwin web --store STORE --fleet RES</pre>"""
+        return _page(f"{title}: fleet results", body, page="fleet", plotly=False)
+    links = " ".join(
+        f"<b>{_e(label)}</b>" if key == sort else f'<a href="/fleet?sort={key}">{_e(label)}</a>'
+        for key, label in _FLEET_SORTS)
+
+    def pct(v: Any) -> str:
+        return _num(v * 100 if isinstance(v, float) else v, "{:+.1f}", "%")
+
+    trs = []
+    for r in rows:
+        warn = ' class="warn"' if r["n_alarms"] else ""
+        cov = r["coverage_min"]
+        cov_cls = ' class="warn"' if isinstance(cov, float) and cov < 1 else ""
+        trs.append(
+            f"<tr{warn}><td><a href=\"/machines/{_q(r['machine'])}\">{_e(r['machine'])}</a>"
+            f"</td><td>{r['days']}</td><td>{r['n_alarms']}</td><td>{_e(r['alarm_kinds'])}</td>"
+            f"<td>{_e(r['first_alarm'] or '–')}</td><td>{pct(r['wear_rise'])}</td>"
+            f"<td>{pct(r['max_drift'])}</td><td{cov_cls}>{_num(cov, '{:.4f}')}</td>"
+            f"<td>{r['missing_cycles']}</td><td>{_num(r['jitter_ms_max'], '{:.3g}', 'ms')}</td>"
+            f"<td>{r['partial_partitions']}</td></tr>")
+    body = f"""
+<h1>{_e(title)}: fleet results</h1>
+<p class="muted">From {_e(source)} ({_e(', '.join(tables))}). {len(rows)} machines, worst first.
+Rank by: {links}.</p>
+<p class="muted">Wear: largest rise of the mean cutting torque per hole over the tool's first
+day. Drift: largest change of Kv, axis Coulomb friction or spindle friction current from the
+machine's own first day. Alarms: <code>cnctwin fleet health</code> (docs/fleet.md).</p>
+<table id="fleet"><thead><tr><th>machine</th><th>days</th><th>alarms</th><th>kinds</th>
+<th>first alarm</th><th>wear</th><th>drift</th><th>coverage (min)</th><th>missing cycles</th>
+<th>jitter (max)</th><th>partial days</th></tr></thead>
+<tbody>{''.join(trs)}</tbody></table>
+"""
+    return _page(f"{title}: fleet results", body, page="fleet", plotly=False)

@@ -1,0 +1,456 @@
+"""MTConnect out: a device model, a sequence-numbered circular buffer, the agent's documents
+(``probe``, ``current``, ``sample``) and an SHDR adapter.
+
+MTConnect 2.3 (namespaces ``urn:mtconnect.org:MTConnect{Devices,Streams,Error}:2.3``; the
+documents validate against the official XSD files, tests/data/mtconnect/). The device model
+(:func:`machine_tool_device`):
+
+=====================  ==========================  =================================================
+component              data item (id)              MTConnect type, units
+=====================  ==========================  =================================================
+Device                 ``avail``                   EVENT AVAILABILITY
+Axes / Linear X, Y, Z  ``<axis>_pos``              SAMPLE POSITION ACTUAL, MILLIMETER
+                       ``<axis>_load``             SAMPLE LOAD, PERCENT
+Axes / Rotary C        ``<sp>_speed``              SAMPLE ROTARY_VELOCITY ACTUAL, REVOLUTION/MINUTE
+(the spindle)          ``<sp>_load``               SAMPLE LOAD, PERCENT
+                       ``<sp>_power``              SAMPLE WATTAGE, WATT
+                       ``<sp>_cut_torque``         SAMPLE TORQUE, NEWTON_METER (cnctwin: cutting
+                                                   torque from the drive current)
+                       ``<sp>_hole_torque``        SAMPLE TORQUE, NEWTON_METER (cnctwin: mean
+                                                   cutting torque of the last hole)
+                       ``<sp>_cond``               CONDITION LOAD (cnctwin alarms)
+Controller / Path      ``program``                 EVENT PROGRAM
+                       ``tool``                    EVENT TOOL_NUMBER
+                       ``holes``                   EVENT CYCLE_COUNT (cnctwin: holes drilled)
+                       ``hole_record``             EVENT MESSAGE (cnctwin: the per-hole record)
+                       ``wear``                    EVENT MESSAGE (cnctwin: wear index)
+                       ``system``                  CONDITION SYSTEM (runtime overload)
+=====================  ==========================  =================================================
+
+The buffer (:class:`ObservationBuffer`) numbers every observation; ``sample?from=&count=``
+returns the observations ``from .. from+count-1`` still in the buffer and ``nextSequence``
+(the one to ask for next), so a client that follows ``nextSequence`` sees every observation
+once; asking for one that has left the buffer is an ``OUT_OF_RANGE`` error document (never a
+silent skip).
+
+References
+----------
+MTConnect Standard Part 1-4, version 2.3; cppagent's schemas/ (Apache 2.0).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+import uuid as uuidlib
+import xml.etree.ElementTree as ET
+from collections import deque
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from cnctwin.exceptions import ConfigError
+
+__all__ = [
+    "MTCONNECT_VERSION",
+    "NS_DEVICES",
+    "NS_ERROR",
+    "NS_STREAMS",
+    "Component",
+    "DataItem",
+    "DeviceModel",
+    "Observation",
+    "ObservationBuffer",
+    "OutOfRangeError",
+    "error_document",
+    "machine_tool_device",
+    "probe_document",
+    "streams_document",
+]
+
+MTCONNECT_VERSION = "2.3"
+NS_DEVICES = f"urn:mtconnect.org:MTConnectDevices:{MTCONNECT_VERSION}"
+NS_STREAMS = f"urn:mtconnect.org:MTConnectStreams:{MTCONNECT_VERSION}"
+NS_ERROR = f"urn:mtconnect.org:MTConnectError:{MTCONNECT_VERSION}"
+UNAVAILABLE = "UNAVAILABLE"
+
+
+@dataclass(frozen=True)
+class DataItem:
+    """One MTConnect data item.
+
+    Attributes
+    ----------
+    id : str
+        Unique id (the SHDR key too).
+    category : {'SAMPLE', 'EVENT', 'CONDITION'}
+        Category.
+    type : str
+        MTConnect type (``POSITION``, ``ROTARY_VELOCITY``, ...).
+    component : str
+        Id of the component it belongs to.
+    units : str, optional
+        MTConnect units (samples).
+    sub_type : str, optional
+        ``ACTUAL``, ``COMMANDED``, ...
+    name : str, optional
+        Name.
+    """
+
+    id: str
+    category: str
+    type: str
+    component: str
+    units: str | None = None
+    sub_type: str | None = None
+    name: str | None = None
+
+    @property
+    def element(self) -> str:
+        """The observation's element name in a Streams document (``ROTARY_VELOCITY`` ->
+        ``RotaryVelocity``)."""
+        return "".join(p.capitalize() for p in self.type.split("_"))
+
+
+@dataclass(frozen=True)
+class Component:
+    """A component of the device: ``kind`` is its element name (``Axes``, ``Linear``, ...)."""
+
+    id: str
+    kind: str
+    name: str | None = None
+    parent: str | None = None
+
+
+@dataclass(frozen=True)
+class DeviceModel:
+    """A device: its components (parents first) and data items."""
+
+    id: str
+    name: str
+    uuid: str
+    components: tuple[Component, ...]
+    data_items: tuple[DataItem, ...]
+
+    def item(self, item_id: str) -> DataItem:
+        """The data item with this id."""
+        for d in self.data_items:
+            if d.id == item_id:
+                return d
+        raise KeyError(item_id)
+
+    def component(self, component_id: str) -> Component | None:
+        """The component with this id (None for the device itself)."""
+        for c in self.components:
+            if c.id == component_id:
+                return c
+        return None
+
+
+def _key(name: str) -> str:
+    return "".join(ch if ch.isalnum() else "_" for ch in name).lower()
+
+
+def machine_tool_device(
+    machine: str, *, axes: Sequence[str] = ("X1", "Y1", "Z1"), spindle: str = "SP1",
+) -> DeviceModel:
+    """The device model of a SINUMERIK machine tool as cnctwin sees it (module table).
+
+    Parameters
+    ----------
+    machine : str
+        Machine name (the device's ``name``; its ``uuid`` derives from it).
+    axes : sequence of str, default ('X1', 'Y1', 'Z1')
+        Linear axes (their MTConnect names are the letters: ``X1`` -> ``X``).
+    spindle : str, default 'SP1'
+        The spindle (a Rotary component named ``C`` in rotary-velocity mode).
+    """
+    dev = _key(machine) or "machine"
+    comps: list[Component] = [Component("axes", "Axes"), Component("ctrl", "Controller"),
+                              Component("path", "Path", parent="ctrl")]
+    items: list[DataItem] = [DataItem("avail", "EVENT", "AVAILABILITY", dev)]
+    for ax in axes:
+        k = _key(ax)
+        comps.append(Component(k, "Linear", name=ax.rstrip("0123456789") or ax, parent="axes"))
+        items += [DataItem(f"{k}_pos", "SAMPLE", "POSITION", k, "MILLIMETER", "ACTUAL",
+                           f"{ax}_actual"),
+                  DataItem(f"{k}_load", "SAMPLE", "LOAD", k, "PERCENT", name=f"{ax}_load")]
+    sp = _key(spindle)
+    comps.append(Component(sp, "Rotary", name="C", parent="axes"))
+    items += [
+        DataItem(f"{sp}_speed", "SAMPLE", "ROTARY_VELOCITY", sp, "REVOLUTION/MINUTE", "ACTUAL",
+                 f"{spindle}_speed"),
+        DataItem(f"{sp}_load", "SAMPLE", "LOAD", sp, "PERCENT", name=f"{spindle}_load"),
+        DataItem(f"{sp}_power", "SAMPLE", "WATTAGE", sp, "WATT", name=f"{spindle}_power"),
+        DataItem(f"{sp}_cut_torque", "SAMPLE", "TORQUE", sp, "NEWTON_METER",
+                 name="cutting_torque"),
+        DataItem(f"{sp}_hole_torque", "SAMPLE", "TORQUE", sp, "NEWTON_METER",
+                 name="hole_mean_cutting_torque"),
+        DataItem(f"{sp}_cond", "CONDITION", "LOAD", sp, name="cnctwin_alarm"),
+        DataItem("program", "EVENT", "PROGRAM", "path"),
+        DataItem("tool", "EVENT", "TOOL_NUMBER", "path"),
+        DataItem("holes", "EVENT", "CYCLE_COUNT", "path", name="holes"),
+        DataItem("hole_record", "EVENT", "MESSAGE", "path", name="hole_record"),
+        DataItem("wear", "EVENT", "MESSAGE", "path", name="wear_index"),
+        DataItem("system", "CONDITION", "SYSTEM", "path", name="runtime"),
+    ]
+    return DeviceModel(dev, machine, str(uuidlib.uuid5(uuidlib.NAMESPACE_URL,
+                                                         f"cnctwin:{machine}")),
+                       tuple(comps), tuple(items))
+
+
+# ---------------------------------------------------------------------------- buffer
+@dataclass(frozen=True)
+class Observation:
+    """One observation: sequence number, data item, time and value.
+
+    For a condition, ``value`` is the level (``NORMAL``, ``WARNING``, ``FAULT``,
+    ``UNAVAILABLE``) and ``native_code``/``message`` describe it.
+    """
+
+    sequence: int
+    item_id: str
+    timestamp_ns: int
+    value: Any
+    native_code: str | None = None
+    message: str | None = None
+
+
+class OutOfRangeError(ConfigError):
+    """A ``sample`` request for sequence numbers the buffer no longer (or not yet) holds."""
+
+
+@dataclass
+class ObservationBuffer:
+    """A sequence-numbered circular buffer of observations (thread-safe).
+
+    Parameters
+    ----------
+    size : int, default 131072
+        Observations kept (MTConnect ``bufferSize``).
+    """
+
+    size: int = 131_072
+    instance_id: int = field(default_factory=lambda: int(time.time()))
+    _obs: deque[Observation] = field(init=False, repr=False)
+    _latest: dict[str, Observation] = field(init=False, repr=False, default_factory=dict)
+    _next: int = field(init=False, default=1)
+    _lock: threading.Lock = field(init=False, repr=False, default_factory=threading.Lock)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.size, int) or self.size < 1:
+            raise ConfigError(f"the MTConnect buffer size must be a positive integer, not "
+                              f"{self.size!r}")
+        self._obs = deque(maxlen=self.size)
+
+    def add(self, item_id: str, timestamp_ns: int, value: Any, *,
+            native_code: str | None = None, message: str | None = None) -> int:
+        """Append one observation; returns its sequence number."""
+        with self._lock:
+            seq = self._next
+            ob = Observation(seq, item_id, int(timestamp_ns), value, native_code, message)
+            self._obs.append(ob)
+            self._latest[item_id] = ob
+            self._next += 1
+            return seq
+
+    @property
+    def next_sequence(self) -> int:
+        """The sequence number the next observation will get."""
+        return self._next
+
+    @property
+    def first_sequence(self) -> int:
+        """The oldest sequence number still in the buffer (= next when empty)."""
+        with self._lock:
+            return self._obs[0].sequence if self._obs else self._next
+
+    def current(self) -> tuple[list[Observation], int, int]:
+        """The newest observation of every data item, ``firstSequence``, ``nextSequence``."""
+        with self._lock:
+            first = self._obs[0].sequence if self._obs else self._next
+            return sorted(self._latest.values(), key=lambda o: o.sequence), first, self._next
+
+    def sample(self, start: int | None = None, count: int = 100) -> tuple[
+            list[Observation], int, int, int]:
+        """Observations ``start .. start+count-1`` that are in the buffer.
+
+        Parameters
+        ----------
+        start : int, optional
+            First sequence number; default the oldest in the buffer.
+        count : int, default 100
+            Most observations returned (1 ... buffer size).
+
+        Returns
+        -------
+        observations, first_sequence, next_sequence, last_sequence
+            ``next_sequence`` is the one after the last returned (the one to ask for next).
+
+        Raises
+        ------
+        OutOfRangeError
+            ``start`` older than the buffer's first or newer than its next sequence, or
+            ``count`` outside 1 ... size.
+        """
+        if not isinstance(count, int) or not 1 <= count <= self.size:
+            raise OutOfRangeError(f"count must be 1 ... {self.size} (the buffer size), not "
+                                  f"{count!r}")
+        with self._lock:
+            first = self._obs[0].sequence if self._obs else self._next
+            last = self._next - 1
+            s = first if start is None else int(start)
+            if s < first or s > self._next:
+                raise OutOfRangeError(
+                    f"'from' must be {first} ... {self._next} (the buffer holds {first} ... "
+                    f"{last}); {s} has {'left' if s < first else 'not reached'} the buffer")
+            i = s - first
+            out = [self._obs[j] for j in range(i, min(i + count, len(self._obs)))]
+            nxt = out[-1].sequence + 1 if out else s
+            return out, first, nxt, last
+
+
+# ---------------------------------------------------------------------------- documents
+def _iso(t_ns: int) -> str:
+    s, ns = divmod(int(t_ns), 1_000_000_000)
+    return time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(s)) + f".{ns // 1000:06d}Z"
+
+
+def _header(root: ET.Element, tag: str, *, sender: str, instance_id: int, buffer_size: int,
+            extra: dict[str, str], model_time: bool = True) -> ET.Element:
+    h = ET.SubElement(root, tag)
+    h.set("creationTime", _iso(time.time_ns()).split(".")[0] + "Z")
+    h.set("sender", sender)
+    h.set("instanceId", str(instance_id))
+    h.set("version", f"{MTCONNECT_VERSION}.0")
+    h.set("bufferSize", str(buffer_size))
+    if model_time:
+        h.set("deviceModelChangeTime", _iso(instance_id * 1_000_000_000))
+    for k, v in extra.items():
+        h.set(k, v)
+    return h
+
+
+def _doc(root: ET.Element) -> bytes:
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="utf-8")
+
+
+def probe_document(model: DeviceModel, buffer: ObservationBuffer, *,
+                   sender: str = "cnctwin") -> bytes:
+    """The ``/probe`` document (MTConnectDevices): the device model."""
+    root = ET.Element("MTConnectDevices", {"xmlns": NS_DEVICES})
+    _header(root, "Header", sender=sender, instance_id=buffer.instance_id,
+            buffer_size=buffer.size, extra={"assetBufferSize": "1024", "assetCount": "0"})
+    devices = ET.SubElement(root, "Devices")
+    dev = ET.SubElement(devices, "Device", {"id": model.id, "name": model.name,
+                                            "uuid": model.uuid})
+    ET.SubElement(dev, "Description", {"manufacturer": "cnctwin"}).text = (
+        f"{model.name}: SINUMERIK drive signals and cnctwin's digital-twin results")
+    elements: dict[str | None, ET.Element] = {None: dev}
+    holders: dict[str | None, ET.Element] = {}
+
+    def items_of(cid: str | None, parent: ET.Element) -> None:
+        mine = [d for d in model.data_items if d.component == (cid or model.id)]
+        if not mine:
+            return
+        box = ET.SubElement(parent, "DataItems")
+        for d in mine:
+            attrs = {"id": d.id, "category": d.category, "type": d.type}
+            if d.sub_type:
+                attrs["subType"] = d.sub_type
+            if d.units:
+                attrs["units"] = d.units
+            if d.name:
+                attrs["name"] = d.name
+            ET.SubElement(box, "DataItem", attrs)
+
+    items_of(None, dev)
+    for c in model.components:
+        parent = elements[c.parent]
+        if c.parent not in holders:
+            holders[c.parent] = ET.SubElement(parent, "Components")
+        attrs = {"id": c.id}
+        if c.name:
+            attrs["name"] = c.name
+        el = ET.SubElement(holders[c.parent], c.kind, attrs)
+        elements[c.id] = el
+        items_of(c.id, el)
+    return _doc(root)
+
+
+def streams_document(
+    model: DeviceModel, observations: Iterable[Observation], *, buffer: ObservationBuffer,
+    first_sequence: int, next_sequence: int, last_sequence: int, sender: str = "cnctwin",
+) -> bytes:
+    """A ``/current`` or ``/sample`` document (MTConnectStreams)."""
+    root = ET.Element("MTConnectStreams", {"xmlns": NS_STREAMS})
+    _header(root, "Header", sender=sender, instance_id=buffer.instance_id,
+            buffer_size=buffer.size,
+            extra={"firstSequence": str(first_sequence), "nextSequence": str(next_sequence),
+                   "lastSequence": str(last_sequence)})
+    streams = ET.SubElement(root, "Streams")
+    ds = ET.SubElement(streams, "DeviceStream", {"name": model.name, "uuid": model.uuid})
+    by_comp: dict[str, list[Observation]] = {}
+    for ob in sorted(observations, key=lambda o: o.sequence):
+        by_comp.setdefault(model.item(ob.item_id).component, []).append(ob)
+    order = [model.id, *[c.id for c in model.components]]
+    for cid in order:
+        obs = by_comp.get(cid)
+        if not obs:
+            continue
+        comp = model.component(cid)
+        attrs = {"component": comp.kind if comp else "Device", "componentId": cid}
+        if comp is not None and comp.name:
+            attrs["name"] = comp.name
+        if comp is None:
+            attrs["name"] = model.name
+        cs = ET.SubElement(ds, "ComponentStream", attrs)
+        for cat, tag in (("SAMPLE", "Samples"), ("EVENT", "Events"), ("CONDITION", "Condition")):
+            group = [o for o in obs if model.item(o.item_id).category == cat]
+            if not group:
+                continue
+            box = ET.SubElement(cs, tag)
+            for o in group:
+                _observation(box, model.item(o.item_id), o)
+    return _doc(root)
+
+
+def _observation(box: ET.Element, d: DataItem, o: Observation) -> None:
+    attrs = {"dataItemId": d.id, "timestamp": _iso(o.timestamp_ns), "sequence": str(o.sequence)}
+    if d.name:
+        attrs["name"] = d.name
+    if d.sub_type:
+        attrs["subType"] = d.sub_type
+    if d.category == "CONDITION":
+        level = str(o.value).upper()
+        tag = {"NORMAL": "Normal", "WARNING": "Warning", "FAULT": "Fault"}.get(level,
+                                                                              "Unavailable")
+        attrs["type"] = d.type
+        if tag in ("Warning", "Fault"):
+            attrs["conditionId"] = o.native_code or d.id
+        if o.native_code:
+            attrs["nativeCode"] = o.native_code
+        el = ET.SubElement(box, tag, attrs)
+        if o.message:
+            el.text = o.message
+        return
+    el = ET.SubElement(box, d.element, attrs)
+    v = o.value
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        el.text = UNAVAILABLE
+    elif isinstance(v, float):
+        el.text = f"{v:.6g}"
+    else:
+        el.text = str(v)
+
+
+def error_document(code: str, message: str, *, buffer: ObservationBuffer,
+                   sender: str = "cnctwin") -> bytes:
+    """An MTConnectError document (``OUT_OF_RANGE``, ``INVALID_REQUEST``, ...)."""
+    root = ET.Element("MTConnectError", {"xmlns": NS_ERROR})
+    _header(root, "Header", sender=sender, instance_id=buffer.instance_id,
+            buffer_size=buffer.size, extra={}, model_time=False)
+    errors = ET.SubElement(root, "Errors")
+    ET.SubElement(errors, "Error", {"errorCode": code}).text = message
+    return _doc(root)

@@ -1,0 +1,497 @@
+"""MTConnect agent (HTTP) and SHDR adapter (TCP) of the edge runtime, and the sink that feeds
+them (``cnctwin edge run --mtconnect http://HOST:PORT --shdr tcp://HOST:PORT``).
+
+* :class:`MTConnectAgent`: ``GET /probe``, ``/current``, ``/sample?from=&count=`` (also under
+  ``/<device name>/``), MTConnect 2.3 XML from :mod:`cnctwin.edge.mtconnect`; errors as
+  MTConnectError documents (``OUT_OF_RANGE``, ``INVALID_REQUEST``, ``UNSUPPORTED``). A
+  non-loopback address needs an access token (``Authorization: Bearer``) and may use TLS;
+  without a token it serves only with ``insecure=True``.
+* :class:`ShdrAdapter`: the line protocol the reference agent (cppagent) reads from an
+  adapter: ``timestamp|key|value|key|value`` per line, conditions as
+  ``timestamp|key|level|native_code|native_severity|qualifier|message``; a new connection
+  gets every current value first; ``* PING`` is answered ``* PONG <ms>``. SHDR has no
+  authentication: a non-loopback address needs ``insecure=True``.
+* :class:`MTConnectSink`: the runtime's results and the drive signals (decimated to
+  ``sample_hz``) into the buffer and out to the adapter's clients.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hmac
+import ipaddress
+import json
+import math
+import socket
+import socketserver
+import ssl
+import threading
+import urllib.parse
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import Any
+
+import numpy as np
+
+from cnctwin.edge.mtconnect import (
+    DeviceModel,
+    ObservationBuffer,
+    OutOfRangeError,
+    error_document,
+    machine_tool_device,
+    probe_document,
+    streams_document,
+)
+from cnctwin.edge.pipeline import Chunk
+from cnctwin.exceptions import ConfigError
+
+__all__ = ["MTConnectAgent", "MTConnectSink", "ShdrAdapter", "parse_listen_url"]
+
+
+def parse_listen_url(url: str, *, scheme: str, option: str) -> tuple[str, int]:
+    """``scheme://HOST:PORT`` -> (host, port); a clear error naming the option otherwise."""
+    u = urllib.parse.urlsplit(url)
+    try:
+        port = u.port
+    except ValueError:
+        port = None
+    if u.scheme != scheme or not u.hostname or not port:
+        raise ConfigError(f"{option} {url!r}: expected {scheme}://HOST:PORT, e.g. "
+                          f"{scheme}://127.0.0.1:{7878 if scheme == 'tcp' else 5000}")
+    return u.hostname, port
+
+
+def _loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+# ---------------------------------------------------------------------------- agent
+class MTConnectAgent:
+    """An MTConnect agent over HTTP for one device (read-only).
+
+    Parameters
+    ----------
+    model : DeviceModel
+        The device.
+    buffer : ObservationBuffer
+        Its observations.
+    host, port : str, int
+        Address to listen on (port 0: any free port, see :attr:`port`).
+    token : str, optional
+        Access token: every request then needs ``Authorization: Bearer TOKEN``.
+    tls_cert, tls_key : str, optional
+        PEM certificate and key: serve HTTPS.
+    insecure : bool, default False
+        Serve a non-loopback address without a token.
+
+    Raises
+    ------
+    ConfigError
+        A non-loopback address without a token or ``insecure``; the port in use.
+    """
+
+    def __init__(self, model: DeviceModel, buffer: ObservationBuffer, *, host: str = "127.0.0.1",
+                 port: int = 5000, token: str | None = None, tls_cert: str | None = None,
+                 tls_key: str | None = None, insecure: bool = False) -> None:
+        if token is None and not insecure and not _loopback(host):
+            raise ConfigError(f"the MTConnect agent on {host} faces the network: give an "
+                              "access token (--mtconnect-token-file) or --mtconnect-insecure")
+        self.model, self.buffer, self.token = model, buffer, token
+        agent = self
+
+        class Handler(BaseHTTPRequestHandler):
+            server_version = "cnctwin-mtconnect"
+
+            def log_message(self, *args: Any) -> None:  # quiet
+                pass
+
+            def do_GET(self) -> None:
+                status, body = agent.respond(self.path, self.headers.get("Authorization"))
+                self.send_response(status)
+                self.send_header("Content-Type", "application/xml; charset=utf-8")
+                self.send_header("Content-Length", str(len(body)))
+                if status == 401:
+                    self.send_header("WWW-Authenticate", "Bearer")
+                self.end_headers()
+                self.wfile.write(body)
+
+        try:
+            self._server = ThreadingHTTPServer((host, port), Handler)
+        except OSError as exc:
+            reason = exc.strerror or exc
+            raise ConfigError(f"cannot listen on {host}:{port} for MTConnect ({reason}); "
+                              "choose another port in --mtconnect") from None
+        self._server.daemon_threads = True
+        scheme = "http"
+        if tls_cert:
+            ctx = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+            ctx.load_cert_chain(tls_cert, tls_key)
+            self._server.socket = ctx.wrap_socket(self._server.socket, server_side=True)
+            scheme = "https"
+        self.host = host
+        self.port = int(self._server.server_address[1])
+        self.url = f"{scheme}://{host}:{self.port}"
+        self._thread = threading.Thread(target=self._server.serve_forever, name="mtconnect",
+                                        daemon=True)
+        self._thread.start()
+
+    def respond(self, path: str, authorization: str | None = None) -> tuple[int, bytes]:
+        """Status and body for a request path (the HTTP handler's logic, testable alone)."""
+        b = self.buffer
+        if self.token is not None:
+            given = (authorization or "").removeprefix("Bearer ").strip()
+            if not hmac.compare_digest(given.encode(), self.token.encode()):
+                return 401, error_document("UNAUTHORIZED", "a valid Bearer token is required",
+                                           buffer=b)
+        u = urllib.parse.urlsplit(path)
+        parts = [urllib.parse.unquote(p) for p in u.path.split("/") if p]
+        if parts and parts[0] in (self.model.name, self.model.id, self.model.uuid):
+            parts = parts[1:]
+        req = parts[0] if parts else "probe"
+        q = urllib.parse.parse_qs(u.query)
+        if len(parts) > 1 or req not in ("probe", "current", "sample"):
+            return 404, error_document("INVALID_REQUEST", f"unknown request {u.path!r}; use "
+                                       "/probe, /current or /sample?from=&count=", buffer=b)
+        if req == "probe":
+            return 200, probe_document(self.model, b)
+        if req == "current":
+            if "at" in q:
+                return 400, error_document("UNSUPPORTED", "current?at= is not supported",
+                                           buffer=b)
+            obs, first, nxt = b.current()
+            return 200, streams_document(self.model, obs, buffer=b, first_sequence=first,
+                                         next_sequence=nxt, last_sequence=nxt - 1)
+        try:
+            start = int(q["from"][0]) if "from" in q else None
+            count = int(q["count"][0]) if "count" in q else 100
+        except ValueError:
+            return 400, error_document("INVALID_REQUEST", "from and count must be integers",
+                                       buffer=b)
+        try:
+            obs, first, nxt, last = b.sample(start, count)
+        except OutOfRangeError as exc:
+            return 400, error_document("OUT_OF_RANGE", str(exc), buffer=b)
+        return 200, streams_document(self.model, obs, buffer=b, first_sequence=first,
+                                     next_sequence=nxt, last_sequence=last)
+
+    def close(self) -> None:
+        """Stop serving."""
+        self._server.shutdown()
+        self._server.server_close()
+        self._thread.join(5)
+
+
+# ---------------------------------------------------------------------------- SHDR
+def _shdr_value(v: Any) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "UNAVAILABLE"
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return str(v).replace("|", "/").replace("\n", " ")
+
+
+class ShdrAdapter:
+    """An SHDR adapter: a TCP server that agents (cppagent) connect to.
+
+    Parameters
+    ----------
+    model : DeviceModel
+        The device (its data item ids are the SHDR keys).
+    host, port : str, int
+        Address to listen on (port 0: any free port).
+    insecure : bool, default False
+        Listen on a non-loopback address (SHDR has no authentication).
+    """
+
+    def __init__(self, model: DeviceModel, *, host: str = "127.0.0.1", port: int = 7878,
+                 insecure: bool = False) -> None:
+        if not insecure and not _loopback(host):
+            raise ConfigError(f"the SHDR adapter on {host} would face the network without "
+                              "authentication (SHDR has none): listen on 127.0.0.1 and let "
+                              "the agent connect locally, or give --shdr-insecure")
+        self.model = model
+        self._clients: list[socket.socket] = []
+        self._lock = threading.Lock()
+        self._current: dict[str, str] = {}
+        adapter = self
+
+        class Handler(socketserver.BaseRequestHandler):
+            def handle(self) -> None:
+                sock: socket.socket = self.request
+                with adapter._lock:
+                    snapshot = "".join(f"{line}\n" for line in adapter._current.values())
+                    adapter._clients.append(sock)
+                try:
+                    if snapshot:
+                        sock.sendall(snapshot.encode())
+                    buf = b""
+                    while True:
+                        data = sock.recv(4096)
+                        if not data:
+                            return
+                        buf += data
+                        while b"\n" in buf:
+                            line, buf = buf.split(b"\n", 1)
+                            if line.strip().startswith(b"* PING"):
+                                with adapter._lock:
+                                    sock.sendall(b"* PONG 10000\n")
+                except OSError:
+                    return
+                finally:
+                    with adapter._lock:
+                        if sock in adapter._clients:
+                            adapter._clients.remove(sock)
+
+        class Server(socketserver.ThreadingTCPServer):
+            allow_reuse_address = True
+            daemon_threads = True
+
+        try:
+            self._server = Server((host, port), Handler)
+        except OSError as exc:
+            reason = exc.strerror or exc
+            raise ConfigError(f"cannot listen on {host}:{port} for SHDR ({reason}); choose "
+                              "another port in --shdr") from None
+        self.host, self.port = host, int(self._server.server_address[1])
+        self._thread = threading.Thread(target=self._server.serve_forever, name="shdr",
+                                        daemon=True)
+        self._thread.start()
+
+    @property
+    def n_clients(self) -> int:
+        """Connected agents."""
+        with self._lock:
+            return len(self._clients)
+
+    def send(self, timestamp: str, items: list[tuple[str, Any]]) -> None:
+        """Send one time's values (``[(key, value), ...]``) to every connected agent."""
+        if not items:
+            return
+        samples = [(k, v) for k, v in items if not isinstance(v, tuple)]
+        lines = []
+        if samples:
+            lines.append(timestamp + "".join(f"|{k}|{_shdr_value(v)}" for k, v in samples))
+        for k, v in items:
+            if isinstance(v, tuple):  # condition: (level, native_code, message)
+                level, code, text = v
+                lines.append(f"{timestamp}|{k}|{level}|{code or ''}|||{_shdr_value(text or '')}")
+        with self._lock:
+            for k, v in items:
+                self._current[k] = (f"{timestamp}|{k}|{_shdr_value(v)}"
+                                    if not isinstance(v, tuple) else lines[-1])
+            data = "".join(f"{line}\n" for line in lines).encode()
+            for sock in list(self._clients):
+                try:
+                    sock.sendall(data)
+                except OSError:
+                    self._clients.remove(sock)
+
+    def close(self) -> None:
+        """Stop serving and drop the clients."""
+        self._server.shutdown()
+        self._server.server_close()
+        with self._lock:
+            for s in self._clients:
+                try:
+                    s.shutdown(socket.SHUT_RDWR)
+                    s.close()
+                except OSError:
+                    pass
+            self._clients.clear()
+        self._thread.join(5)
+
+
+# ---------------------------------------------------------------------------- sink
+def _iso(t_ns: int) -> str:
+    from cnctwin.edge.mtconnect import _iso as iso
+
+    return iso(t_ns)
+
+
+class MTConnectSink:
+    """Runtime sink: drive signals and cnctwin results into an MTConnect buffer, served by an
+    agent and/or sent to an SHDR adapter's agents.
+
+    Parameters
+    ----------
+    machine : str
+        Machine name (the device).
+    agent : tuple of (host, port), optional
+        Serve the agent here.
+    shdr : tuple of (host, port), optional
+        Serve the SHDR adapter here.
+    buffer_size : int, default 131072
+        The agent's circular buffer (``--mtconnect-buffer``).
+    sample_hz : float, default 10
+        Rate of the drive-signal samples (a value every ``1/sample_hz`` s of the recording's
+        clock: the last cycle of each window) [Hz].
+    axes : sequence of str
+        Linear axes of the device model.
+    token, tls_cert, tls_key, insecure, shdr_insecure
+        Security of the agent and the adapter (:class:`MTConnectAgent`, :class:`ShdrAdapter`).
+    """
+
+    name = "mtconnect"
+
+    def __init__(self, machine: str, *, agent: tuple[str, int] | None = None,
+                 shdr: tuple[str, int] | None = None, buffer_size: int = 131_072,
+                 sample_hz: float = 10.0, axes: tuple[str, ...] = ("X1", "Y1", "Z1"),
+                 spindle: str = "SP1", token: str | None = None, tls_cert: str | None = None,
+                 tls_key: str | None = None, insecure: bool = False,
+                 shdr_insecure: bool = False) -> None:
+        if not (math.isfinite(sample_hz) and 0.01 <= sample_hz <= 500):
+            raise ConfigError(f"the MTConnect sample rate must be 0.01 ... 500 Hz, not "
+                              f"{sample_hz!r}")
+        self.model = machine_tool_device(machine, axes=axes, spindle=spindle)
+        self.buffer = ObservationBuffer(buffer_size)
+        self.axes, self.spindle, self.sample_hz = axes, spindle, sample_hz
+        self.agent = (MTConnectAgent(self.model, self.buffer, host=agent[0], port=agent[1],
+                                     token=token, tls_cert=tls_cert, tls_key=tls_key,
+                                     insecure=insecure) if agent else None)
+        try:
+            self.adapter = (ShdrAdapter(self.model, host=shdr[0], port=shdr[1],
+                                        insecure=shdr_insecure) if shdr else None)
+        except ConfigError:
+            if self.agent is not None:
+                self.agent.close()
+            raise
+        self._next_sample_cycle: int | None = None
+        self._last_event: dict[str, Any] = {}
+        self._holes = 0
+        self.observations = 0
+        self._put(None, [("avail", "AVAILABLE"), ("system", ("NORMAL", None, None)),
+                         (f"{self._sp}_cond", ("NORMAL", None, None))])
+
+    @property
+    def _sp(self) -> str:
+        return "".join(ch if ch.isalnum() else "_" for ch in self.spindle).lower()
+
+    def _put(self, t_ns: int | None, items: list[tuple[str, Any]]) -> None:
+        import time
+
+        t = time.time_ns() if t_ns is None else int(t_ns)
+        for key, v in items:
+            if isinstance(v, tuple):
+                self.buffer.add(key, t, v[0], native_code=v[1], message=v[2])
+            else:
+                self.buffer.add(key, t, v)
+        self.observations += len(items)
+        if self.adapter is not None:
+            self.adapter.send(_iso(t), items)
+
+    def _event(self, key: str, value: Any, out: list[tuple[str, Any]]) -> None:
+        if self._last_event.get(key) != value:
+            self._last_event[key] = value
+            out.append((key, value))
+
+    def write(self, messages: list[dict[str, Any]], chunk: Chunk | None) -> None:
+        """Put a chunk's decimated signals and the messages into the buffer."""
+        by_time: dict[int, list[tuple[str, Any]]] = {}
+        torque: dict[int, tuple[float, float]] = {}
+        for msg in messages:
+            if msg["kind"] == "torque":
+                c0 = int(msg["first_cycle"])
+                tq = msg["torque_nm"]
+                sp = msg["speed_rpm"]
+                for i in range(int(msg["n"])):
+                    torque[c0 + i] = (float(tq[i]) if tq[i] is not None else math.nan,
+                                      float(sp[i]) if sp[i] is not None else math.nan)
+        if chunk is not None and len(chunk):
+            self._samples(chunk, torque, by_time)
+            self._events(chunk, by_time)
+        for msg in messages:
+            t_ns = self._msg_time(msg, chunk)
+            items = by_time.setdefault(t_ns, [])
+            if msg["kind"] == "hole":
+                row = msg["row"]
+                self._holes += 1
+                items += [("holes", self._holes),
+                          (f"{self._sp}_hole_torque", row.get("torque_mean_nm")),
+                          ("hole_record", json.dumps(
+                              {k: row.get(k) for k in ("hole", "depth_mm", "torque_mean_nm",
+                                                       "torque_first_nm", "energy_j",
+                                                       "x_mm", "y_mm", "tool")},
+                              default=str))]
+            elif msg["kind"] == "alarm":
+                level = "WARNING" if msg.get("severity") == "warning" else "FAULT"
+                items.append((f"{self._sp}_cond", (level, str(msg.get("detector", "cnctwin")),
+                                                   str(msg.get("message", "anomaly")))))
+            elif msg["kind"] == "wear" and "wear" in msg:
+                items.append(("wear", f"{float(msg['wear']):.4g}"))
+            elif msg["kind"] in ("overload", "status") and msg.get("message"):
+                items.append(("system", ("WARNING", msg["kind"], str(msg["message"]))))
+        for t_ns in sorted(by_time):
+            self._put(t_ns, by_time[t_ns])
+
+    def _msg_time(self, msg: dict[str, Any], chunk: Chunk | None) -> int:
+        if chunk is not None and len(chunk):
+            return int(chunk.time_ns[0]) + round((int(msg["cycle"]) - chunk.first_cycle)
+                                                 * chunk.cycle_time_s * 1e9)
+        import time
+
+        return time.time_ns()
+
+    def _samples(self, chunk: Chunk, torque: dict[int, tuple[float, float]],
+                 by_time: dict[int, list[tuple[str, Any]]]) -> None:
+        step = max(1, round(1.0 / (self.sample_hz * chunk.cycle_time_s)))
+        if self._next_sample_cycle is None:
+            self._next_sample_cycle = chunk.first_cycle + step - 1
+        idx = np.arange(self._next_sample_cycle - chunk.first_cycle, len(chunk), step)
+        idx = idx[idx >= 0]
+        if idx.size:
+            self._next_sample_cycle = int(chunk.cycles[idx[-1]]) + step
+        sig = chunk.signals
+        sp = self._sp
+        for i in idx:
+            items: list[tuple[str, Any]] = []
+            for ax in self.axes:
+                k = "".join(ch if ch.isalnum() else "_" for ch in ax).lower()
+                pos = sig.get(f"ENC_POS|{ax}", sig.get(f"CTRL_POS|{ax}"))
+                if pos is not None:
+                    items.append((f"{k}_pos", float(pos[i])))
+                if f"LOAD|{ax}" in sig:
+                    items.append((f"{k}_load", float(sig[f"LOAD|{ax}"][i])))
+            if f"LOAD|{self.spindle}" in sig:
+                items.append((f"{sp}_load", float(sig[f"LOAD|{self.spindle}"][i])))
+            if f"POWER|{self.spindle}" in sig:
+                items.append((f"{sp}_power", float(sig[f"POWER|{self.spindle}"][i])))
+            c = int(chunk.cycles[i])
+            if c in torque:
+                items += [(f"{sp}_cut_torque", torque[c][0]), (f"{sp}_speed", torque[c][1])]
+            by_time.setdefault(int(chunk.time_ns[i]), []).extend(items)
+
+    def _events(self, chunk: Chunk, by_time: dict[int, list[tuple[str, Any]]]) -> None:
+        ev = chunk.events
+        if ev is None or ev.empty:
+            return
+        for _, row in ev.iterrows():
+            items: list[tuple[str, Any]] = []
+            if row.get("kind") == "call" and isinstance(row.get("path"), str):
+                self._event("program", row["path"], items)
+            tool = row.get("active_tool")
+            if tool is not None and not (isinstance(tool, float) and math.isnan(tool)):
+                with contextlib.suppress(TypeError, ValueError):
+                    self._event("tool", int(tool), items)
+            if items:
+                i = int(np.clip(int(row["cycle"]) - chunk.first_cycle, 0, len(chunk) - 1))
+                by_time.setdefault(int(chunk.time_ns[i]), []).extend(items)
+
+    def status(self) -> dict[str, Any]:
+        """Counters for ``status.json``."""
+        return {"observations": self.observations,
+                "next_sequence": self.buffer.next_sequence,
+                "first_sequence": self.buffer.first_sequence,
+                "agent": self.agent.url if self.agent else None,
+                "shdr_clients": self.adapter.n_clients if self.adapter else 0}
+
+    def close(self) -> None:
+        """Mark the device unavailable and stop serving."""
+        self._put(None, [("avail", "UNAVAILABLE")])
+        if self.agent is not None:
+            self.agent.close()
+        if self.adapter is not None:
+            self.adapter.close()

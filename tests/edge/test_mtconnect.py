@@ -1,0 +1,239 @@
+"""MTConnect out: the agent's documents against the official XSD (MTConnect 2.3, vendored from
+mtconnect/cppagent in tests/data/mtconnect/), sample paging across a buffer wrap, the SHDR
+adapter, and an edge run on the real Capture4Analysis recording serving both.
+"""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import threading
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from lxml import etree
+
+from cnctwin.edge.mtconnect import (
+    NS_STREAMS,
+    ObservationBuffer,
+    OutOfRangeError,
+    machine_tool_device,
+)
+from cnctwin.edge.mtconnect_server import MTConnectAgent, ShdrAdapter
+from cnctwin.exceptions import ConfigError
+from tests._services import free_port
+
+XSD_DIR = Path(__file__).parents[1] / "data" / "mtconnect"
+NS = {"m": NS_STREAMS}
+
+
+@pytest.fixture(scope="module")
+def schemas() -> dict[str, Any]:
+    return {k: etree.XMLSchema(etree.parse(str(XSD_DIR / f"MTConnect{k}_2.3_1.0.xsd")))
+            for k in ("Devices", "Streams", "Error")}
+
+
+def _valid(schemas: dict[str, Any], kind: str, body: bytes) -> Any:
+    doc = etree.fromstring(body)
+    schema = schemas[kind]
+    assert schema.validate(doc), schema.error_log.filter_from_errors()[:3]
+    return doc
+
+
+def _get(url: str, token: str | None = None) -> tuple[int, bytes]:
+    req = urllib.request.Request(url)
+    if token:
+        req.add_header("Authorization", f"Bearer {token}")
+    try:
+        with urllib.request.urlopen(req, timeout=10) as r:
+            return r.status, r.read()
+    except urllib.error.HTTPError as e:
+        return e.code, e.read()
+
+
+def test_paging_loses_nothing_and_repeats_nothing_across_a_wrap(schemas: dict[str, Any]) -> None:
+    """100 000 observations through a 4096-entry buffer (24 wraps); a client over HTTP that
+    follows nextSequence sees each exactly once, in order, every page XSD-valid."""
+    model = machine_tool_device("M1")
+    buf = ObservationBuffer(4096)
+    agent = MTConnectAgent(model, buf, port=0)
+    total = 100_000
+    read_up_to = [0]  # the client's position: the producer never overwrites unread entries
+    t0 = time.time_ns()
+
+    def produce() -> None:
+        for i in range(total):
+            while buf.next_sequence - read_up_to[0] >= buf.size - 1:
+                time.sleep(0.001)
+            buf.add("x1_pos", t0 + i * 2_000_000, float(i))
+
+    prod = threading.Thread(target=produce)
+    prod.start()
+    seen: list[int] = []
+    values: list[float] = []
+    nxt = 1
+    pages = 0
+    try:
+        while len(seen) < total:
+            status, body = _get(f"{agent.url}/sample?from={nxt}&count=1000")
+            assert status == 200, body[:300]
+            doc = etree.fromstring(body)
+            if pages % 10 == 0:
+                _valid(schemas, "Streams", body)
+            pages += 1
+            for el in doc.iterfind(".//m:Position", NS):
+                seen.append(int(el.get("sequence")))
+                values.append(float(el.text))
+            nxt = int(doc.find(".//m:Header", NS).get("nextSequence"))
+            read_up_to[0] = nxt - 1
+            if not len(doc.findall(".//m:Position", NS)):
+                time.sleep(0.002)
+    finally:
+        prod.join(60)
+        agent.close()
+    assert seen == list(range(1, total + 1))
+    assert values == [float(i) for i in range(total)]
+    assert buf.first_sequence > 1  # the buffer wrapped
+    # asking for what left the buffer is an OUT_OF_RANGE error, never a silent skip
+    with pytest.raises(OutOfRangeError, match="left the buffer"):
+        buf.sample(1, 10)
+
+
+def test_agent_documents_and_errors(schemas: dict[str, Any]) -> None:
+    model = machine_tool_device("DMC 60H")
+    buf = ObservationBuffer(64)
+    t = time.time_ns()
+    buf.add("avail", t, "AVAILABLE")
+    buf.add("sp1_cond", t, "FAULT", native_code="physics", message="torque 30 % above")
+    buf.add("sp1_speed", t, float("nan"))
+    buf.add("holes", t, 4)
+    agent = MTConnectAgent(model, buf, port=0, token="s3cret")
+    try:
+        assert _get(f"{agent.url}/probe")[0] == 401
+        st, body = _get(f"{agent.url}/probe", "s3cret")
+        probe = _valid(schemas, "Devices", body)
+        dev = probe.find(".//{*}Device")
+        assert dev.get("name") == "DMC 60H"
+        types = {d.get("type") for d in probe.iterfind(".//{*}DataItem")}
+        assert {"POSITION", "ROTARY_VELOCITY", "TORQUE", "LOAD", "CYCLE_COUNT",
+                "AVAILABILITY"} <= types
+        st, body = _get(f"{agent.url}/DMC 60H/current".replace(" ", "%20"), "s3cret")
+        cur = _valid(schemas, "Streams", body)
+        assert cur.find(".//m:Fault", NS).text == "torque 30 % above"
+        assert cur.find(".//m:RotaryVelocity", NS).text == "UNAVAILABLE"
+        st, body = _get(f"{agent.url}/sample?from=99", "s3cret")
+        assert st == 400
+        err = _valid(schemas, "Error", body)
+        assert err.find(".//{*}Error").get("errorCode") == "OUT_OF_RANGE"
+        st, body = _get(f"{agent.url}/nonsense", "s3cret")
+        assert st == 404
+        _valid(schemas, "Error", body)
+    finally:
+        agent.close()
+    with pytest.raises(ConfigError, match="faces the network"):
+        MTConnectAgent(model, buf, host="0.0.0.0", port=0)
+
+
+def test_shdr_adapter_snapshot_lines_and_ping() -> None:
+    model = machine_tool_device("M1")
+    ad = ShdrAdapter(model, port=0)
+    try:
+        ad.send("2026-01-01T00:00:00.000000Z", [("x1_pos", 1.25), ("avail", "AVAILABLE")])
+        with socket.create_connection(("127.0.0.1", ad.port), timeout=5) as s:
+            f = s.makefile("rwb")
+            first = {f.readline().decode().strip() for _ in range(2)}
+            assert first == {"2026-01-01T00:00:00.000000Z|x1_pos|1.25",
+                             "2026-01-01T00:00:00.000000Z|avail|AVAILABLE"}
+            deadline = time.time() + 5
+            while ad.n_clients < 1 and time.time() < deadline:
+                time.sleep(0.01)
+            ad.send("2026-01-01T00:00:01.000000Z",
+                    [("x1_pos", 2.5), ("sp1_cond", ("FAULT", "physics", "torque|high"))])
+            assert f.readline().decode().strip() == "2026-01-01T00:00:01.000000Z|x1_pos|2.5"
+            assert (f.readline().decode().strip()
+                    == "2026-01-01T00:00:01.000000Z|sp1_cond|FAULT|physics|||torque/high")
+            f.write(b"* PING\n")
+            f.flush()
+            assert f.readline().decode().strip() == "* PONG 10000"
+    finally:
+        ad.close()
+    with pytest.raises(ConfigError, match=r"no authentication|has none"):
+        ShdrAdapter(model, host="0.0.0.0", port=0)
+
+
+def test_edge_run_serves_the_real_recording(
+    c4a_file: Path, spindle_model: Any, tmp_path: Path, schemas: dict[str, Any]
+) -> None:
+    """``cnctwin edge run`` on the real Capture4Analysis recording at real speed with
+    ``--mtconnect`` and ``--shdr``: a client following nextSequence and an SHDR client see
+    the recording's own positions at their times (values to 6 significant digits)."""
+    from cnctwin.edge import save_spindle_model
+    from cnctwin.iotools import read_recording
+
+    model = save_spindle_model(spindle_model, tmp_path / "spindle.json")
+    port, shdr_port = free_port(), free_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cnctwin", "edge", "run", "--source", str(c4a_file),
+         "--model", str(model), "--out", str(tmp_path / "state"), "--quiet", "--no-anomaly",
+         "--speed", "1", "--machine", "DMC", "--mtconnect", f"http://127.0.0.1:{port}",
+         "--shdr", f"tcp://127.0.0.1:{shdr_port}", "--mtconnect-buffer", "100000"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    url = f"http://127.0.0.1:{port}"
+    positions: dict[int, tuple[str, float]] = {}
+    shdr_lines: list[str] = []
+    try:
+        deadline = time.time() + 30
+        while True:
+            try:
+                _, body = _get(f"{url}/probe")
+                break
+            except (urllib.error.URLError, ConnectionError):
+                assert proc.poll() is None, proc.communicate()[1]
+                assert time.time() < deadline
+                time.sleep(0.2)
+        _valid(schemas, "Devices", body)
+        sock = socket.create_connection(("127.0.0.1", shdr_port), timeout=20)
+        reader = threading.Thread(target=lambda: shdr_lines.extend(
+            sock.makefile("rb").read().decode().splitlines()), daemon=True)
+        reader.start()
+        nxt, seqs = 1, []
+        while proc.poll() is None:
+            try:
+                st, body = _get(f"{url}/sample?from={nxt}&count=500")
+            except (urllib.error.URLError, ConnectionError):
+                break  # the run ended between the poll and the request
+            doc = _valid(schemas, "Streams", body)
+            for el in doc.iterfind(".//m:ComponentStream/*/*", NS):
+                seqs.append(int(el.get("sequence")))
+                if el.tag.endswith("Position") and el.get("dataItemId") == "x1_pos":
+                    positions[int(el.get("sequence"))] = (el.get("timestamp"), float(el.text))
+            nxt = int(doc.find(".//m:Header", NS).get("nextSequence"))
+            time.sleep(0.2)
+        _, err = proc.communicate(timeout=30)
+        assert proc.returncode == 0, err
+        reader.join(10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    # every observation of the run exactly once (the buffer held them all)
+    assert sorted(seqs) == list(range(1, nxt)) and len(seqs) > 100
+    rec = read_recording(c4a_file)
+    enc = rec.hf["ENC_POS|X1"]
+    t = rec.hf["time"].dt.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    by_time = dict(zip(t, enc.to_numpy(), strict=True))
+    assert len(positions) > 20
+    for ts, v in positions.values():
+        assert ts in by_time
+        np.testing.assert_allclose(v, by_time[ts], rtol=1e-5, atol=1e-9)
+    x_lines = [ln for ln in shdr_lines if "|x1_pos|" in ln]
+    assert len(x_lines) >= len(positions) // 2
+    for ln in x_lines[-10:]:
+        ts, _, val = ln.split("|")[:3]
+        np.testing.assert_allclose(float(val), by_time[ts], rtol=1e-5, atol=1e-9)
+    assert any("|avail|UNAVAILABLE" in ln for ln in shdr_lines[-5:])
