@@ -17,7 +17,8 @@ from cnctwin.exceptions import CnctwinError
 __all__ = ["main"]
 
 # Modules that contribute subcommands, in help order. Each has ``register(subparsers)``.
-_COMMAND_MODULES: tuple[str, ...] = ("cnctwin.cli.io", "cnctwin.cli.store", "cnctwin.cli.sim",
+_COMMAND_MODULES: tuple[str, ...] = ("cnctwin.cli.io", "cnctwin.cli.opcua", "cnctwin.cli.store",
+                                      "cnctwin.cli.sim",
                                       "cnctwin.cli.servo", "cnctwin.cli.calibrate",
                                       "cnctwin.cli.twin",
                                       "cnctwin.cli.usecases",

@@ -66,6 +66,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="recording format: c4a (Capture4Analysis JSON) or parquet (chunk directory); "
         "default: the scenario's (parquet for tool_wear_run, c4a otherwise)",
     )
+    p.add_argument("--serve-opcua", metavar="opc.tcp://HOST:PORT",
+                   help="after simulating, serve the recording in real time from a "
+                   "SINUMERIK-like OPC UA server (Ctrl-C ends; writes OUT/nodes.toml for "
+                   "`cnctwin record`)")
+    p.add_argument("--serve-speed", type=float, default=1.0,
+                   help="with --serve-opcua: recording seconds per second (default 1)")
     f = p.add_argument_group("fleet (cnctwin simulate fleet)")
     f.add_argument("--machines", type=int, default=20, help="machines (default 20)")
     f.add_argument("--days", type=int, default=5, help="days from --start-day (default 5)")
@@ -134,7 +140,28 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         print(p)
     if args.program is not None:
         _print_limits(res.truth["limits"])
+    if args.serve_opcua:
+        from cnctwin.iotools import read_recording
+
+        _serve_opcua(read_recording(res.recording_paths[0]), args)
     return 0
+
+
+def _serve_opcua(rec: Any, args: argparse.Namespace) -> None:
+    import time
+
+    from cnctwin.edge.sinumerik_opcua import SinumerikOpcUaServer, write_node_file
+
+    nodes = write_node_file(rec, Path(args.out) / "nodes.toml")
+    srv = SinumerikOpcUaServer(rec, args.serve_opcua, speed=args.serve_speed, loop=True).start()
+    print(f"serving on {args.serve_opcua} (node file {nodes}); Ctrl-C ends", flush=True)
+    try:
+        while True:
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        srv.stop()
 
 
 def _print_limits(lim: dict[str, Any]) -> None:

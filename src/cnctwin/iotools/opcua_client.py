@@ -27,6 +27,7 @@ the recording goes on after the reconnect.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import os
 import threading
@@ -339,22 +340,29 @@ class OpcUaRecorder:
         return client
 
     async def _main(self) -> None:
+        import logging
+
+        for name in ("asyncua", "asyncua.client"):  # a lost server is reported by us
+            logging.getLogger(name).setLevel(logging.CRITICAL)
         client = await self._session(True)
         self._ready.set()
+        last_check = time.monotonic()
         while not self._stop.is_set():
             await asyncio.sleep(min(self.interval_s, 0.1))
             self._flush()
             if not self._lost.is_set():
+                if time.monotonic() - last_check < 1.0:
+                    continue
+                last_check = time.monotonic()
                 try:
-                    await client.check_connection()
+                    await asyncio.wait_for(client.nodes.server_state.read_value(),
+                                           min(self.options.timeout_s, 2.0))
                     continue
                 except Exception:
                     self._lost.set()
             self._flush(final=True)
-            try:
+            with contextlib.suppress(Exception):
                 await client.disconnect()
-            except Exception:
-                pass
             while not self._stop.is_set():
                 await asyncio.sleep(self.reconnect_s)
                 try:
@@ -372,10 +380,8 @@ class OpcUaRecorder:
                     self._resumed = True
                 break
         self._flush(final=True)
-        try:
+        with contextlib.suppress(Exception):
             await client.disconnect()
-        except Exception:
-            pass
 
     def stop(self) -> None:
         """Stop recording (returns when the client has disconnected)."""

@@ -1,0 +1,267 @@
+"""A SINUMERIK-like OPC UA server for tests and demos, fed by a (simulated) recording.
+
+``cnctwin simulate NAME --serve-opcua opc.tcp://HOST:PORT`` runs a scenario and serves its
+recording in real time the way a SINUMERIK 840D sl's OPC UA server (Access MyMachine /
+OPC UA) exposes the NC variables: string node ids in namespace 2 with the NC variable paths
+(SINUMERIK 840D sl, *NC variables and interface signals*, List Manual 01/2017)::
+
+    ns=2;s=/Channel/MachineAxis/actToolBasePos[u1,<n>]   ENC_POS|<axis>    position [mm]
+    ns=2;s=/Channel/MachineAxis/aaLoad[u1,<n>]           LOAD|<axis>       load [%]
+    ns=2;s=/Channel/MachineAxis/aaCurr[u1,<n>]           CURRENT|<axis>    current [A]
+    ns=2;s=/Channel/MachineAxis/aaPower[u1,<n>]          POWER|<axis>      power [W]
+    ns=2;s=/Channel/Spindle/cmdSpeed[u1,1]               CMD_SPEED|SP1     speed [rpm]
+    ns=2;s=/Channel/ProgramInfo/progName[u1]             program name (text)
+    ns=2;s=/Channel/State/actTNumber[u1]                 active tool (text)
+
+``<n>`` is the axis' number in the recording's axis map. Every value is written with the
+source timestamp of the recorded cycle it comes from, every ``interval_s`` of the recording
+(default 100 ms: the rate SINUMERIK's server delivers), and logged in :attr:`served` so a test
+can compare what a client recorded with what was served. All nodes are read-only.
+:func:`node_map` writes the matching node file for ``cnctwin record``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import threading
+import time
+import urllib.parse
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from cnctwin.exceptions import ConfigError
+from cnctwin.recording import Recording
+
+__all__ = ["SinumerikOpcUaServer", "node_ids", "write_node_file"]
+
+_AXIS_VARS = (("ENC_POS", "actToolBasePos", "mm"), ("LOAD", "aaLoad", "%"),
+              ("CURRENT", "aaCurr", "A"), ("POWER", "aaPower", "W"))
+
+
+def node_ids(rec: Recording) -> tuple[dict[str, str], dict[str, str]]:
+    """Column -> node id and text name -> node id of the variables served for ``rec``."""
+    numbers = {name: int(n) for n, name in rec.meta.axis_map.items()}
+    if not numbers:
+        numbers = {}
+        for c in rec.columns:
+            ax = c.split("|", 1)[1]
+            numbers.setdefault(ax, len(numbers) + 1)
+    sig: dict[str, str] = {}
+    for code, var, _ in _AXIS_VARS:
+        for ax, n in sorted(numbers.items(), key=lambda kv: kv[1]):
+            if f"{code}|{ax}" in rec.columns:
+                sig[f"{code}|{ax}"] = f"ns=2;s=/Channel/MachineAxis/{var}[u1,{n}]"
+    sp = next((ax for ax in numbers if ax.startswith("SP")), None)
+    if sp is not None and f"CMD_SPEED|{sp}" in rec.columns:
+        sig[f"CMD_SPEED|{sp}"] = "ns=2;s=/Channel/Spindle/cmdSpeed[u1,1]"
+    text = {"program": "ns=2;s=/Channel/ProgramInfo/progName[u1]",
+            "tool": "ns=2;s=/Channel/State/actTNumber[u1]"}
+    return sig, text
+
+
+def write_node_file(rec: Recording, path: str | Path) -> Path:
+    """Write the node file (``cnctwin record --nodes``) for the variables served for ``rec``."""
+    sig, text = node_ids(rec)
+    units = {c: u for code, _, u in _AXIS_VARS for c in sig if c.startswith(code + "|")}
+    lines = ["# SINUMERIK-like OPC UA server of cnctwin (cnctwin.edge.sinumerik_opcua)",
+             "[signals]"]
+    lines += [f'"{c}" = "{n}"' for c, n in sig.items()]
+    lines += ["", "[text]"] + [f'{k} = "{n}"' for k, n in text.items()]
+    lines += ["", "[units]"] + [f'"{c}" = "{u}"' for c, u in units.items()]
+    p = Path(path)
+    p.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return p
+
+
+class SinumerikOpcUaServer:
+    """Serve a recording's values in real time from SINUMERIK-style nodes.
+
+    Parameters
+    ----------
+    rec : Recording
+        What to serve (e.g. a simulator scenario's recording).
+    endpoint : str, default 'opc.tcp://127.0.0.1:4840'
+        Where to listen.
+    interval_s : float, default 0.1
+        Recording time between served values [s].
+    speed : float, default 1
+        Recording seconds per wall-clock second.
+    loop : bool, default False
+        Start over at the end (a demo that runs until stopped; the times go on).
+    start_s : float, default 0
+        Start this far into the recording (a server restarted mid-run goes on from there).
+    users : dict, optional
+        User name -> password: username authentication with Basic256Sha256 Sign and
+        SignAndEncrypt (certificate ``cert_file``/``key_file``, generated if missing);
+        without it anonymous access with no security (a test and demo server).
+    cert_file, key_file : path, optional
+        Server certificate (DER) and key (PEM).
+    """
+
+    def __init__(self, rec: Recording, endpoint: str = "opc.tcp://127.0.0.1:4840", *,
+                 interval_s: float = 0.1, speed: float = 1.0, loop: bool = False,
+                 start_s: float = 0.0, users: dict[str, str] | None = None,
+                 cert_file: str | Path | None = None, key_file: str | Path | None = None) -> None:
+        u = urllib.parse.urlsplit(endpoint)
+        if u.scheme != "opc.tcp" or not u.hostname or not u.port:
+            raise ConfigError(f"--serve-opcua {endpoint!r}: expected opc.tcp://HOST:PORT")
+        if users and not (cert_file and key_file):
+            raise ConfigError("a secured server needs cert_file and key_file")
+        self.rec, self.endpoint, self.interval_s = rec, endpoint, interval_s
+        self.speed, self.loop, self.users = speed, loop, users
+        self.start_s = start_s
+        self.cert_file, self.key_file = cert_file, key_file
+        self.signals, self.text = node_ids(rec)
+        self.served: list[tuple[int, dict[str, Any]]] = []
+        self._stop = threading.Event()
+        self._done = threading.Event()
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> SinumerikOpcUaServer:
+        """Start serving in a background thread (returns once the server listens)."""
+        self._thread = threading.Thread(target=lambda: asyncio.run(self._main()),
+                                        name="sinumerik-opcua", daemon=True)
+        self._thread.start()
+        self._ready.wait(30)
+        if self._error is not None:
+            raise ConfigError(f"the OPC UA server on {self.endpoint} did not start: "
+                              f"{self._error}")
+        return self
+
+    @property
+    def finished(self) -> bool:
+        """The recording has been served to its end."""
+        return self._done.is_set()
+
+    def stop(self) -> None:
+        """Stop serving (the port is free afterwards)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(15)
+
+    async def _main(self) -> None:
+        import logging
+
+        from asyncua import Server, ua
+
+        for name in ("asyncua", "asyncua.server"):
+            logging.getLogger(name).setLevel(logging.ERROR)
+        try:
+            if self.users:
+                from asyncua.crypto.cert_gen import setup_self_signed_certificate
+                from asyncua.server.user_managers import UserManager
+                from cryptography.x509.oid import ExtendedKeyUsageOID
+
+                users = self.users
+
+                class Users(UserManager):
+                    def get_user(self, iserver: Any, username: str | None = None,
+                                 password: str | None = None, certificate: Any = None) -> Any:
+                        from asyncua.server.users import User, UserRole
+
+                        if username in users and password == users[username]:
+                            return User(role=UserRole.User, name=username)
+                        return None
+
+                server = Server(user_manager=Users())
+            else:
+                server = Server()
+            await server.init()
+            server.set_endpoint(self.endpoint)
+            server.set_server_name("SINUMERIK 840D sl (cnctwin simulator)")
+            if self.users:
+                uri = "urn:cnctwin:sinumerik-sim"
+                await server.set_application_uri(uri)
+                Path(str(self.cert_file)).parent.mkdir(parents=True, exist_ok=True)
+                await setup_self_signed_certificate(
+                    Path(str(self.key_file)), Path(str(self.cert_file)), uri, "localhost",
+                    [ExtendedKeyUsageOID.SERVER_AUTH], {"commonName": "sinumerik-sim"})
+                await server.load_certificate(str(self.cert_file))
+                await server.load_private_key(str(self.key_file))
+                server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_Sign,
+                                            ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt])
+                server.set_security_IDs(["Username"])
+            else:
+                server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+            idx = await server.register_namespace("SinumerikVarProvider")
+            if idx != 2:
+                raise ConfigError(f"namespace index {idx}, expected 2")
+            folder = await server.nodes.objects.add_folder(ua.NodeId("Sinumerik", idx),
+                                                           ua.QualifiedName("Sinumerik", idx))
+            nodes: dict[str, Any] = {}
+            for name, nid in {**self.signals, **self.text}.items():
+                vt = ua.VariantType.Double if name in self.signals else ua.VariantType.String
+                init: Any = 0.0 if name in self.signals else ""
+                node = await folder.add_variable(ua.NodeId.from_string(nid),
+                                                 ua.QualifiedName(nid.split("s=", 1)[1], idx),
+                                                 init, varianttype=vt)
+                nodes[name] = node.nodeid
+            async with server:
+                self._ready.set()
+                await self._feed(server, nodes)
+        except BaseException as exc:
+            self._error = exc
+            self._ready.set()
+
+    def _values(self) -> tuple[np.ndarray, dict[str, np.ndarray], list[tuple[str, str]]]:
+        rec = self.rec
+        t_ns = rec.hf["time"].to_numpy(dtype="datetime64[ns]").view(np.int64)
+        step = max(1, round(self.interval_s / rec.meta.cycle_time_s))
+        first = min(rec.n_cycles - 1, max(0, round(self.start_s / rec.meta.cycle_time_s)))
+        idx = np.arange(first, rec.n_cycles, step)
+        cols = {c: rec.hf[c].to_numpy(dtype=float)[idx] for c in self.signals}
+        prog, tool = "", ""
+        ev = rec.events
+        text: list[tuple[str, str]] = []
+        cyc = rec.cycles
+        for i in idx:
+            c = int(cyc[i])
+            if len(ev):
+                upto = ev[ev["cycle"] <= c]
+                calls = upto[upto["kind"] == "call"]["path"].dropna()
+                prog = str(calls.iloc[-1]) if len(calls) else prog
+                if "active_tool" in upto:
+                    tools = upto["active_tool"].dropna()
+                    tool = str(int(tools.iloc[-1])) if len(tools) else tool
+            text.append((prog, tool))
+        return t_ns[idx], cols, text
+
+    async def _feed(self, server: Any, nodes: dict[str, Any]) -> None:
+        from asyncua import ua
+
+        t_src, cols, text = self._values()
+        span = int(t_src[-1] - t_src[0]) + round(self.interval_s * 1e9) if len(t_src) else 0
+        offset = 0
+        while True:
+            t0 = time.monotonic()
+            for k in range(len(t_src)):
+                if self._stop.is_set():
+                    return
+                due = t0 + k * self.interval_s / self.speed
+                await asyncio.sleep(max(0.0, due - time.monotonic()))
+                t_k = int(t_src[k]) + offset
+                ts = pd.Timestamp(t_k, tz="UTC").to_pydatetime()
+                vals: dict[str, Any] = {c: float(v[k]) for c, v in cols.items()}
+                vals["program"], vals["tool"] = text[k]
+                for name, value in vals.items():
+                    vt = ua.VariantType.String if name in self.text else ua.VariantType.Double
+                    if vt == ua.VariantType.Double and not math.isfinite(value):
+                        dv = ua.DataValue(StatusCode_=ua.StatusCode(ua.StatusCodes.BadNoData),
+                                          SourceTimestamp=ts, ServerTimestamp=ts)
+                    else:
+                        dv = ua.DataValue(ua.Variant(value, vt), SourceTimestamp=ts,
+                                          ServerTimestamp=ts)
+                    await server.write_attribute_value(nodes[name], dv)
+                self.served.append((t_k, vals))
+            offset += span
+            if not self.loop:
+                self._done.set()
+                while not self._stop.is_set():
+                    await asyncio.sleep(0.1)
+                return
