@@ -152,8 +152,8 @@ def _serve_opcua(rec: Any, args: argparse.Namespace) -> None:
 
     from cnctwin.edge.sinumerik_opcua import SinumerikOpcUaServer, write_node_file
 
-    nodes = write_node_file(rec, Path(args.out) / "nodes.toml")
     srv = SinumerikOpcUaServer(rec, args.serve_opcua, speed=args.serve_speed, loop=True).start()
+    nodes = write_node_file(rec, Path(args.out) / "nodes.toml")  # once the server listens
     print(f"serving on {args.serve_opcua} (node file {nodes}); Ctrl-C ends", flush=True)
     try:
         while True:

@@ -155,21 +155,12 @@ class SinumerikOpcUaServer:
         try:
             if self.users:
                 from asyncua.crypto.cert_gen import setup_self_signed_certificate
-                from asyncua.server.user_managers import UserManager
                 from cryptography.x509.oid import ExtendedKeyUsageOID
 
-                users = self.users
+                from cnctwin.edge.opcua import _UserManager, hash_password
 
-                class Users(UserManager):
-                    def get_user(self, iserver: Any, username: str | None = None,
-                                 password: str | None = None, certificate: Any = None) -> Any:
-                        from asyncua.server.users import User, UserRole
-
-                        if username in users and password == users[username]:
-                            return User(role=UserRole.User, name=username)
-                        return None
-
-                server = Server(user_manager=Users())
+                hashed = {u: hash_password(p, iterations=1000) for u, p in self.users.items()}
+                server = Server(user_manager=_UserManager(hashed))
             else:
                 server = Server()
             await server.init()

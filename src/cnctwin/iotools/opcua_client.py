@@ -174,9 +174,26 @@ def _connect_message(url: str, opts: OpcUaClientOptions, exc: BaseException) -> 
     if "security" in low or "certificate" in low or "badsecurity" in low:
         return (f"OPC UA server {url} refused the secure channel ({text}): check the "
                 "certificate, its key and the security policy")
+    if isinstance(exc, asyncio.TimeoutError | TimeoutError) and _reachable(url) \
+            and opts.security not in ("None", "", None):
+        return (f"OPC UA server {url} did not answer the secured channel within "
+                f"{opts.timeout_s:g} s: the server certificate given (--server-cert) is not "
+                "the server's, or the server does not offer this security policy")
     if isinstance(exc, OSError | asyncio.TimeoutError | TimeoutError):
         return f"cannot reach the OPC UA server {url} ({text})"
     return f"cannot connect to the OPC UA server {url}: {text}"
+
+
+def _reachable(url: str) -> bool:
+    import socket
+    import urllib.parse
+
+    u = urllib.parse.urlsplit(url)
+    try:
+        with socket.create_connection((u.hostname or "", u.port or 4840), timeout=2):
+            return True
+    except OSError:
+        return False
 
 
 async def _check_nodes(client: Any, nodes: NodeMap) -> dict[str, Any]:
