@@ -199,3 +199,34 @@ def test_cli_record_from_simulate_serve_opcua(tmp_path: Path) -> None:
     t = rec.hf["time"].to_numpy(dtype="datetime64[ns]").view(np.int64)
     for ti, v in zip(t, rec.hf["ENC_POS|X1"].to_numpy(), strict=True):
         assert v == by_time[int(ti) % (max(by_time) + 1)] or int(ti) > max(by_time)
+
+
+def test_edge_run_with_an_opcua_source(sim_rec: Any, tmp_path: Path) -> None:
+    """``cnctwin edge run --source opc.tcp://... --nodes FILE``: the runtime computes the
+    cutting torque on the rows the server delivers and stops when the server goes quiet."""
+    import json
+
+    from cnctwin.edge import save_spindle_model
+    from cnctwin.edge.sinumerik_opcua import SinumerikOpcUaServer, write_node_file
+    from cnctwin.spindle import SpindleModel
+
+    url = f"opc.tcp://127.0.0.1:{free_port()}"
+    nodes = write_node_file(sim_rec, tmp_path / "nodes.toml")
+    model = save_spindle_model(SpindleModel.from_parameters("thesis_spinner_840dsl"),
+                               tmp_path / "spindle.json")
+    srv = SinumerikOpcUaServer(sim_rec, url, speed=3.0).start()
+    try:
+        res = subprocess.run(
+            [str(Path(sys.executable).parent / "cnctwin"), "edge", "run", "--source", url,
+             "--nodes", str(nodes), "--model", str(model), "--out", str(tmp_path / "state"),
+             "--machine", "sim", "--quiet", "--no-anomaly", "--no-holes", "--idle-timeout-s",
+             "2"], capture_output=True, text=True, timeout=120)
+    finally:
+        srv.stop()
+    assert res.returncode == 0, res.stderr
+    status = json.loads((tmp_path / "state" / "status.json").read_text())
+    assert status["cycles"] >= 30
+    msgs = [json.loads(x) for x in (tmp_path / "state" / "results.jsonl").read_text().split("\n")
+            if x.strip()]
+    torque = [m for m in msgs if m["kind"] == "torque"]
+    assert torque and sum(m["n"] for m in torque) == status["cycles"]

@@ -83,6 +83,20 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    "FILE' adds one)")
     r.add_argument("--opcua-publish-hz", type=float, default=10.0,
                    help="OPC UA publish rate of the decimated 500 Hz values [Hz]")
+    r.add_argument("--nodes", type=Path, metavar="FILE",
+                   help="with --source opc.tcp://HOST:PORT: the node file of the control's "
+                   "OPC UA variables (docs/opcua-client.md)")
+    r.add_argument("--security", default="None",
+                   choices=("None", "Basic256Sha256_Sign", "Basic256Sha256_SignAndEncrypt"),
+                   help="OPC UA source: security policy and mode (default None)")
+    r.add_argument("--client-cert", type=Path, metavar="FILE",
+                   help="OPC UA source: client certificate for a secured channel")
+    r.add_argument("--client-key", type=Path, metavar="FILE", help="OPC UA source: its key")
+    r.add_argument("--server-cert", type=Path, metavar="FILE",
+                   help="OPC UA source: the server certificate to trust")
+    r.add_argument("--user", metavar="NAME",
+                   help="OPC UA source: user name (password: --password-file or "
+                   "CNCTWIN_OPCUA_PASSWORD)")
     r.add_argument("--mtconnect", metavar="URL",
                    help="serve an MTConnect agent (/probe, /current, /sample) at "
                    "http://HOST:PORT while the runtime runs (docs/mtconnect.md)")
@@ -270,6 +284,18 @@ def _build(args: argparse.Namespace) -> Any:
                   file=sys.stderr)
         if not src.machine:
             src.machine = str((src.recorder.decoder.metadata or {}).get("applicationName", ""))
+    elif args.source.startswith("opc.tcp://"):
+        from cnctwin.cli.opcua import client_options
+        from cnctwin.edge.sources import OpcUaSource
+        from cnctwin.iotools.opcua_client import read_node_map
+
+        if args.nodes is None:
+            raise ConfigError("an OPC UA source needs --nodes FILE (the node file: [signals] "
+                              "column = node id; docs/opcua-client.md)")
+        src = OpcUaSource(args.source, read_node_map(args.nodes),
+                          options=client_options(args), idle_timeout_s=args.idle_timeout_s,
+                          machine=args.machine)
+        src.start()
     else:
         src = ReplaySource(args.source, chunk_cycles=args.chunk_cycles, speed=args.speed)
     machine = args.machine or src.machine or "machine"

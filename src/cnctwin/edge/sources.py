@@ -14,6 +14,7 @@ import urllib.parse
 from collections.abc import Iterator
 from dataclasses import dataclass
 from os import PathLike
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -324,3 +325,108 @@ class DatabusSource:
         """Disconnect."""
         self._closed = True
         self.recorder.stop()
+
+
+class OpcUaSource:
+    """Live values from the control's OPC UA server (:class:`~cnctwin.iotools.opcua_client.
+    OpcUaRecorder`), in chunks of the rows that arrived in each poll window.
+
+    One row per source timestamp the server delivers (about 100 ms on SINUMERIK): the
+    chunks' ``cycle_time_s`` is the subscription's interval, not the 2 ms position-control
+    cycle, and a lost connection is a gap in the cycle counter (``gap_before``).
+
+    Parameters
+    ----------
+    url : str
+        ``opc.tcp://HOST:PORT``.
+    nodes : NodeMap
+        The node file (:func:`~cnctwin.iotools.opcua_client.read_node_map`).
+    options : OpcUaClientOptions, optional
+        Security and user.
+    interval_s : float, default 0.1
+        Publishing interval [s].
+    window_s : float, default 0.5
+        Poll window [s].
+    idle_timeout_s : float or None
+        Stop when no row arrived for this long [s].
+    machine : str
+        Machine name.
+    """
+
+    def __init__(self, url: str, nodes: Any, *, options: Any = None, interval_s: float = 0.1,
+                 window_s: float = 0.5, idle_timeout_s: float | None = None,
+                 machine: str = "") -> None:
+        from cnctwin.iotools.opcua_client import OpcUaRecorder
+
+        self.recorder = OpcUaRecorder(url, nodes, options=options, interval_s=interval_s,
+                                      machine=machine)
+        self.window_s, self.idle_timeout_s = window_s, idle_timeout_s
+        self.machine = machine
+        self.live = True
+        self.issues: list[str] = []
+        self._done = 0
+        self._interrupted = False
+        self._started = False
+
+    def start(self) -> OpcUaSource:
+        """Connect and check every node (raises a ConfigError naming a bad one)."""
+        if not self._started:
+            self.recorder.start()
+            self._started = True
+        return self
+
+    def _chunk(self, rows: list[tuple[int, int, dict[str, Any]]]) -> Chunk:
+        from cnctwin.recording import CounterGap
+
+        cycles = np.array([r[0] for r in rows], dtype=np.int64)
+        t_ns = np.array([r[1] for r in rows], dtype=np.int64)
+        cols = self.recorder.nodes.signals
+        sig = {c: np.array([_float(r[2].get(c)) for r in rows]) for c in cols}
+        prev = self._last_cycle
+        gap = CounterGap(prev, int(cycles[0])) if prev is not None and \
+            cycles[0] != prev + 1 else None
+        self._last_cycle = int(cycles[-1])
+        return Chunk(cycles, t_ns, sig, gap_before=gap,
+                     cycle_time_s=self.recorder.interval_s, machine=self.machine,
+                     received_ns=time.time_ns())
+
+    _last_cycle: int | None = None
+
+    def chunks(self) -> Iterator[Chunk]:
+        """One chunk per poll window with rows."""
+        self.start()
+        last = time.monotonic()
+        while not self._interrupted:
+            time.sleep(self.window_s)
+            rows = self.recorder.rows()[self._done:]
+            if not rows:
+                if self.idle_timeout_s is not None and \
+                        time.monotonic() - last > self.idle_timeout_s:
+                    return
+                continue
+            last = time.monotonic()
+            self._done += len(rows)
+            yield self._chunk(rows)
+
+    def interrupt(self) -> None:
+        """End :meth:`chunks` after the current window (thread-safe)."""
+        self._interrupted = True
+
+    def drain(self) -> Iterator[Chunk]:
+        """Disconnect and yield the rows received so far."""
+        self.recorder.stop()
+        rows = self.recorder.rows()[self._done:]
+        self._done += len(rows)
+        if rows:
+            yield self._chunk(rows)
+
+    def close(self) -> None:
+        """Disconnect."""
+        self.recorder.stop()
+
+
+def _float(v: Any) -> float:
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return float("nan")
