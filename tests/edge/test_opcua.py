@@ -134,6 +134,30 @@ def test_opcua_matches_batch(wear_recording: Recording, spindle_model: SpindleMo
             eu = await obj.get_child([f"{idx}:CuttingTorque", "0:EngineeringUnits"])
             final["eu"] = await eu.read_value()
             final["ns"] = ua.StatusCodes.BadWaitingForInitialData
+            # the OPC 40501 structure, browsed by the specification's browse names
+            mt = await c.get_namespace_index("http://opcfoundation.org/UA/MachineTool/")
+            mach = await c.get_namespace_index("http://opcfoundation.org/UA/Machinery/")
+            di = await c.get_namespace_index("http://opcfoundation.org/UA/DI/")
+            machine = await c.nodes.objects.get_child([f"{mach}:Machines", f"{mt}:mill-1"])
+            final["mt_type"] = await machine.read_type_definition()
+            final["mt_type_name"] = await c.get_node(final["mt_type"]).read_browse_name()
+            final["mt_children"] = {(q.NamespaceIndex, q.Name) for q in [
+                await ch.read_browse_name() for ch in await machine.get_children()]}
+            final["mt_ns"] = (mt, di)
+            sp = await machine.get_child([f"{mt}:Monitoring", f"{mt}:Spindle"])
+            final["IsRotating"] = await (await sp.get_child([f"{mt}:IsRotating"])).read_value()
+            final["MT.ActualSpeed"] = await (await sp.get_child([f"{idx}:ActualSpeed"])
+                                             ).read_value()
+            final["MT.CuttingTorque"] = await (await sp.get_child([f"{idx}:CuttingTorque"])
+                                               ).read_value()
+            ap = await machine.get_child([f"{mt}:Production", f"{mt}:ActiveProgram"])
+            final["ProgramName"] = await (await ap.get_child([f"{mt}:Name"])).read_value()
+            final["MT.HoleCount"] = await (await ap.get_child([f"{idx}:HoleCount"])).read_value()
+            msgs = await machine.get_child([f"{mt}:Notification", f"{mt}:Messages"])
+            final["AlarmActive"] = await (await msgs.get_child([f"{idx}:AlarmActive"])
+                                          ).read_value()
+            ser = await machine.get_child([f"{di}:Identification", f"{di}:SerialNumber"])
+            final["SerialNumber"] = await ser.read_value()
 
     th = threading.Thread(target=lambda: asyncio.run(client()))
     th.start()
@@ -194,6 +218,56 @@ def test_opcua_matches_batch(wear_recording: Recording, spindle_model: SpindleMo
                         rel_tol=1e-12)
     # no wear model given: the value is not invented
     assert final["ToolWear"].StatusCode_.value == final["ns"]
+    # OPC 40501: a MachineToolType object with the specification's children, carrying the
+    # same values the runtime computed
+    mt, di = final["mt_ns"]
+    assert final["mt_type_name"].Name == "MachineToolType"
+    assert final["mt_type_name"].NamespaceIndex == mt
+    assert {(mt, "Monitoring"), (mt, "Production"), (mt, "Notification"),
+            (di, "Identification")} <= final["mt_children"]
+    assert final["SerialNumber"] == "mill-1"
+    assert final["MT.ActualSpeed"] == final["SpindleSpeed"].Value.Value
+    assert final["IsRotating"] is (abs(final["SpindleSpeed"].Value.Value) > 1.0)
+    assert final["MT.CuttingTorque"] == final["CuttingTorque"].Value.Value
+    assert final["MT.HoleCount"] == 3
+    assert final["AlarmActive"] is False
+    calls = rec.events[rec.events["kind"] == "call"]["path"].dropna()
+    assert final["ProgramName"] == str(calls.iloc[-1])
+
+
+def test_opcua_machine_tool_alarm() -> None:
+    """An alarm message of the runtime shows on the OPC 40501 object's Notification."""
+    from cnctwin.edge.pipeline import Chunk
+
+    url = f"opc.tcp://127.0.0.1:{free_port()}/cnctwin"
+    sink = OpcUaSink(url, machine="mill-2")
+    t0 = 1_700_000_000 * 10**9
+    chunk = Chunk(np.arange(100, 150, dtype=np.int64),
+                  t0 + np.arange(50, dtype=np.int64) * 2_000_000, {})
+    try:
+        sink.write([{"kind": "alarm", "cycle": 120, "detector": "physics",
+                     "message": "torque 40 % above the model", "score": 4.0,
+                     "threshold": 3.0}], chunk)
+        sink.flush()
+
+        async def read() -> tuple[Any, Any]:
+            from asyncua import Client
+
+            async with Client(url) as c:
+                mt = await c.get_namespace_index("http://opcfoundation.org/UA/MachineTool/")
+                mach = await c.get_namespace_index("http://opcfoundation.org/UA/Machinery/")
+                idx = await c.get_namespace_index("urn:cnctwin:edge")
+                msgs = await c.nodes.objects.get_child(
+                    [f"{mach}:Machines", f"{mt}:mill-2", f"{mt}:Notification", f"{mt}:Messages"])
+                active = await (await msgs.get_child([f"{idx}:AlarmActive"])).read_value()
+                text = await (await msgs.get_child([f"{idx}:AlarmMessage"])).read_value()
+                return active, text
+
+        active, text = asyncio.run(read())
+    finally:
+        sink.close()
+    assert active is True
+    assert text.startswith("physics: torque 40 % above the model at cycle 120")
 
 
 @pytest.mark.parametrize("hz", [0.0, -1.0, float("nan"), 1000.0])

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import socket
 from pathlib import Path
 from typing import Any
 
@@ -86,7 +87,14 @@ def secured(tmp_path_factory: pytest.TempPathFactory, c4a_file: Path) -> Any:
             assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
             assert time.monotonic() < deadline
             time.sleep(0.2)
-        time.sleep(1.0)
+        while True:  # the server listens once its address space (OPC 40501 too) is built
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+                assert time.monotonic() < deadline
+                time.sleep(0.2)
         yield url, d
     finally:
         proc.terminate()

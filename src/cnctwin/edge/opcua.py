@@ -245,6 +245,11 @@ class OpcUaSink:
     max_pending : int, default 64
         Batches of writes queued for the server loop before :meth:`write` waits (back
         pressure instead of dropping values).
+    security : OpcUaSecurity, optional
+        Basic256Sha256 and users; None serves anonymous clients without security.
+    machine_tool : bool, default True
+        Also offer the OPC 40501 (Machine Tools) structure built from the official NodeSets
+        (:mod:`cnctwin.edge.opcua_machinetool`; about 3 s more at start).
 
     Raises
     ------
@@ -259,7 +264,8 @@ class OpcUaSink:
                  thermal: Any = None, wear: Any = None, wear_baseline_holes: int = 6,
                  wear_set_size: int | None = 6, alarm_hold_s: float = 1.0,
                  hole_history_s: float = 300.0, start_timeout_s: float = 10.0,
-                 max_pending: int = 64, security: OpcUaSecurity | None = None) -> None:
+                 max_pending: int = 64, security: OpcUaSecurity | None = None,
+                 machine_tool: bool = True) -> None:
         try:
             import asyncua  # noqa: F401
         except ImportError as exc:  # pragma: no cover - depends on the environment
@@ -288,6 +294,9 @@ class OpcUaSink:
         self.alarm_hold_s, self.hole_history_s = alarm_hold_s, hole_history_s
         self.max_pending = max_pending
         self.security = security
+        self.machine_tool = machine_tool
+        self._mirror: dict[Any, list[tuple[Any, Any]]] = {}
+        self._program = ""
         self.published = 0
         self.windows = 0
         self.last_error = ""
@@ -426,12 +435,31 @@ class OpcUaSink:
         for path in nodes:
             if path not in ("HoleCount", "Alarm.Active", "Alarm.Count"):
                 await server.write_attribute_value(nodes[path], waiting)
+        if self.machine_tool:
+            from cnctwin.edge.opcua_machinetool import add_machine_tool
+
+            mt = await add_machine_tool(server, m, idx)
+            same = lambda dv: dv  # noqa: E731
+            rotating = lambda dv: ua.DataValue(  # noqa: E731
+                ua.Variant(bool(abs(float(dv.Value.Value)) > 1.0), ua.VariantType.Boolean),
+                SourceTimestamp=dv.SourceTimestamp, ServerTimestamp=dv.ServerTimestamp)
+            self._mirror = {
+                nodes["SpindleSpeed"]: [(mt["ActualSpeed"], same), (mt["IsRotating"], rotating)],
+                nodes["CuttingTorque"]: [(mt["CuttingTorque"], same)],
+                nodes["HoleCount"]: [(mt["HoleCount"], same)],
+                nodes["Alarm.Active"]: [(mt["AlarmActive"], same)],
+                nodes["Alarm.Message"]: [(mt["AlarmMessage"], same)],
+            }
+            nodes["MT.ProgramName"] = mt["ProgramName"]
         await server.start()
         self._server = server
 
     async def _apply(self, updates: list[tuple[Any, Any]]) -> None:
         for nodeid, dv in updates:
             await self._server.write_attribute_value(nodeid, dv)
+            for target, fn in self._mirror.get(nodeid, ()):
+                if dv.Value is not None and dv.Value.Value is not None:
+                    await self._server.write_attribute_value(target, fn(dv))
 
     # ---------------------------------------------------------------- values
     def _dv(self, value: Any, vt: str, t_ns: int) -> Any:
@@ -569,6 +597,7 @@ class OpcUaSink:
 
     # ---------------------------------------------------------------- Sink protocol
     def write(self, messages: list[dict[str, Any]], chunk: Chunk | None) -> None:
+        prog = self._program_update(chunk)
         if chunk is not None and len(chunk):
             self._cycle_time_s = chunk.cycle_time_s
             self._anchor = (chunk.first_cycle, int(chunk.time_ns[0]))
@@ -578,7 +607,7 @@ class OpcUaSink:
                     raise ConfigError(f"publish_hz {self.publish_hz:g} is above the cycle "
                                       f"rate {1 / chunk.cycle_time_s:g} Hz")
                 self._window = m
-        updates: list[tuple[Any, Any]] = []
+        updates: list[tuple[Any, Any]] = list(prog)
         for msg in messages:
             kind = msg["kind"]
             if kind == "torque":
@@ -600,6 +629,20 @@ class OpcUaSink:
             while len(self._hist) > 1 and int(self._hist[0][0][-1]) < horizon:
                 self._hist.popleft()
         self._submit(updates)
+
+    def _program_update(self, chunk: Chunk | None) -> list[tuple[Any, Any]]:
+        """``Production/ActiveProgram/Name`` of the OPC 40501 object from the NC call events."""
+        if chunk is None or "MT.ProgramName" not in self._nodes or chunk.events.empty:
+            return []
+        ev = chunk.events
+        calls = ev[ev["kind"].astype(str) == "call"]
+        if "path" not in calls or calls["path"].dropna().empty:
+            return []
+        name = str(calls["path"].dropna().iloc[-1])
+        if name == self._program:
+            return []
+        self._program = name
+        return [(self._nodes["MT.ProgramName"], self._dv(name, "s", int(chunk.time_ns[-1])))]
 
     def status(self) -> dict[str, Any]:
         return {"endpoint": self.endpoint, "published": self.published,
