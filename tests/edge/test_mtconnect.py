@@ -205,7 +205,7 @@ def test_edge_run_serves_the_real_recording(
         nxt, seqs = 1, []
         while proc.poll() is None:
             try:
-                st, body = _get(f"{url}/sample?from={nxt}&count=500")
+                _, body = _get(f"{url}/sample?from={nxt}&count=500")
             except (urllib.error.URLError, ConnectionError):
                 break  # the run ended between the poll and the request
             doc = _valid(schemas, "Streams", body)

@@ -150,7 +150,8 @@ def test_wrong_password_and_wrong_certificate(sim_rec: Any, tmp_path: Path) -> N
         with pytest.raises(ConfigError, match="refused the user 'operator'"):
             OpcUaRecorder(url, nodes,
                           options=OpcUaClientOptions(**base, password="wrong")).start()
-        with pytest.raises(ConfigError, match=r"certificate given \(--server-cert\) is not the server's"):
+        with pytest.raises(ConfigError,
+                           match=r"certificate given \(--server-cert\) is not the server's"):
             OpcUaRecorder(url, nodes, options=OpcUaClientOptions(
                 **base, password="right",
                 server_cert_file=str(tmp_path / "other-cert.der"))).start()
