@@ -18,11 +18,18 @@ Results equal across the three paths (checked). Updates the "Fleet" section of B
     .venv/bin/python benchmarks/bench_fleet.py [--machines 8 --days 3 --cycles-per-day 2]
 """
 
+# ruff: noqa: E402  (the thread limits must be set before numpy is imported)
 from __future__ import annotations
+
+import os
+
+# one BLAS/OpenMP thread everywhere, as Dask gives its workers, so that "per worker" and the
+# single-process path compare one core with one core (set before numpy is imported)
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 import argparse
 import json
-import os
 import resource
 import subprocess
 import sys
@@ -33,7 +40,7 @@ from typing import Any
 
 import pandas as pd
 
-from _common import REPO, cpu_model, replace_section
+from _common import REPO, cpu_model, pin_one_core, replace_section
 
 CYCLES_PER_YEAR = 500 * 86_400 * 365  # 500 Hz, around the clock (upper bound)
 
@@ -110,13 +117,14 @@ def main() -> int:
                            zip(cat["n_cycles"], cat["columns"], strict=True)))
         part_mb = max(_partition_mb(store, p) for p in parts)
 
+        t1, r1, mem1 = _run_cluster(1, parts, store)
+        t2, r2, mem2 = _run_cluster(2, parts, store)
+        pinned = pin_one_core()  # after the clusters: their workers must not inherit it
         _warm()
         run_job(health_partition, parts[:1], client=None, store_url=store)
         t0 = time.perf_counter()
         single = run_job(health_partition, parts, client=None, store_url=store)
         t_single = time.perf_counter() - t0
-        t1, r1, mem1 = _run_cluster(1, parts, store)
-        t2, r2, mem2 = _run_cluster(2, parts, store)
 
     key = ["machine", "day", "component", "parameter"]
     for r in (r1, r2):
@@ -138,7 +146,9 @@ def main() -> int:
         f"{args.machines} machines x {args.days} days x {args.cycles_per_day} part cycles "
         f"= {len(parts)} partitions, {len(cat)} recordings, {n_cycles:,} cycles "
         f"({n_cycles / 500:.0f} s at 500 Hz), {n_values:,} HF values. Cluster start and one "
-        "warm-up task per worker excluded; results identical on all three paths (checked).",
+        "warm-up task per worker excluded; results identical on all three paths (checked). "
+        f"One BLAS/OpenMP thread per process everywhere; the single-process path pinned to one "
+        f"core ({pinned}).",
         "",
         "| path | wall s | cycles/s per worker | HF values/s per worker | parallel efficiency |",
         "|---|---|---|---|---|",

@@ -77,8 +77,14 @@ def fleet_client(
             client.close()
         return
     n = n_workers or os.cpu_count() or 1
+    import logging
+
+    # silence_logs: the workers' own shutdown chatter ("failed to communicate with scheduler
+    # during heartbeat" as the cluster closes) is not for the user; task errors reach the
+    # client and are raised there
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           memory_limit=memory_limit, dashboard_address=":0")
+                           memory_limit=memory_limit, dashboard_address=":0",
+                           silence_logs=logging.CRITICAL)
     client = Client(cluster)
     try:
         yield client
