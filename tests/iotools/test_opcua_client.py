@@ -215,7 +215,7 @@ def test_edge_run_with_an_opcua_source(sim_rec: Any, tmp_path: Path) -> None:
     nodes = write_node_file(sim_rec, tmp_path / "nodes.toml")
     model = save_spindle_model(SpindleModel.from_parameters("thesis_spinner_840dsl"),
                                tmp_path / "spindle.json")
-    srv = SinumerikOpcUaServer(sim_rec, url, speed=3.0).start()
+    srv = SinumerikOpcUaServer(sim_rec, url, speed=1.5).start()
     try:
         res = subprocess.run(
             [str(Path(sys.executable).parent / "cnctwin"), "edge", "run", "--source", url,
