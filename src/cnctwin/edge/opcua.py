@@ -240,8 +240,9 @@ class OpcUaSink:
         ``Alarm/Active`` stays true this long on the recording clock after the last alarm [s].
     hole_history_s : float, default 300
         Cutting torque kept per cycle to find a hole's peak torque [s].
-    start_timeout_s : float, default 10
-        Time to wait for the server to listen [s].
+    start_timeout_s : float, default 60
+        Time to wait for the server to listen [s] (building the OPC 40501 address space from
+        the NodeSets takes a few seconds, more on a loaded machine).
     max_pending : int, default 64
         Batches of writes queued for the server loop before :meth:`write` waits (back
         pressure instead of dropping values).
@@ -263,7 +264,7 @@ class OpcUaSink:
                  publish_hz: float = 10.0, namespace_uri: str = DEFAULT_NAMESPACE,
                  thermal: Any = None, wear: Any = None, wear_baseline_holes: int = 6,
                  wear_set_size: int | None = 6, alarm_hold_s: float = 1.0,
-                 hole_history_s: float = 300.0, start_timeout_s: float = 10.0,
+                 hole_history_s: float = 300.0, start_timeout_s: float = 60.0,
                  max_pending: int = 64, security: OpcUaSecurity | None = None,
                  machine_tool: bool = True) -> None:
         try:
@@ -285,6 +286,7 @@ class OpcUaSink:
             raise ConfigError(f"OPC UA endpoint {endpoint!r}: bad port ({exc})") from None
         if port == 0:
             raise ConfigError("give the OPC UA server a fixed port (clients must know it)")
+        _check_port_free(u.hostname, port)  # before seconds of address-space building
         self.endpoint, self.host, self.port = endpoint, u.hostname, port
         self.machine = machine or "machine"
         self.publish_hz = float(publish_hz)
@@ -699,6 +701,26 @@ _HOLE_KEYS: dict[str, str] = {
     "DeviationXMaxAbs": "dev_x_maxabs_mm", "DeviationYMaxAbs": "dev_y_maxabs_mm",
     "DeviationZMaxAbs": "dev_z_maxabs_mm", "DeviationZRms": "dev_z_rms_mm", "Record": "*row",
 }
+
+
+def _check_port_free(host: str, port: int) -> None:
+    """Raise the "in use" error at once if ``host:port`` cannot be bound."""
+    import socket
+
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except socket.gaierror as exc:
+        raise ConfigError(f"OPC UA endpoint host {host!r}: not an address of this machine "
+                          f"({exc})") from None
+    family, _, _, _, addr = infos[0]
+    with socket.socket(family, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind(addr)
+        except OSError as exc:
+            raise ConfigError(f"cannot listen on {host}:{port} for OPC UA ({exc.strerror or exc})"
+                              "; the port is in use or not allowed: choose another --opcua "
+                              "port") from None
 
 
 class _UserManager:
