@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from cnctwin.edge.listen import check_bindable, is_loopback
 from cnctwin.exceptions import ConfigError
 
 __all__ = ["register"]
@@ -60,13 +61,13 @@ def _cmd_web(args: argparse.Namespace) -> int:
         raise ConfigError(f"model file {args.model} does not exist; write one with "
                           "cnctwin.edge.save_spindle_model (docs/edge.md)")
     token = _token(args)
-    if token is None and not _is_loopback(args.host) and not args.insecure:
+    if token is None and not is_loopback(args.host) and not args.insecure:
         raise ConfigError(f"--host {args.host} faces the network: give an access token "
                           "(--token-file FILE or CNCTWIN_WEB_TOKEN), or --insecure to serve "
                           "it to anyone")
     if not 1 <= args.port <= 65535:
         raise ConfigError(f"--port {args.port} is not a TCP port; give 1 ... 65535 (default 8050)")
-    _check_bind(args.host, args.port)
+    check_bindable(args.host, args.port, service="the dashboard", option="--port")
     try:
         import uvicorn
     except ImportError:
@@ -86,24 +87,6 @@ def _cmd_web(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_bind(host: str, port: int) -> None:
-    """Fail before anything is announced if the address cannot be served."""
-    import socket
-
-    try:
-        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
-    except socket.gaierror as exc:
-        raise ConfigError(f"--host {host}: not an address of this machine ({exc})") from None
-    family, _, _, _, addr = infos[0]
-    with socket.socket(family, socket.SOCK_STREAM) as sock:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            sock.bind(addr)
-        except OSError as exc:
-            raise ConfigError(f"cannot serve on {host}:{port}: {exc.strerror or exc}; the port "
-                              "is in use or not allowed: choose another with --port") from None
-
-
 def _token(args: argparse.Namespace) -> str | None:
     """The access token from --token-file or CNCTWIN_WEB_TOKEN (never the command line)."""
     import os
@@ -118,16 +101,3 @@ def _token(args: argparse.Namespace) -> str | None:
         return text
     env = os.environ.get("CNCTWIN_WEB_TOKEN", "").strip()
     return env or None
-
-
-def _is_loopback(host: str) -> bool:
-    import ipaddress
-    import socket
-
-    if host in ("localhost", ""):
-        return True
-    try:
-        return all(ipaddress.ip_address(info[4][0]).is_loopback
-                   for info in socket.getaddrinfo(host, None))
-    except (OSError, ValueError):
-        return False

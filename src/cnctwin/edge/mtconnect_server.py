@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import contextlib
 import hmac
-import ipaddress
 import json
 import math
 import socket
@@ -32,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from cnctwin.edge.listen import is_loopback
 from cnctwin.edge.mtconnect import (
     DeviceModel,
     ObservationBuffer,
@@ -58,15 +58,6 @@ def parse_listen_url(url: str, *, scheme: str, option: str) -> tuple[str, int]:
         raise ConfigError(f"{option} {url!r}: expected {scheme}://HOST:PORT, e.g. "
                           f"{scheme}://127.0.0.1:{7878 if scheme == 'tcp' else 5000}")
     return u.hostname, port
-
-
-def _loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 # ---------------------------------------------------------------------------- agent
@@ -97,7 +88,7 @@ class MTConnectAgent:
     def __init__(self, model: DeviceModel, buffer: ObservationBuffer, *, host: str = "127.0.0.1",
                  port: int = 5000, token: str | None = None, tls_cert: str | None = None,
                  tls_key: str | None = None, insecure: bool = False) -> None:
-        if token is None and not insecure and not _loopback(host):
+        if token is None and not insecure and not is_loopback(host):
             raise ConfigError(f"the MTConnect agent on {host} faces the network: give an "
                               "access token (--mtconnect-token-file) or --mtconnect-insecure")
         self.model, self.buffer, self.token = model, buffer, token
@@ -209,7 +200,7 @@ class ShdrAdapter:
 
     def __init__(self, model: DeviceModel, *, host: str = "127.0.0.1", port: int = 7878,
                  insecure: bool = False) -> None:
-        if not insecure and not _loopback(host):
+        if not insecure and not is_loopback(host):
             raise ConfigError(f"the SHDR adapter on {host} would face the network without "
                               "authentication (SHDR has none): listen on 127.0.0.1 and let "
                               "the agent connect locally, or give --shdr-insecure")

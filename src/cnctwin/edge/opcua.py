@@ -44,6 +44,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from cnctwin.edge.listen import check_bindable
 from cnctwin.edge.pipeline import Chunk
 from cnctwin.exceptions import ConfigError
 
@@ -286,7 +287,8 @@ class OpcUaSink:
             raise ConfigError(f"OPC UA endpoint {endpoint!r}: bad port ({exc})") from None
         if port == 0:
             raise ConfigError("give the OPC UA server a fixed port (clients must know it)")
-        _check_port_free(u.hostname, port)  # before seconds of address-space building
+        # before seconds of address-space building
+        check_bindable(u.hostname, port, service="OPC UA", option="--opcua")
         self.endpoint, self.host, self.port = endpoint, u.hostname, port
         self.machine = machine or "machine"
         self.publish_hz = float(publish_hz)
@@ -701,26 +703,6 @@ _HOLE_KEYS: dict[str, str] = {
     "DeviationXMaxAbs": "dev_x_maxabs_mm", "DeviationYMaxAbs": "dev_y_maxabs_mm",
     "DeviationZMaxAbs": "dev_z_maxabs_mm", "DeviationZRms": "dev_z_rms_mm", "Record": "*row",
 }
-
-
-def _check_port_free(host: str, port: int) -> None:
-    """Raise the "in use" error at once if ``host:port`` cannot be bound."""
-    import socket
-
-    try:
-        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
-    except socket.gaierror as exc:
-        raise ConfigError(f"OPC UA endpoint host {host!r}: not an address of this machine "
-                          f"({exc})") from None
-    family, _, _, _, addr = infos[0]
-    with socket.socket(family, socket.SOCK_STREAM) as sock:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            sock.bind(addr)
-        except OSError as exc:
-            raise ConfigError(f"cannot listen on {host}:{port} for OPC UA ({exc.strerror or exc})"
-                              "; the port is in use or not allowed: choose another --opcua "
-                              "port") from None
 
 
 class _UserManager:
