@@ -58,8 +58,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     r.add_argument("--tls-key", type=Path, metavar="FILE", help="its private key (PEM)")
     r.add_argument("--mqtt-user", metavar="NAME", help="MQTT user name")
     r.add_argument("--password-file", type=Path, metavar="FILE",
-                   help="file holding the MQTT password (or CNCTWIN_MQTT_PASSWORD); never on "
-                   "the command line")
+                   help="file holding the MQTT password (or CNCTWIN_MQTT_PASSWORD), or the "
+                   "OPC UA source's with --user (or CNCTWIN_OPCUA_PASSWORD); never on the "
+                   "command line")
     r.add_argument("--mqtt-client-id", metavar="ID",
                    help="MQTT client id of the live source (default cnctwin-edge-<machine>): "
                    "the key of its persistent session")
@@ -86,17 +87,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     r.add_argument("--nodes", type=Path, metavar="FILE",
                    help="with --source opc.tcp://HOST:PORT: the node file of the control's "
                    "OPC UA variables (docs/opcua-client.md)")
-    r.add_argument("--security", default="None",
-                   choices=("None", "Basic256Sha256_Sign", "Basic256Sha256_SignAndEncrypt"),
-                   help="OPC UA source: security policy and mode (default None)")
-    r.add_argument("--client-cert", type=Path, metavar="FILE",
-                   help="OPC UA source: client certificate for a secured channel")
-    r.add_argument("--client-key", type=Path, metavar="FILE", help="OPC UA source: its key")
-    r.add_argument("--server-cert", type=Path, metavar="FILE",
-                   help="OPC UA source: the server certificate to trust")
-    r.add_argument("--user", metavar="NAME",
-                   help="OPC UA source: user name (password: --password-file or "
-                   "CNCTWIN_OPCUA_PASSWORD)")
+    from cnctwin.cli.opcua import add_client_options
+
+    add_client_options(r, password_file=False)  # the password: --password-file as for MQTT
     r.add_argument("--mtconnect", metavar="URL",
                    help="serve an MTConnect agent (/probe, /current, /sample) at "
                    "http://HOST:PORT while the runtime runs (docs/mtconnect.md)")

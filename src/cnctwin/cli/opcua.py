@@ -36,20 +36,22 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.set_defaults(func=_cmd_record)
 
 
-def add_client_options(p: argparse.ArgumentParser) -> None:
-    """The OPC UA client's security and user options."""
+def add_client_options(p: argparse.ArgumentParser, *, password_file: bool = True) -> None:
+    """The OPC UA client's security and user options (``password_file=False`` where the
+    command has its own ``--password-file`` already, e.g. ``edge run``)."""
     p.add_argument("--security", default="None",
                    choices=("None", "Basic256Sha256_Sign", "Basic256Sha256_SignAndEncrypt"),
-                   help="security policy and mode (default None)")
+                   help="OPC UA security policy and mode (default None)")
     p.add_argument("--client-cert", type=Path, metavar="FILE",
                    help="client certificate (DER/PEM) for a secured channel")
     p.add_argument("--client-key", type=Path, metavar="FILE", help="its private key (PEM)")
     p.add_argument("--server-cert", type=Path, metavar="FILE",
                    help="the server certificate to trust")
-    p.add_argument("--user", metavar="NAME", help="user name")
-    p.add_argument("--password-file", type=Path, metavar="FILE",
-                   help="file holding the password (or CNCTWIN_OPCUA_PASSWORD); never on the "
-                   "command line")
+    p.add_argument("--user", metavar="NAME", help="OPC UA user name")
+    if password_file:
+        p.add_argument("--password-file", type=Path, metavar="FILE",
+                       help="file holding the password (or CNCTWIN_OPCUA_PASSWORD); never on "
+                       "the command line")
 
 
 def client_options(args: argparse.Namespace) -> object:
