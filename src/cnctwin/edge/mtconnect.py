@@ -64,6 +64,8 @@ __all__ = [
     "ObservationBuffer",
     "OutOfRangeError",
     "error_document",
+    "iso_timestamp",
+    "item_key",
     "machine_tool_device",
     "probe_document",
     "streams_document",
@@ -148,7 +150,8 @@ class DeviceModel:
         return None
 
 
-def _key(name: str) -> str:
+def item_key(name: str) -> str:
+    """The data-item id prefix of an axis or spindle name (``"X1"`` -> ``"x1"``)."""
     return "".join(ch if ch.isalnum() else "_" for ch in name).lower()
 
 
@@ -166,17 +169,17 @@ def machine_tool_device(
     spindle : str, default 'SP1'
         The spindle (a Rotary component named ``C`` in rotary-velocity mode).
     """
-    dev = _key(machine) or "machine"
+    dev = item_key(machine) or "machine"
     comps: list[Component] = [Component("axes", "Axes"), Component("ctrl", "Controller"),
                               Component("path", "Path", parent="ctrl")]
     items: list[DataItem] = [DataItem("avail", "EVENT", "AVAILABILITY", dev)]
     for ax in axes:
-        k = _key(ax)
+        k = item_key(ax)
         comps.append(Component(k, "Linear", name=ax.rstrip("0123456789") or ax, parent="axes"))
         items += [DataItem(f"{k}_pos", "SAMPLE", "POSITION", k, "MILLIMETER", "ACTUAL",
                            f"{ax}_actual"),
                   DataItem(f"{k}_load", "SAMPLE", "LOAD", k, "PERCENT", name=f"{ax}_load")]
-    sp = _key(spindle)
+    sp = item_key(spindle)
     comps.append(Component(sp, "Rotary", name="C", parent="axes"))
     items += [
         DataItem(f"{sp}_speed", "SAMPLE", "ROTARY_VELOCITY", sp, "REVOLUTION/MINUTE", "ACTUAL",
@@ -312,7 +315,8 @@ class ObservationBuffer:
 
 
 # ---------------------------------------------------------------------------- documents
-def _iso(t_ns: int) -> str:
+def iso_timestamp(t_ns: int) -> str:
+    """MTConnect/SHDR timestamp of ``t_ns`` [ns since the epoch], UTC, microseconds."""
     s, ns = divmod(int(t_ns), 1_000_000_000)
     return time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(s)) + f".{ns // 1000:06d}Z"
 
@@ -320,13 +324,13 @@ def _iso(t_ns: int) -> str:
 def _header(root: ET.Element, tag: str, *, sender: str, instance_id: int, buffer_size: int,
             extra: dict[str, str], model_time: bool = True) -> ET.Element:
     h = ET.SubElement(root, tag)
-    h.set("creationTime", _iso(time.time_ns()).split(".")[0] + "Z")
+    h.set("creationTime", iso_timestamp(time.time_ns()).split(".")[0] + "Z")
     h.set("sender", sender)
     h.set("instanceId", str(instance_id))
     h.set("version", f"{MTCONNECT_VERSION}.0")
     h.set("bufferSize", str(buffer_size))
     if model_time:
-        h.set("deviceModelChangeTime", _iso(instance_id * 1_000_000_000))
+        h.set("deviceModelChangeTime", iso_timestamp(instance_id * 1_000_000_000))
     for k, v in extra.items():
         h.set(k, v)
     return h
@@ -417,7 +421,8 @@ def streams_document(
 
 
 def _observation(box: ET.Element, d: DataItem, o: Observation) -> None:
-    attrs = {"dataItemId": d.id, "timestamp": _iso(o.timestamp_ns), "sequence": str(o.sequence)}
+    attrs = {"dataItemId": d.id, "timestamp": iso_timestamp(o.timestamp_ns),
+             "sequence": str(o.sequence)}
     if d.name:
         attrs["name"] = d.name
     if d.sub_type:

@@ -37,6 +37,8 @@ from cnctwin.edge.mtconnect import (
     ObservationBuffer,
     OutOfRangeError,
     error_document,
+    iso_timestamp,
+    item_key,
     machine_tool_device,
     probe_document,
     streams_document,
@@ -297,12 +299,6 @@ class ShdrAdapter:
 
 
 # ---------------------------------------------------------------------------- sink
-def _iso(t_ns: int) -> str:
-    from cnctwin.edge.mtconnect import _iso as iso
-
-    return iso(t_ns)
-
-
 class MTConnectSink:
     """Runtime sink: drive signals and cnctwin results into an MTConnect buffer, served by an
     agent and/or sent to an SHDR adapter's agents.
@@ -340,6 +336,7 @@ class MTConnectSink:
         self.model = machine_tool_device(machine, axes=axes, spindle=spindle)
         self.buffer = ObservationBuffer(buffer_size)
         self.axes, self.spindle, self.sample_hz = axes, spindle, sample_hz
+        self._sp = item_key(spindle)
         self.agent = (MTConnectAgent(self.model, self.buffer, host=agent[0], port=agent[1],
                                      token=token, tls_cert=tls_cert, tls_key=tls_key,
                                      insecure=insecure) if agent else None)
@@ -357,10 +354,6 @@ class MTConnectSink:
         self._put(None, [("avail", "AVAILABLE"), ("system", ("NORMAL", None, None)),
                          (f"{self._sp}_cond", ("NORMAL", None, None))])
 
-    @property
-    def _sp(self) -> str:
-        return "".join(ch if ch.isalnum() else "_" for ch in self.spindle).lower()
-
     def _put(self, t_ns: int | None, items: list[tuple[str, Any]]) -> None:
         import time
 
@@ -372,7 +365,7 @@ class MTConnectSink:
                 self.buffer.add(key, t, v)
         self.observations += len(items)
         if self.adapter is not None:
-            self.adapter.send(_iso(t), items)
+            self.adapter.send(iso_timestamp(t), items)
 
     def _event(self, key: str, value: Any, out: list[tuple[str, Any]]) -> None:
         if self._last_event.get(key) != value:
@@ -440,7 +433,7 @@ class MTConnectSink:
         for i in idx:
             items: list[tuple[str, Any]] = []
             for ax in self.axes:
-                k = "".join(ch if ch.isalnum() else "_" for ch in ax).lower()
+                k = item_key(ax)
                 pos = sig.get(f"ENC_POS|{ax}", sig.get(f"CTRL_POS|{ax}"))
                 if pos is not None:
                     items.append((f"{k}_pos", float(pos[i])))
