@@ -77,6 +77,12 @@ def write_node_file(rec: Recording, path: str | Path) -> Path:
     return p
 
 
+def _last_at(ev_cycles: np.ndarray, values: np.ndarray, cycles: np.ndarray) -> list[str]:
+    """For each cycle the last value of an event at or before it ("" before the first)."""
+    pos = np.searchsorted(ev_cycles, cycles, side="right") - 1
+    return [str(values[p]) if p >= 0 else "" for p in pos]
+
+
 class SinumerikOpcUaServer:
     """Serve a recording's values in real time from SINUMERIK-style nodes.
 
@@ -207,20 +213,16 @@ class SinumerikOpcUaServer:
         first = min(rec.n_cycles - 1, max(0, round(self.start_s / rec.meta.cycle_time_s)))
         idx = np.arange(first, rec.n_cycles, step)
         cols = {c: rec.hf[c].to_numpy(dtype=float)[idx] for c in self.signals}
-        prog, tool = "", ""
-        ev = rec.events
-        text: list[tuple[str, str]] = []
-        cyc = rec.cycles
-        for i in idx:
-            c = int(cyc[i])
-            if len(ev):
-                upto = ev[ev["cycle"] <= c]
-                calls = upto[upto["kind"] == "call"]["path"].dropna()
-                prog = str(calls.iloc[-1]) if len(calls) else prog
-                if "active_tool" in upto:
-                    tools = upto["active_tool"].dropna()
-                    tool = str(int(tools.iloc[-1])) if len(tools) else tool
-            text.append((prog, tool))
+        ev = rec.events.sort_values("cycle", kind="stable")
+        at = rec.cycles[idx]
+        calls = ev[ev["kind"] == "call"].dropna(subset=["path"])
+        progs = _last_at(calls["cycle"].to_numpy(), calls["path"].astype(str).to_numpy(), at)
+        tools = [""] * len(at)
+        if "active_tool" in ev:
+            t = ev.dropna(subset=["active_tool"])
+            tools = _last_at(t["cycle"].to_numpy(),
+                             np.array([str(int(v)) for v in t["active_tool"]], dtype=object), at)
+        text = list(zip(progs, tools, strict=True))
         return t_ns[idx], cols, text
 
     async def _feed(self, server: Any, nodes: dict[str, Any]) -> None:
