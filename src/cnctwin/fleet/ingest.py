@@ -164,12 +164,14 @@ def content_hash(path: str | os.PathLike[str]) -> str:
     return h.hexdigest()
 
 
-def stored_hashes(store_url: str) -> frozenset[str]:
-    """The ``source_sha256`` of every recording in the store."""
+def stored_hashes(store: str | Any) -> frozenset[str]:
+    """The ``source_sha256`` of every recording in the store (a URL or an open store)."""
     import cnctwin.store
 
-    with cnctwin.store.open(store_url) as st:
-        cat = st.recordings()
+    if isinstance(store, str):
+        with cnctwin.store.open(store) as st:
+            return stored_hashes(st)
+    cat = store.recordings()
     out = set()
     for text in cat.get("meta", pd.Series(dtype=object)):
         sha = json.loads(text).get("attrs", {}).get("source_sha256") if text else None
@@ -262,8 +264,8 @@ def ingest_recordings(
     from cnctwin.store.duckdb_store import DuckDBStore
 
     found = [str(p) for p in find_recordings(paths)]
-    known = stored_hashes(store_url)
     with cnctwin.store.open(store_url) as st:
+        known = stored_hashes(st)
         stage = isinstance(st, DuckDBStore)
         store_ref = str(st.root) if isinstance(st, DuckDBStore) else store_url
     results = map_tasks(client, ingest_one, found, key="ingest", progress=progress,

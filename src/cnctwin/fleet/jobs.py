@@ -174,7 +174,7 @@ def _combine(values: Sequence[float], errors: Sequence[float]) -> tuple[float, f
 
 def health_partition(
     part: Partition, *, store_url: str, machine_files: Mapping[str, str] | None = None,
-    axes: Sequence[str] = HEALTH_AXES,
+    axes: Sequence[str] = HEALTH_AXES, spindle: str = "SP1",
 ) -> pd.DataFrame:
     """Servo and spindle health of one partition.
 
@@ -226,7 +226,7 @@ def health_partition(
                 v = 0.5 * (p["viscous_pos"].value + p["viscous_neg"].value)
                 e = 0.5 * math.hypot(p["viscous_pos"].stderr, p["viscous_neg"].stderr)
                 add(ax, "viscous_a_s_per_mm", p["viscous_pos"].unit, v, e)
-        sp = getattr(rec.meta, "spindle", None) or "SP1"
+        sp = spindle
         try:
             stats = air_cut_statistics(rec, spindle=sp)
             holes = hole_record(rec, model=model)
