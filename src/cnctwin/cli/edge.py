@@ -7,6 +7,8 @@ Examples::
         --name-map map.json --model spindle.json --out /var/lib/cnctwin \\
         --publish mqtt://broker:1883/cnctwin
     cnctwin edge status /var/lib/cnctwin
+    cnctwin edge run --config plant.toml          # many machines (docs/edge.md)
+    cnctwin edge status --config plant.toml
 """
 
 from __future__ import annotations
@@ -35,12 +37,45 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     r = esub.add_parser("run", help="run the runtime next to a machine or on a file",
                         description="Source -> torque, holes, anomalies -> JSON lines in OUT, "
                         "optional MQTT publish (store-and-forward) and store.")
-    r.add_argument("--source", required=True, metavar="URL|FILE",
+    r.add_argument("--config", type=Path, metavar="PLANT.toml",
+                   help="run every machine of this plant file in one process group (one "
+                   "worker process per core; docs/edge.md \"Many machines\"); the other "
+                   "options then come from the file")
+    r.add_argument("--workers", type=int, metavar="N",
+                   help="with --config: worker processes (default the file's, else the cores)")
+    _add_run_options(r)
+    r.add_argument("--quiet", action="store_true", help="no live summary")
+    r.set_defaults(func=_run)
+    s = esub.add_parser("status", help="show the status a runtime wrote into its state dir")
+    s.add_argument("dir", type=Path, metavar="DIR", nargs="?",
+                   help="the --out directory of `edge run`")
+    s.add_argument("--config", type=Path, metavar="PLANT.toml",
+                   help="every machine of this plant file, one row each")
+    s.add_argument("--json", action="store_true", help="print the raw status.json")
+    s.set_defaults(func=_status)
+    u = esub.add_parser("opcua-user", help="add or replace a user of the OPC UA server",
+                        description="Append NAME with a salted PBKDF2 hash of the password to "
+                        "the users file of --opcua-users. The password is read from "
+                        "CNCTWIN_OPCUA_PASSWORD or standard input, never the command line.")
+    u.add_argument("name", metavar="NAME", help="user name")
+    u.add_argument("--users", type=Path, required=True, metavar="FILE", help="users file")
+    u.set_defaults(func=_opcua_user)
+
+    def _help(args: argparse.Namespace) -> int:
+        p.print_help()
+        return 0
+
+    p.set_defaults(func=_help)
+
+
+def _add_run_options(r: argparse.ArgumentParser) -> None:
+    """The options of one machine's runtime (the command line and a plant file's tables)."""
+    r.add_argument("--source", metavar="URL|FILE",
                    help="mqtt://host:port/<databus metadata topic> or a recording file")
     r.add_argument("--model", type=Path, metavar="FILE",
                    help="calibrated spindle model (.json/.toml, cnctwin.edge.save_spindle_model); "
                    "not needed with --machine FILE.toml")
-    r.add_argument("--out", required=True, type=Path, metavar="DIR",
+    r.add_argument("--out", type=Path, metavar="DIR",
                    help="state directory: results.jsonl, status.json, outbox.sqlite")
     r.add_argument("--publish", metavar="URL",
                    help="mqtt://host:port/<topic prefix> for results (default prefix cnctwin)")
@@ -143,25 +178,157 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    help="store-and-forward bound [messages]")
     r.add_argument("--idle-timeout-s", type=float, default=None,
                    help="live source: stop after this long without data [s]")
-    r.add_argument("--quiet", action="store_true", help="no live summary")
-    r.set_defaults(func=_run)
-    s = esub.add_parser("status", help="show the status a runtime wrote into its state dir")
-    s.add_argument("dir", type=Path, metavar="DIR", help="the --out directory of `edge run`")
-    s.add_argument("--json", action="store_true", help="print the raw status.json")
-    s.set_defaults(func=_status)
-    u = esub.add_parser("opcua-user", help="add or replace a user of the OPC UA server",
-                        description="Append NAME with a salted PBKDF2 hash of the password to "
-                        "the users file of --opcua-users. The password is read from "
-                        "CNCTWIN_OPCUA_PASSWORD or standard input, never the command line.")
-    u.add_argument("name", metavar="NAME", help="user name")
-    u.add_argument("--users", type=Path, required=True, metavar="FILE", help="users file")
-    u.set_defaults(func=_opcua_user)
 
-    def _help(args: argparse.Namespace) -> int:
-        p.print_help()
-        return 0
 
-    p.set_defaults(func=_help)
+class _OptionParser(argparse.ArgumentParser):
+    """An ``edge run`` parser whose errors are exceptions (a plant file's machine tables)."""
+
+    def error(self, message: str) -> Any:
+        raise ConfigError(message)
+
+
+def _machine_parser() -> argparse.ArgumentParser:
+    mp_ = _OptionParser(prog="cnctwin edge run", add_help=False)
+    _add_run_options(mp_)
+    return mp_
+
+
+_NOT_IN_PLANT = {"help"}
+
+
+def _read_plant(path: Path) -> Any:
+    from cnctwin.edge.plant import read_plant
+
+    parser = _machine_parser()
+    names = [o[2:] for a in parser._actions for o in a.option_strings if o.startswith("--")]
+    paths = [o[2:] for a in parser._actions for o in a.option_strings
+             if o.startswith("--") and a.type is Path]
+    plant = read_plant(path, options=[n for n in names if n not in _NOT_IN_PLANT],
+                       path_options=paths)
+    for m in plant.machines:  # every machine's options checked before anything starts
+        _machine_args(plant.path, m)
+    return plant
+
+
+def _machine_args(plant_path: Path, m: Any) -> argparse.Namespace:
+    """The ``edge run`` options of one machine of a plant file, parsed as on the command line."""
+    parser = _machine_parser()
+    flags = {o[2:]: a for a in parser._actions for o in a.option_strings if o.startswith("--")}
+    argv: list[str] = []
+    for key, value in m.options.items():
+        action = flags[key]
+        if isinstance(action, argparse._StoreTrueAction):
+            if not isinstance(value, bool):
+                raise ConfigError(f"{plant_path}: machine {m.name!r}: {key} = {value!r}: give "
+                                  "true or false")
+            if value:
+                argv.append(f"--{key}")
+        else:
+            if isinstance(value, bool):
+                raise ConfigError(f"{plant_path}: machine {m.name!r}: {key} = {value}: give a "
+                                  "value, not true/false")
+            argv += [f"--{key}", str(value)]
+    try:
+        ns = parser.parse_args(argv)
+    except ConfigError as exc:
+        raise ConfigError(f"{plant_path}: machine {m.name!r}: {exc}") from None
+    ns.quiet = True
+    return ns
+
+
+def _plant_worker(plant_path: str, names: list[str], report_queue: Any) -> None:
+    """Worker process of ``edge run --config``: run the named machines (one thread each)."""
+    from cnctwin.edge.plant import run_machines, worker_signals
+
+    stop = threading.Event()
+    worker_signals(stop)
+    plant = _read_plant(Path(plant_path))
+    builders = []
+    for name in names:
+        ns = _machine_args(plant.path, plant.machine(name))
+        builders.append((name, lambda ns=ns: _build(ns)))
+    run_machines(builders, report=lambda n, w, v: report_queue.put((n, w, v)), stop=stop)
+
+
+def plant_table(plant: Any, results: dict[str, Any] | None = None,
+                events: list[str] | None = None) -> Any:
+    """A rich table of every machine of a plant: one row each, from its ``status.json``."""
+    from rich.table import Table
+
+    from cnctwin.edge import read_status
+
+    t = Table(title=f"cnctwin edge - plant {plant.path.name} ({len(plant.machines)} machines)")
+    for col in ("machine", "state", "cycles", "cyc/s", "lag s", "holes", "alarms", "gaps",
+                "lost"):
+        t.add_column(col, no_wrap=True, justify="left" if col in ("machine", "state")
+                     else "right")
+    t.add_column("note", no_wrap=True, overflow="ellipsis", max_width=48)
+    for m in plant.machines:
+        try:
+            st = read_status(m.out)
+        except (FileNotFoundError, ValueError):
+            st = {}
+        what, value = (results or {}).get(m.name, ("", None))
+        state = "ERROR" if what == "error" else str(st.get("state", "no status"))
+        rate = st.get("cycles_per_s_recent")
+        if not isinstance(rate, float) or math.isnan(rate):
+            rate = st.get("cycles_per_s")
+        lost = sum(int(v) for v in (st.get("overload") or {}).values())
+        note = str(value) if what == "error" else ""
+        t.add_row(m.name, state, str(st.get("cycles", 0)), _fmt(rate, ".0f"),
+                  _fmt(st.get("lag_s")), str(st.get("holes", 0)), str(st.get("alarms", 0)),
+                  str(st.get("gaps", 0)), str(lost) if lost else "-", note)
+    if events:
+        t.caption = events[-1]
+    return t
+
+
+def _run_plant(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.live import Live
+
+    from cnctwin.edge.plant import PlantRunner
+
+    own = [k for k in ("source", "out", "model", "publish") if getattr(args, k, None)]
+    if own:
+        raise ConfigError(f"--config takes the machines' options from the plant file; give "
+                          f"{', '.join('--' + k for k in own)} there ([defaults] or a "
+                          "[[machine]] table)")
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError(f"--workers {args.workers}: give 1 or more")
+    plant = _read_plant(args.config)
+    runner = PlantRunner(plant, _plant_worker, workers=args.workers)
+    main_thread = threading.current_thread() is threading.main_thread()
+    old = signal.signal(signal.SIGTERM, lambda *a: runner.stop()) if main_thread else None
+    console = Console(stderr=True)
+    print(f"plant {plant.path}: {len(plant.machines)} machines on {runner.n_workers} worker "
+          "processes", file=sys.stderr)
+    try:
+        if args.quiet:
+            results = _supervise(runner, None)
+        else:
+            with Live(console=console, refresh_per_second=1, transient=False) as live:
+                results = _supervise(runner, lambda r: live.update(
+                    plant_table(plant, r.results, r.events)))
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, old)
+    failed = {n: v for n, (w, v) in results.items() if w == "error"}
+    for n, msg in failed.items():
+        print(f"machine {n}: {msg}", file=sys.stderr)
+    summary = {m.name: ({k: v.get(k) for k in ("cycles", "holes", "alarms", "gaps")}
+                        if w == "done" else {"error": v})
+               for m in plant.machines for w, v in [results.get(m.name, ("error", "no report"))]}
+    print(json.dumps(summary))
+    return 1 if failed else 0
+
+
+def _supervise(runner: Any, on_tick: Any) -> dict[str, Any]:
+    try:
+        return dict(runner.run(on_tick=on_tick))
+    except KeyboardInterrupt:  # Ctrl-C: stop the workers (they drain) and wait for them
+        runner.stop()
+        return dict(runner.run())
 
 
 def _fmt(v: Any, spec: str = ".3g") -> str:
@@ -417,6 +584,14 @@ def _run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.live import Live
 
+    if args.config is not None:
+        return _run_plant(args)
+    if args.workers is not None:
+        raise ConfigError("--workers goes with --config PLANT.toml (many machines)")
+    missing = [k for k in ("source", "out") if getattr(args, k) is None]
+    if missing:
+        raise ConfigError(f"give {' and '.join('--' + k for k in missing)} (one machine), or "
+                          "--config PLANT.toml (many machines)")
     rt = _build(args)
     main_thread = threading.current_thread() is threading.main_thread()
     old = signal.signal(signal.SIGTERM, lambda *a: rt.stop()) if main_thread else None
@@ -443,6 +618,22 @@ def _status(args: argparse.Namespace) -> int:
 
     from cnctwin.edge import read_status
 
+    if args.config is not None:
+        plant = _read_plant(args.config)
+        if args.json:
+            out: dict[str, Any] = {}
+            for m in plant.machines:
+                try:
+                    out[m.name] = read_status(m.out)
+                except FileNotFoundError:
+                    out[m.name] = None
+            print(json.dumps(out, indent=1))
+        else:
+            Console().print(plant_table(plant))
+        return 0
+    if args.dir is None:
+        raise ConfigError("give the state directory (the --out of `edge run`) or --config "
+                          "PLANT.toml")
     try:
         st = read_status(args.dir)
     except FileNotFoundError as exc:

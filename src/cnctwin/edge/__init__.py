@@ -12,6 +12,8 @@ Layers (pure pieces first, orchestration last):
 * :mod:`~cnctwin.edge.sinks`: MQTT (store-and-forward), the store, JSON lines.
 * :mod:`~cnctwin.edge.opcua`: an OPC UA server sink (extra ``opcua``; import it from there).
 * :mod:`~cnctwin.edge.runtime`: :class:`EdgeRuntime`, the loop and its status.
+* :mod:`~cnctwin.edge.plant`: many machines in one process group (the plant file, worker
+  processes, restarts).
 
 See docs/edge.md.
 """

@@ -1,0 +1,436 @@
+"""Many machines in one edge process: the plant file and the runner that serves it.
+
+A plant file (TOML) lists the machines one ``cnctwin edge run --config plant.toml`` serves,
+each with the options it would get on its own command line::
+
+    workers = 2                  # worker processes (default: the cores, at most one per machine)
+    out = "state"                # a machine's --out defaults to <out>/<name>
+
+    [defaults]                   # options of every machine (a machine's own value wins)
+    publish = "mqtt://broker:1883/cnctwin"
+    password-file = "secrets/mqtt.txt"
+
+    [[machine]]
+    name = "mill-1"
+    source = "mqtt://ie-databus:1883/ie/m/j/simatic/v1/nck1/dp"
+    machine = "machines/mill-1.toml"   # the calibrated machine file
+
+    [[machine]]
+    name = "mill-2"
+    source = "recordings/mill-2.json"
+    model = "spindle-mill-2.json"
+
+Relative paths are taken from the plant file's folder. Every machine keeps its own source,
+model or machine file, state directory (``seq``, status, results, outbox) and topics, so what
+:mod:`cnctwin.edge.runtime` guarantees for one machine (exactly once across restarts, counted
+losses) holds for each machine of the plant.
+
+:func:`run_machines` runs the runtimes of some machines in one process, one thread each (the
+CPU work of a machine is a few percent of a core; the threads wait on their sources);
+:class:`PlantRunner` spreads the machines over worker processes (``spawn``), one per core, so
+the interpreter lock never limits a plant to one core, restarts a worker that dies and stops
+them all on SIGTERM or Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing as mp
+import os
+import queue as queue_mod
+import signal
+import threading
+import time
+import tomllib
+from collections.abc import Callable, Collection, Mapping, Sequence
+from dataclasses import dataclass, field
+from os import PathLike
+from pathlib import Path
+from typing import Any, Protocol
+
+from cnctwin.exceptions import CnctwinError, ConfigError
+
+__all__ = ["PlantFile", "PlantMachine", "PlantRunner", "read_plant", "run_machines"]
+
+
+@dataclass(frozen=True)
+class PlantMachine:
+    """One machine of a plant file.
+
+    Attributes
+    ----------
+    name : str
+        Label of the machine in the plant (unique; the default state directory name).
+    options : dict
+        Its ``edge run`` options, keys as on the command line without the dashes
+        (``"password-file"``); paths made absolute.
+    out : pathlib.Path
+        Its state directory (``--out``).
+    """
+
+    name: str
+    options: dict[str, Any]
+    out: Path
+
+
+@dataclass(frozen=True)
+class PlantFile:
+    """A plant file: its machines and the number of worker processes it asks for."""
+
+    path: Path
+    machines: tuple[PlantMachine, ...]
+    workers: int | None = None
+
+    def machine(self, name: str) -> PlantMachine:
+        """The machine called ``name``."""
+        for m in self.machines:
+            if m.name == name:
+                return m
+        raise ConfigError(f"{self.path}: no machine named {name!r}; it lists "
+                          f"{[m.name for m in self.machines]}")
+
+
+_TOP_KEYS = {"workers", "out", "defaults", "machine"}
+
+
+def _norm(key: str) -> str:
+    return key.strip().replace("_", "-")
+
+
+def read_plant(path: str | PathLike[str], *, options: Collection[str],
+               path_options: Collection[str] = ()) -> PlantFile:
+    """Read and check a plant file.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The TOML file.
+    options : collection of str
+        Option names a machine may set (``edge run``'s, without dashes: ``"source"``).
+    path_options : collection of str
+        Options whose relative values are paths from the plant file's folder (``source``
+        and ``machine`` are resolved too when they name a file rather than a URL or a name).
+
+    Returns
+    -------
+    PlantFile
+
+    Raises
+    ------
+    ConfigError
+        Naming the file, the machine and the key: a TOML syntax error, an unknown key, a
+        machine without a name, two machines with one name or one state directory.
+    """
+    p = Path(path)
+    try:
+        doc = tomllib.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: no such plant file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{p}: cannot read the plant file ({exc})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{p}: not valid TOML: {exc}") from None
+    unknown = sorted(set(doc) - _TOP_KEYS)
+    if unknown:
+        raise ConfigError(f"{p}: unknown top-level key(s) {unknown}; a plant file has "
+                          f"{sorted(_TOP_KEYS)} (machine options go under [defaults] or a "
+                          "[[machine]] table)")
+    base = p.resolve().parent
+    workers = doc.get("workers")
+    if workers is not None and (not isinstance(workers, int) or isinstance(workers, bool)
+                                or workers < 1):
+        raise ConfigError(f"{p}: workers = {workers!r}: give a whole number >= 1 (or leave "
+                          "it out: one worker per core)")
+    out_base = doc.get("out")
+    if out_base is not None and not isinstance(out_base, str):
+        raise ConfigError(f"{p}: out = {out_base!r}: give a folder name")
+    allowed = {_norm(o) for o in options}
+    paths = {_norm(o) for o in path_options}
+
+    def _options(table: Any, where: str) -> dict[str, Any]:
+        if not isinstance(table, Mapping):
+            raise ConfigError(f"{p}: {where} must be a table of options")
+        out: dict[str, Any] = {}
+        for k, v in table.items():
+            key = _norm(k)
+            if key == "name" and where != "[defaults]":
+                continue
+            if key not in allowed:
+                raise ConfigError(f"{p}: {where}: unknown option {k!r}; the options are those "
+                                  f"of `cnctwin edge run` ({', '.join(sorted(allowed))})")
+            if isinstance(v, Mapping | list):
+                raise ConfigError(f"{p}: {where}: {k} = {v!r}: give a string, number or "
+                                  "true/false")
+            out[key] = _resolve(key, v, base, paths)
+        return out
+
+    defaults = _options(doc.get("defaults", {}), "[defaults]")
+    tables = doc.get("machine", [])
+    if not isinstance(tables, list) or not tables:
+        raise ConfigError(f"{p}: no machines: add a [[machine]] table per machine (name, "
+                          "source, machine or model)")
+    machines: list[PlantMachine] = []
+    seen_out: dict[Path, str] = {}
+    for k, t in enumerate(tables, 1):
+        where = f"[[machine]] #{k}"
+        name = t.get("name") if isinstance(t, Mapping) else None
+        if not isinstance(name, str) or not name.strip() or "/" in name:
+            raise ConfigError(f"{p}: {where} needs name = \"...\" (a label without '/')")
+        where = f"[[machine]] {name!r}"
+        if any(m.name == name for m in machines):
+            raise ConfigError(f"{p}: two machines are named {name!r}: names must be unique")
+        opts = {**defaults, **_options(t, where)}
+        opts.setdefault("machine", name)
+        if "out" not in opts:
+            if out_base is None:
+                raise ConfigError(f"{p}: {where} has no out = \"DIR\" and the file has no "
+                                  "top-level out = \"DIR\" to put it under")
+            opts["out"] = str((base / out_base / name).resolve())
+        out = Path(opts["out"])
+        if out in seen_out:
+            raise ConfigError(f"{p}: machines {seen_out[out]!r} and {name!r} share the state "
+                              f"directory {out}: each machine needs its own")
+        seen_out[out] = name
+        for need in ("source",):
+            if need not in opts:
+                raise ConfigError(f"{p}: {where} has no {need} (a recording file or "
+                                  "mqtt://host:port/<metadata topic> or opc.tcp://...)")
+        machines.append(PlantMachine(name, opts, out))
+    return PlantFile(p, tuple(machines), workers)
+
+
+def _resolve(key: str, value: Any, base: Path, paths: Collection[str]) -> Any:
+    if not isinstance(value, str) or not value:
+        return value
+    if key in paths or key == "out":
+        return str((base / value).resolve()) if not Path(value).is_absolute() else value
+    if key in ("source", "machine") and "://" not in value and not Path(value).is_absolute():
+        cand = base / value
+        if key == "source" or value.endswith(".toml") or cand.is_file():
+            return str(cand.resolve())
+    return value
+
+
+# ---------------------------------------------------------------------- one process
+class _Runtime(Protocol):
+    def run(self) -> dict[str, Any]: ...
+
+    def stop(self) -> None: ...
+
+
+Report = Callable[[str, str, Any], None]
+"""``report(machine, what, value)``: ``what`` is ``"started"``, ``"done"`` (value: the final
+status) or ``"error"`` (value: the message)."""
+
+
+def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
+                 report: Report, stop: threading.Event) -> None:
+    """Build and run the runtime of each machine in its own thread, until all have ended.
+
+    Parameters
+    ----------
+    builders : sequence of (str, callable)
+        Machine name and a function that builds its runtime (called in the thread, so a slow
+        connection of one machine does not hold the others up).
+    report : callable
+        ``report(name, what, value)`` on start, end and error of each machine.
+    stop : threading.Event
+        Set it to stop every runtime (each drains what it received and closes its sinks).
+
+    Notes
+    -----
+    A machine whose build or run fails (a broker that refuses it, a missing file) is reported
+    and ends; the others go on.
+    """
+    runtimes: dict[str, _Runtime] = {}
+    lock = threading.Lock()
+
+    def one(name: str, build: Callable[[], _Runtime]) -> None:
+        try:
+            rt = build()
+            with lock:
+                runtimes[name] = rt
+                stopping = stop.is_set()
+            if stopping:
+                rt.stop()
+            report(name, "started", None)
+            report(name, "done", rt.run())
+        except CnctwinError as exc:
+            report(name, "error", str(exc))
+        except (OSError, ConnectionError, TimeoutError) as exc:
+            report(name, "error", f"{type(exc).__name__}: {exc}")
+        except Exception as exc:  # one machine's bug must not take the plant down
+            report(name, "error", f"internal error: {type(exc).__name__}: {exc}")
+
+    threads = [threading.Thread(target=one, args=(n, b), name=f"edge-{n}", daemon=True)
+               for n, b in builders]
+    for th in threads:
+        th.start()
+    stopped = False
+    while any(th.is_alive() for th in threads):
+        if stop.wait(0.2) and not stopped:
+            stopped = True
+            with lock:
+                for rt in runtimes.values():
+                    rt.stop()
+    for th in threads:
+        th.join()
+
+
+# ---------------------------------------------------------------------- many processes
+Worker = Callable[[str, list[str], Any], None]
+"""``worker(plant_path, machine_names, report_queue)``: a top-level function (picklable by
+reference) that runs the named machines of the plant file in a worker process and puts
+``(name, what, value)`` tuples on the queue (:func:`run_machines` does the running)."""
+
+
+@dataclass
+class _Slot:
+    names: list[str]
+    proc: Any = None
+    restarts: int = 0
+    next_start: float = 0.0
+    finished: set[str] = field(default_factory=set)
+
+
+class PlantRunner:
+    """Spread the machines of a plant over worker processes and supervise them.
+
+    Parameters
+    ----------
+    plant : PlantFile
+        The plant.
+    worker : callable
+        See :data:`Worker`.
+    workers : int, optional
+        Worker processes (default the plant file's, else the CPUs this process may use; at
+        most one per machine).
+    restart_backoff_s : float, default 1.0
+        First wait before a worker that died (killed, crashed) is started again; doubles on
+        each restart up to 60 s. Its machines resume from their state directories.
+
+    Attributes
+    ----------
+    results : dict
+        Machine name -> ``("done", final status)`` or ``("error", message)``.
+    """
+
+    def __init__(self, plant: PlantFile, worker: Worker, *, workers: int | None = None,
+                 restart_backoff_s: float = 1.0) -> None:
+        n_cpu = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
+            else (os.cpu_count() or 1)
+        w = workers or plant.workers or n_cpu
+        if w < 1:
+            raise ConfigError(f"workers = {w}: give 1 or more")
+        self.plant = plant
+        self.worker = worker
+        self.n_workers = min(w, len(plant.machines))
+        names = [m.name for m in plant.machines]
+        self.slots = [_Slot(names[k::self.n_workers]) for k in range(self.n_workers)]
+        self.restart_backoff_s = restart_backoff_s
+        self.results: dict[str, tuple[str, Any]] = {}
+        self.events: list[str] = []
+        self._ctx = mp.get_context("spawn")
+        self._queue: Any = self._ctx.Queue()
+        self._stop = threading.Event()
+        self._started = False
+        self._stop_sent: float | None = None
+
+    def stop(self) -> None:
+        """Stop every worker (SIGTERM: each machine drains and closes); thread-safe."""
+        self._stop.set()
+
+    def _start(self, slot: _Slot) -> None:
+        names = [n for n in slot.names if n not in slot.finished]
+        slot.proc = self._ctx.Process(target=self.worker,
+                                      args=(str(self.plant.path), names, self._queue),
+                                      name=f"cnctwin-edge-{'+'.join(names)[:40]}", daemon=False)
+        slot.proc.start()
+
+    def _drain_reports(self, timeout_s: float) -> None:
+        try:
+            item = self._queue.get(timeout=timeout_s)
+        except queue_mod.Empty:
+            return
+        while True:
+            name, what, value = item
+            if what in ("done", "error"):
+                self.results[name] = (what, value)
+                for s in self.slots:
+                    if name in s.names:
+                        s.finished.add(name)
+            try:
+                item = self._queue.get_nowait()
+            except queue_mod.Empty:
+                return
+
+    def run(self, *, on_tick: Callable[[PlantRunner], None] | None = None,
+            tick_s: float = 1.0, stop_timeout_s: float = 60.0) -> dict[str, tuple[str, Any]]:
+        """Start the workers and supervise them until every machine has ended or a stop.
+
+        Returns
+        -------
+        dict
+            :attr:`results`.
+        """
+        if not self._started:
+            self._started = True
+            for s in self.slots:
+                self._start(s)
+        last_tick = 0.0
+        stop_sent: float | None = self._stop_sent
+        while True:
+            self._drain_reports(0.2)
+            now = time.monotonic()
+            if self._stop.is_set() and stop_sent is None:
+                stop_sent = self._stop_sent = now
+                for s in self.slots:
+                    if s.proc is not None and s.proc.is_alive():
+                        os.kill(s.proc.pid, signal.SIGTERM)
+            if stop_sent is not None and now - stop_sent > stop_timeout_s:
+                for s in self.slots:  # drained too long: the state directories still hold
+                    if s.proc is not None and s.proc.is_alive():  # the resume point
+                        s.proc.kill()
+            alive = False
+            for s in self.slots:
+                if s.proc is None:
+                    if stop_sent is None and now >= s.next_start:
+                        self._start(s)
+                    alive = alive or stop_sent is None
+                    continue
+                if s.proc.is_alive():
+                    alive = True
+                    continue
+                code = s.proc.exitcode
+                s.proc.join()
+                self._drain_reports(0.0)
+                open_ = [n for n in s.names if n not in s.finished]
+                if open_ and stop_sent is None:
+                    wait = min(self.restart_backoff_s * 2 ** s.restarts, 60.0)
+                    s.restarts += 1
+                    self.events.append(f"worker of {', '.join(open_)} ended with code {code}; "
+                                       f"restart #{s.restarts} in {wait:.0f} s (the machines "
+                                       "resume from their state directories)")
+                    s.proc, s.next_start = None, now + wait
+                    alive = True
+                elif open_:
+                    for n in open_:
+                        self.results.setdefault(n, ("error", f"worker ended with code {code} "
+                                                             "while stopping"))
+                    s.finished.update(open_)
+            if on_tick is not None and now - last_tick >= tick_s:
+                last_tick = now
+                on_tick(self)
+            if not alive:
+                break
+        self._drain_reports(0.0)
+        if on_tick is not None:
+            on_tick(self)
+        return self.results
+
+
+def worker_signals(stop: threading.Event) -> None:
+    """In a worker process: SIGTERM sets ``stop``; Ctrl-C is left to the supervisor."""
+    signal.signal(signal.SIGTERM, lambda *a: stop.set())
+    with contextlib.suppress(ValueError, OSError):
+        signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -1,0 +1,208 @@
+"""Many machines in one edge process group: ``cnctwin edge run --config plant.toml`` (issue 14,
+point 4).
+
+Each machine of a plant must get exactly what it gets from its own ``edge run``: the same
+torque values and holes (compared value by value with a single-machine run of the same file),
+its own state directory and message numbers; a machine that fails (a missing file) is named
+and the others go on; a bad plant file is refused before anything starts, naming the file,
+the machine and the key. Worker processes are real (``spawn``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from cnctwin.cli import main
+from cnctwin.edge import save_spindle_model
+from cnctwin.spindle import SpindleModel
+
+
+def _torque(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    cyc, tau = [], []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        m = json.loads(line)
+        if m["kind"] == "torque":
+            cyc.append(np.arange(m["first_cycle"], m["first_cycle"] + m["n"]))
+            tau.append(np.asarray(m["torque_nm"], dtype=float))
+    return np.concatenate(cyc), np.concatenate(tau)
+
+
+def _holes(path: Path) -> list[dict[str, Any]]:
+    return [json.loads(x)["row"] for x in path.read_text(encoding="utf-8").splitlines()
+            if '"kind":"hole"' in x]
+
+
+def _plant(tmp_path: Path, rec: Path, body: str) -> Path:
+    m1 = save_spindle_model(SpindleModel(1.01, 8.3e-5, 0.34, j_kgm2=0.0045),
+                            tmp_path / "m1.json")
+    save_spindle_model(SpindleModel(0.95, 9.0e-5, 0.30, j_kgm2=0.0045), tmp_path / "m2.json")
+    assert m1.parent == tmp_path
+    p = tmp_path / "plant.toml"
+    p.write_text(body.replace("REC", str(rec)), encoding="utf-8")
+    return p
+
+
+PLANT = """
+workers = 2
+out = "state"
+
+[defaults]
+learn-s = 3
+
+[[machine]]
+name = "mill-1"
+source = "REC"
+model = "m1.json"
+
+[[machine]]
+name = "mill-2"
+source = "REC"
+model = "m2.json"
+no_anomaly = true
+
+[[machine]]
+name = "mill-3"
+source = "missing.json"
+model = "m1.json"
+"""
+
+
+def test_plant_runs_each_machine_as_its_own_run(tmp_path: Path, wear_run: dict[str, Any],
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    plant = _plant(tmp_path, wear_run["path"], PLANT)
+    code = main(["edge", "run", "--config", str(plant), "--quiet"])
+    out, err = capsys.readouterr()
+    # mill-3's file is missing: named, exit 1, and the other two still ran to the end
+    assert code == 1
+    assert "machine mill-3:" in err and "missing.json" in err
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert list(summary) == ["mill-1", "mill-2", "mill-3"]
+    assert "error" in summary["mill-3"]
+    for name, model in (("mill-1", "m1.json"), ("mill-2", "m2.json")):
+        assert summary[name]["holes"] == 3 and summary[name]["gaps"] == 0
+        alone = tmp_path / f"alone-{name}"
+        argv = ["edge", "run", "--source", str(wear_run["path"]), "--model",
+                str(tmp_path / model), "--out", str(alone), "--quiet", "--learn-s", "3"]
+        if name == "mill-2":
+            argv.append("--no-anomaly")
+        assert main(argv) == 0
+        capsys.readouterr()
+        state = tmp_path / "state" / name
+        cyc_p, tau_p = _torque(state / "results.jsonl")
+        cyc_a, tau_a = _torque(alone / "results.jsonl")
+        np.testing.assert_array_equal(cyc_p, cyc_a)
+        np.testing.assert_array_equal(tau_p, tau_a)  # bit for bit: same code, same input
+        assert _holes(state / "results.jsonl") == _holes(alone / "results.jsonl")
+        assert json.loads((state / "status.json").read_text())["state"] == "finished"
+    # two models, two machines: different torque, each from its own model
+    assert not np.array_equal(_torque(tmp_path / "state/mill-1/results.jsonl")[1],
+                              _torque(tmp_path / "state/mill-2/results.jsonl")[1])
+    assert main(["edge", "status", "--config", str(plant)]) == 0
+    table = capsys.readouterr().out
+    assert table.count("finished") == 2 and "mill-3" in table
+    assert main(["edge", "status", "--config", str(plant), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["mill-1"]["holes"] == 3 and doc["mill-3"] is None
+
+
+@pytest.mark.parametrize(("body", "expect"), [
+    ("[[machine]]\nname = 'a'\nsource = 'x.json'\nout = 's'\nbogus = 1\n",
+     "[[machine]] 'a': unknown option 'bogus'"),
+    ("out = 's'\n[[machine]]\nname = 'a'\nsource = 'x.json'\n[[machine]]\nname = 'a'\n"
+     "source = 'y.json'\n", "two machines are named 'a'"),
+    ("[[machine]]\nname = 'a'\nsource = 'x.json'\nout = 's'\n[[machine]]\nname = 'b'\n"
+     "source = 'x.json'\nout = 's'\n", "share the state directory"),
+    ("out = 's'\n", "no machines"),
+    ("out = 's'\n[[machine]]\nsource = 'x.json'\n", "needs name"),
+    ("out = 's'\n[[machine]]\nname = 'a'\n", "has no source"),
+    ("out = 's'\n[[machine]]\nname = 'a'\nsource = 'x.json'\nno-holes = 'yes'\n",
+     "no-holes = 'yes': give true or false"),
+    ("out = 's'\n[[machine]]\nname = 'a'\nsource = 'x.json'\nlearn-s = 'soon'\n",
+     "machine 'a': argument --learn-s: invalid float value"),
+    ("out = 's'\n[[machine]]\nname = 'a'\nsource = 'x.json'\ndetector = 'magic'\n",
+     "invalid choice: 'magic'"),
+    ("workers = 0\nout = 's'\n", "workers = 0"),
+    ("out = 's'\n[machine\n", "not valid TOML"),
+    ("outdir = 's'\n", "unknown top-level key(s) ['outdir']"),
+])
+def test_bad_plant_file_is_refused_before_start(tmp_path: Path, body: str, expect: str,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    p = tmp_path / "plant.toml"
+    p.write_text(body, encoding="utf-8")
+    assert main(["edge", "run", "--config", str(p), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert expect in err and str(p) in err, err
+    assert "Traceback" not in err
+    assert not (tmp_path / "s").exists()  # nothing started
+
+
+def test_config_and_single_machine_options_do_not_mix(tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["edge", "run", "--config", str(tmp_path / "p.toml"), "--source", "x"]) == 2
+    assert "--source there" in capsys.readouterr().err
+    assert main(["edge", "run", "--out", str(tmp_path / "o")]) == 2
+    assert "give --source" in capsys.readouterr().err
+    assert main(["edge", "run", "--config", str(tmp_path / "p.toml")]) == 2
+    assert "no such plant file" in capsys.readouterr().err
+
+
+def test_a_killed_worker_is_restarted_and_sigterm_stops_the_plant(
+        tmp_path: Path, wear_run: dict[str, Any]) -> None:
+    """kill -9 of a worker process: the supervisor starts it again (its machines resume from
+    their state directories, seq continues); SIGTERM to the supervisor stops every machine
+    cleanly (state 'finished', exit 0)."""
+    body = PLANT.split("[[machine]]\nname = \"mill-3\"")[0].replace(
+        "learn-s = 3", "learn-s = 3\nspeed = 1.0")  # real time: still running when killed
+    plant = _plant(tmp_path, wear_run["path"], body)
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "cnctwin", "edge", "run", "--config",
+                             str(plant), "--quiet"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, env=env, cwd=tmp_path)
+    try:
+        status = tmp_path / "state/mill-1/status.json"
+        deadline = time.monotonic() + 90
+        while not (status.exists() and json.loads(status.read_text())["cycles"] > 500):
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "mill-1 did not start"
+            time.sleep(0.2)
+        workers = subprocess.run(["pgrep", "-P", str(proc.pid), "-f", "spawn_main"],
+                                 capture_output=True, text=True).stdout.split()
+        assert len(workers) == 2, workers
+        seq_before = json.loads((tmp_path / "state/mill-1/seq.json").read_text())["next_seq"]
+        os.kill(int(workers[0]), signal.SIGKILL)
+        deadline = time.monotonic() + 60
+        while True:
+            again = subprocess.run(["pgrep", "-P", str(proc.pid), "-f", "spawn_main"],
+                                   capture_output=True, text=True).stdout.split()
+            if len(again) == 2 and workers[0] not in again:
+                break
+            assert time.monotonic() < deadline, f"no restart: {again}"
+            time.sleep(0.2)
+        time.sleep(3.0)  # both workers run again
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err.decode()
+    summary = json.loads(out.decode().strip().splitlines()[-1])
+    assert set(summary) == {"mill-1", "mill-2"}
+    for name in summary:
+        st = json.loads((tmp_path / "state" / name / "status.json").read_text())
+        assert st["state"] == "finished"
+        seqs = [json.loads(x)["seq"] for x in
+                (tmp_path / "state" / name / "results.jsonl").read_text().splitlines()
+                if x.strip().endswith("}")]
+        assert len(seqs) == len(set(seqs))  # never a repeated number, also across the kill
+    seq_after = json.loads((tmp_path / "state/mill-1/seq.json").read_text())["next_seq"]
+    assert seq_after > seq_before
