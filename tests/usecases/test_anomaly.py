@@ -59,6 +59,33 @@ def test_detector_conformance(cls: type[Detector]) -> None:
         det.score_many(df.drop(columns=list(det.inputs)[:1]))
 
 
+@pytest.mark.parametrize("cls", DETECTORS, ids=lambda c: c.__name__)
+def test_chunk_calls_equal_one_sample_calls(cls: type[Detector]) -> None:
+    """``learn_chunk``/``score_chunk`` (the edge runtime's per-chunk calls, array code where a
+    detector has it) give the one-sample results in order. Chunks of 50 (the runtime's),
+    with a speed change inside a chunk (the stream reverses every 250 samples). Tolerance:
+    1e-9 of the score, the rounding of an EWMA by a linear filter and of a pairwise variance
+    against the one-sample recursions; NaN (not judged) exactly where the one-sample call
+    gives NaN."""
+    df = _stream(4000)
+    df.loc[2600:2700, "speed_rpm"] = np.nan  # no speed: judged as before, sample by sample
+    det = cls(**cls._unit_test_params())
+    ref = pickle.loads(pickle.dumps(det))
+    cols = {k: df[k].to_numpy(dtype=np.float64) for k in det.inputs}
+    rows = df[list(det.inputs)].to_dict("records")
+    for k in range(0, 2000, 50):
+        det.learn_chunk({c: v[k:k + 50] for c, v in cols.items()})
+    for r in rows[:2000]:
+        ref.learn_one(r)
+    got = np.concatenate([det.score_chunk({c: v[k:k + 50] for c, v in cols.items()})
+                          for k in range(2000, 4000, 50)])
+    want = np.array([ref.score_one(r) for r in rows[2000:]])
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+    ok = ~np.isnan(want)
+    np.testing.assert_allclose(got[ok], want[ok], rtol=1e-9, atol=1e-9)
+    assert got.dtype == np.float64
+
+
 def test_physics_residual_detects_step_with_short_delay() -> None:
     df = _stream(6000)
     df["speed_rpm"] = 400.0  # the constant-speed twin applies everywhere

@@ -217,6 +217,10 @@ class CutTracker:
         feed = np.full(n, np.nan)
         spd = np.full(n, np.nan)
         evs = self._events(events) if events is not None else []
+        if not evs and n:
+            fast = self._update_array(cycles, z_des_mm, z_enc_mm, speed_rpm)
+            if fast is not None:
+                return fast
         k = 0
         step = self.min_speed_mm_s * self.cycle_time_s
         cyc = cycles.tolist()
@@ -268,3 +272,43 @@ class CutTracker:
             feed[j] = self._feed
             spd[j] = self._speed
         return CutContext(hole, prog, dep, feed, spd)
+
+    def _update_array(self, cycles: NDArray[np.int64], z_des_mm: NDArray[np.float64],
+                      z_enc_mm: NDArray[np.float64], speed_rpm: NDArray[np.float64]
+                      ) -> CutContext | None:
+        """:meth:`update` in array code for the two common chunks without NC events: the
+        tool outside the material throughout, or inside one hole throughout (feed and speed
+        already latched). None for any other chunk (the loop handles it)."""
+        n = int(cycles.size)
+        prev = self._prev_z
+        step = self.min_speed_mm_s * self.cycle_time_s
+        zprev = np.empty(n)
+        zprev[0] = np.nan if prev is None else prev
+        zprev[1:] = z_des_mm[:-1]
+        with np.errstate(invalid="ignore"):
+            down = (z_des_mm - zprev) < -step
+        geo = self.nc_geometry or self.row_geometry
+        if geo is None:
+            inside = np.zeros(n, dtype=bool)
+        else:
+            with np.errstate(invalid="ignore"):
+                inside = down & (z_enc_mm <= geo[0]) & (np.abs(speed_rpm) >= self.min_speed_rpm)
+        nan = np.full(n, np.nan)
+        if not inside.any():
+            if self.in_cut:
+                self.in_cut = False
+                self._last_out = int(cycles[0])
+            self._prev_z = float(z_des_mm[-1])
+            return CutContext(np.full(n, -1.0), nan, nan.copy(), nan.copy(), nan.copy())
+        if not (inside.all() and self.in_cut and len(self._feeds) >= self.latch_cycles):
+            return None
+        assert geo is not None
+        before = np.minimum.accumulate(np.concatenate([[self._deepest], z_enc_mm[:-1]]))
+        new = z_enc_mm < before
+        self._prev_z = float(z_des_mm[-1])
+        self._deepest = float(min(self._deepest, float(z_enc_mm.min())))
+        d = geo[0] - z_enc_mm
+        hole = np.where(new, float(self.hole), -1.0)
+        dep = np.where(new, d, np.nan)
+        return CutContext(hole, np.where(new, d / geo[1], np.nan), dep,
+                          np.where(new, self._feed, np.nan), np.where(new, self._speed, np.nan))

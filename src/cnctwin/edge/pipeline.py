@@ -24,12 +24,13 @@ from numpy.typing import NDArray
 
 from cnctwin.recording import CounterGap, Recording, RecordingMeta, empty_events
 
-__all__ = ["RESULT_KINDS", "Chunk", "Processor", "Result", "Sink", "Source"]
+__all__ = ["RESULT_KINDS", "Chunk", "Processor", "Result", "Sink", "Source", "no_events"]
 
 _NO_EVENTS = empty_events()  # shared and never modified: building one costs ~3 ms
 
 
-def _no_events() -> pd.DataFrame:
+def no_events() -> pd.DataFrame:
+    """The shared empty event table of chunks without NC events (read it, never modify it)."""
     return _NO_EVENTS
 
 
@@ -82,7 +83,7 @@ class Chunk:
     cycles: NDArray[np.int64]
     time_ns: NDArray[np.int64]
     signals: dict[str, NDArray[np.float64]]
-    events: pd.DataFrame = field(default_factory=_no_events)
+    events: pd.DataFrame = field(default_factory=no_events)
     gap_before: CounterGap | None = None
     cycle_time_s: float = 0.002
     machine: str = ""

@@ -214,7 +214,8 @@ class HoleProcessor:
         if z is None:
             raise ConfigError(f"the hole processor needs DES_POS|{self.z_axis} or "
                               f"ENC_POS|{self.z_axis}; the stream has {sorted(chunk.signals)}")
-        keep = {c: v for c, v in chunk.signals.items() if c in self.columns}
+        sig = chunk.signals
+        keep = {c: sig[c] for c in self.columns if c in sig}
         self._parts.append(Chunk(chunk.cycles, chunk.time_ns, keep,
                                  cycle_time_s=chunk.cycle_time_s, machine=chunk.machine))
         self._n += len(chunk)
@@ -553,18 +554,57 @@ class AnomalyProcessor:
             if late is not None and late[0] == c0:
                 x0["torque_nm"] = late[1]
             self._one(c0, x0, learn_until, refr, out)
-        arrs = [cols[k].tolist() for k in keys]
-        cyc = chunk.cycles.tolist()
+        m = n_rows
+        hold = bool("torque_nm" in keys and tq is not None and n_rows
+                    and not np.isfinite(tq[-1]))
+        if hold:  # the last cycle waits for its torque (next chunk)
+            m = n_rows - 1
+            self._held = (chunk.last_cycle, {k: float(cols[k][-1]) for k in keys})
+        x = {k: cols[k][:m] for k in keys}
+        # learning is a prefix of the stream: the chunk splits into learned and scored cycles
+        if self.learn_holes is not None:
+            if self._taught:
+                n_learn = 0
+            else:
+                reached = np.flatnonzero(cols["hole"][:m] >= self.learn_holes)
+                n_learn = int(reached[0]) if reached.size else m
+                self._taught = bool(reached.size)
+        else:
+            n_learn = int(np.clip(learn_until - chunk.first_cycle, 0, m))
         scores = np.full(n_rows, np.nan)
-        hold = "torque_nm" in keys and tq is not None and n_rows and not np.isfinite(tq[-1])
-        for j, c in enumerate(cyc):
-            x = {k: a[j] for k, a in zip(keys, arrs, strict=True)}
-            if hold and j == n_rows - 1:
-                self._held = (c, x)
-                break
-            scores[j] = self._one(c, x, learn_until, refr, out)
+        if n_learn:
+            self.detector.learn_chunk({k: v[:n_learn] for k, v in x.items()})
+            self.learned += n_learn
+        if m > n_learn:
+            sc = self.detector.score_chunk({k: v[n_learn:m] for k, v in x.items()})
+            scores[n_learn:m] = sc
+            self.scored += m - n_learn
+            self._alarms(chunk.cycles[n_learn:m], sc, x, n_learn, refr, out)
         chunk.derived[f"ANOMALY_SCORE|{self.spindle}"] = scores
         return out
+
+    def _alarms(self, cycles: NDArray[np.int64], sc: NDArray[np.float64],
+                x: dict[str, NDArray[np.float64]], offset: int, refr: int,
+                out: list[Result]) -> None:
+        """Alarm results at the upward threshold crossings of ``sc`` (refractory kept)."""
+        above = sc > self.threshold
+        was = np.concatenate([[self._above], above[:-1]])
+        for j in np.flatnonzero(above & ~was).tolist():
+            c = int(cycles[j])
+            if self._last_alarm is None or c - self._last_alarm >= refr:
+                self._last_alarm = c
+                self._alarm(c, float(sc[j]), {k: float(v[offset + j]) for k, v in x.items()},
+                            out)
+        self._above = bool(above[-1])
+
+    def _alarm(self, c: int, score: float, x: dict[str, float], out: list[Result]) -> None:
+        self.alarms += 1
+        out.append(Result("alarm", c, {"detector": type(self.detector).__name__,
+                                       "cycle": c, "score": score,
+                                       "threshold": self.threshold,
+                                       "current_a": x.get("current_a"),
+                                       "hole": int(x["hole"]) if "hole" in x else None,
+                                       "units": {"current_a": "A", "score": "-"}}))
 
     def _one(self, c: int, x: dict[str, float], learn_until: int, refr: int,
              out: list[Result]) -> float:
@@ -585,13 +625,7 @@ class AnomalyProcessor:
         if above and not self._above and (self._last_alarm is None
                                           or c - self._last_alarm >= refr):
             self._last_alarm = c
-            self.alarms += 1
-            out.append(Result("alarm", c, {"detector": type(self.detector).__name__,
-                                           "cycle": c, "score": float(sc),
-                                           "threshold": self.threshold,
-                                           "current_a": x.get("current_a"),
-                                           "hole": int(x["hole"]) if "hole" in x else None,
-                                           "units": {"current_a": "A", "score": "-"}}))
+            self._alarm(c, float(sc), x, out)
         self._above = bool(above)
         return float(sc)
 

@@ -76,6 +76,20 @@ class _Welford:
         self.mean += d / self.n
         self.m2 += d * (x - self.mean)
 
+    def update_many(self, x: NDArray[np.float64]) -> None:
+        """Add many values at once (Chan et al.'s pairwise combination; equal to repeated
+        :meth:`update` up to rounding)."""
+        nb = int(x.size)
+        if nb == 0:
+            return
+        mb = float(x.mean())
+        m2b = float(((x - mb) ** 2).sum())
+        n = self.n + nb
+        d = mb - self.mean
+        self.m2 += m2b + d * d * self.n * nb / n
+        self.mean += d * nb / n
+        self.n = n
+
     @property
     def std(self) -> float:
         return math.sqrt(self.m2 / (self.n - 1)) if self.n > 1 else float("nan")
@@ -99,6 +113,26 @@ class Detector:
     def score_one(self, x: Mapping[str, float]) -> float:
         """Anomaly score of one sample: high means anomalous; 0 or below means normal."""
         raise NotImplementedError
+
+    def learn_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> None:
+        """Learn consecutive samples given as equal-length arrays, in order.
+
+        The same as ``learn_one`` on each sample; detectors override it with array code (the
+        edge runtime calls it once per chunk of cycles).
+        """
+        keys = list(x)
+        for row in zip(*(np.asarray(x[k]).tolist() for k in keys), strict=True):
+            self.learn_one(dict(zip(keys, row, strict=True)))
+
+    def score_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> NDArray[np.float64]:
+        """Scores of consecutive samples given as equal-length arrays, in order.
+
+        The same as ``score_one`` on each sample (see :meth:`learn_chunk`).
+        """
+        keys = list(x)
+        rows = zip(*(np.asarray(x[k]).tolist() for k in keys), strict=True)
+        return np.array([self.score_one(dict(zip(keys, row, strict=True))) for row in rows],
+                        dtype=np.float64)
 
     def learn_many(self, df: pd.DataFrame) -> None:
         """Learn every row of ``df`` in order (same as repeated ``learn_one``)."""
@@ -244,6 +278,60 @@ class PhysicsResidualDetector(Detector):
         if not math.isfinite(std) or std == 0.0:
             return 0.0
         return abs(s - self._stats.mean) / std - self.threshold_sigma
+
+    # ------------------------------------------------------------ chunks (array code)
+    def _smooth_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> NDArray[np.float64]:
+        from scipy.signal import lfilter
+
+        r = np.asarray(x[self.measured], dtype=np.float64) - np.asarray(
+            x[self.predicted], dtype=np.float64)
+        if r.size == 0:
+            return r
+        a = self._alpha
+        out = np.empty_like(r)
+        if self._ewma is None:
+            out[0] = prev = float(r[0])
+            start = 1
+        else:
+            start, prev = 0, self._ewma
+        # e[k] = e[k-1] + a (r[k] - e[k-1]) = a r[k] + (1 - a) e[k-1]
+        if r.size > start:
+            out[start:] = lfilter([a], [1.0, -(1.0 - a)], r[start:], zi=[(1.0 - a) * prev])[0]
+        self._ewma = float(out[-1])
+        return out
+
+    def _steady_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> NDArray[np.bool_]:
+        """:meth:`_steady` of each sample; array code when the speed holds over the chunk."""
+        if self.speed is None:
+            return np.ones(len(next(iter(x.values()))), dtype=bool)
+        n = np.asarray(x[self.speed], dtype=np.float64)
+        k = n.size
+        ref, prev = self._n_ref, self._n_prev
+        if k and ref is not None and prev is not None and np.isfinite(n).all():
+            step = np.abs(np.diff(n, prepend=prev))
+            band = max(10.0 * self.speed_tol_rpm, 0.01 * abs(ref))
+            if (step <= self.speed_tol_rpm).all() and (np.abs(n - ref) <= band).all():
+                since = self._since_change + np.arange(1, k + 1)
+                self._since_change += k
+                self._n_prev = float(n[-1])
+                return since > self.settle_samples
+        key = self.speed
+        return np.array([self._steady({key: v}) for v in n.tolist()], dtype=bool)
+
+    def learn_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> None:
+        s = self._smooth_chunk(x)
+        self._stats.update_many(s[self._steady_chunk(x)])
+
+    def score_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> NDArray[np.float64]:
+        s = self._smooth_chunk(x)
+        steady = self._steady_chunk(x)
+        std = self._stats.std
+        if not math.isfinite(std) or std == 0.0:
+            out = np.zeros(s.size)
+        else:
+            out = np.abs(s - self._stats.mean) / std - self.threshold_sigma
+        out[~steady] = np.nan
+        return out
 
     @classmethod
     def _unit_test_params(cls) -> dict[str, Any]:
