@@ -46,13 +46,10 @@ def _bulk(seq: int, cycles: np.ndarray, t0: pd.Timestamp, i: np.ndarray,
     return json.dumps({"seq": seq, "vals": vals}).encode()
 
 
-def test_databus_in_results_out_with_wrap(broker: Broker, tmp_path: Path) -> None:
-    model = SpindleModel(1.04, 8.42e-5, 0.35, j_kgm2=0.002)
-    rng = np.random.default_rng(3)
-    n_cyc = 600
-    raw = (np.arange(n_cyc) + 2**31 - 250) % 2**31  # the counter wraps after 250 cycles
-    speed = np.linspace(2000.0, 2400.0, n_cyc)
-    current = 3.0 + 0.2 * rng.standard_normal(n_cyc)
+def _live_source(broker: Broker, *, idle_timeout_s: float) -> tuple[Collector, Any,
+                                                                  DatabusSource]:
+    """A result collector, a publisher that has sent the (retained) metadata, and a started
+    live source reading the documented test datapoints."""
     out = Collector(broker.port)
     pub = publisher(broker.port)
     pub.publish(META, json.dumps(_metadata()).encode(), qos=1,
@@ -60,8 +57,19 @@ def test_databus_in_results_out_with_wrap(broker: Broker, tmp_path: Path) -> Non
     src = DatabusSource("127.0.0.1", broker.port, metadata_topic=META,
                         name_map={"Cycle": "CYCLE", "Spindle_Current": "CURRENT|SP1",
                                   "Spindle_Speed": "CMD_SPEED|SP1"},
-                        window_s=0.05, idle_timeout_s=1.5)
+                        window_s=0.05, idle_timeout_s=idle_timeout_s)
     src.start()
+    return out, pub, src
+
+
+def test_databus_in_results_out_with_wrap(broker: Broker, tmp_path: Path) -> None:
+    model = SpindleModel(1.04, 8.42e-5, 0.35, j_kgm2=0.002)
+    rng = np.random.default_rng(3)
+    n_cyc = 600
+    raw = (np.arange(n_cyc) + 2**31 - 250) % 2**31  # the counter wraps after 250 cycles
+    speed = np.linspace(2000.0, 2400.0, n_cyc)
+    current = 3.0 + 0.2 * rng.standard_normal(n_cyc)
+    out, pub, src = _live_source(broker, idle_timeout_s=1.5)
     sink = MqttSink("127.0.0.1", broker.port, state_dir=tmp_path / "state",
                     machine="mill-7")
     rt = EdgeRuntime(src, [TorqueProcessor(model)], [sink], state_dir=tmp_path)
@@ -185,3 +193,39 @@ def test_cli_live_databus(broker: Broker, tmp_path: Path,
                                                          key=lambda m: m["seq"])])
     # thesis Eq. 4.4 by hand: 1.04 * 3.0 - 8.42e-5 * 2400 - 0.35 = 2.56792 Nm
     np.testing.assert_allclose(tau, 2.56792, rtol=1e-12)
+
+
+def test_idle_live_runtime_reports_and_measures_latency(broker: Broker, tmp_path: Path) -> None:
+    """Before any data arrives the runtime already publishes its ``run`` message and keeps its
+    status current (an idle live source ticks the runtime); once data flows, the status holds
+    the arrival-to-publish latency of the chunks (p50/p99/max [ms])."""
+    model = SpindleModel(1.04, 8.42e-5, 0.35)
+    out, pub, src = _live_source(broker, idle_timeout_s=4.0)
+    sink = MqttSink("127.0.0.1", broker.port, state_dir=tmp_path / "state", machine="mill-7")
+    rt = EdgeRuntime(src, [TorqueProcessor(model)], [sink], state_dir=tmp_path,
+                     status_every_s=0.5)
+    th = threading.Thread(target=rt.run, daemon=True)
+    th.start()
+    try:
+        assert out.wait(lambda: out.of_kind("run") and len(out.of_kind("status")) >= 2,
+                        timeout_s=10), "no run/status message while idle"
+        idle = json.loads((tmp_path / "status.json").read_text())
+        assert idle["cycles"] == 0 and idle["latency_ms"]["p99"] is None
+        t0 = pd.Timestamp("2025-03-01T10:00:00Z")
+        for s, k in enumerate(range(0, 300, 50)):
+            c = np.arange(k, k + 50)
+            pub.publish(DATA, _bulk(s + 1, c, t0 + pd.Timedelta(milliseconds=2 * k),
+                                    np.full(50, 3.0), np.full(50, 2400.0)),
+                        qos=1).wait_for_publish(timeout=5)
+            time.sleep(0.1)
+        th.join(timeout=30)
+        assert not th.is_alive()
+    finally:
+        pub.loop_stop()
+        pub.disconnect()
+        out.close()
+    st = rt.final_status
+    assert st is not None and st["cycles"] == 300
+    lat = st["latency_ms"]
+    # each message is its own chunk, processed within a fraction of its 100 ms period
+    assert lat["chunks"] == 6 and 0.0 <= lat["p50"] <= lat["p99"] <= lat["max"] < 1000.0

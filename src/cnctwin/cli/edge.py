@@ -258,7 +258,7 @@ def plant_table(plant: Any, results: dict[str, Any] | None = None,
     from cnctwin.edge import read_status
 
     t = Table(title=f"cnctwin edge - plant {plant.path.name} ({len(plant.machines)} machines)")
-    for col in ("machine", "state", "cycles", "cyc/s", "lag s", "holes", "alarms", "gaps",
+    for col in ("machine", "state", "cycles", "cyc/s", "p99 ms", "holes", "alarms", "gaps",
                 "lost"):
         t.add_column(col, no_wrap=True, justify="left" if col in ("machine", "state")
                      else "right")
@@ -276,7 +276,8 @@ def plant_table(plant: Any, results: dict[str, Any] | None = None,
         lost = sum(int(v) for v in (st.get("overload") or {}).values())
         note = str(value) if what == "error" else ""
         t.add_row(m.name, state, str(st.get("cycles", 0)), _fmt(rate, ".0f"),
-                  _fmt(st.get("lag_s")), str(st.get("holes", 0)), str(st.get("alarms", 0)),
+                  _fmt((st.get("latency_ms") or {}).get("p99")), str(st.get("holes", 0)),
+                  str(st.get("alarms", 0)),
                   str(st.get("gaps", 0)), str(lost) if lost else "-", note)
     if events:
         t.caption = events[-1]
@@ -353,7 +354,8 @@ def status_table(st: dict[str, Any]) -> Any:
         ("cycles", f"{st.get('cycles', 0)} (last {st.get('last_cycle')})"),
         ("cycles/s", f"{_fmt(rate, '.0f')} (machine needs {_fmt(need, '.0f')}; "
                      f"busy {_fmt(st.get('cycles_per_busy_s', float('nan')), '.0f')}/s)"),
-        ("lag", f"{_fmt(st.get('lag_s', float('nan')))} s; data age "
+        ("lag", f"{_fmt(st.get('lag_s', float('nan')))} s (arrival to publish, p99 "
+                f"{_fmt((st.get('latency_ms') or {}).get('p99'))} ms); data age "
                 f"{_fmt(st.get('data_age_s', float('nan')))} s"),
         ("holes", str(st.get("holes", 0))),
         ("alarms", str(st.get("alarms", 0))),

@@ -15,6 +15,7 @@ import json
 import os
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from os import PathLike
@@ -48,6 +49,11 @@ class _Counters:
     age_s: float = float("nan")
     last_cycle: int | None = None
     recent: list[tuple[float, int]] = field(default_factory=list)
+    latencies: deque[float] = field(default_factory=lambda: deque(maxlen=LATENCY_WINDOW))
+
+
+LATENCY_WINDOW = 5000
+"""Chunks whose arrival-to-publish latency the status summarises (the most recent)."""
 
 
 class EdgeRuntime:
@@ -176,7 +182,10 @@ class EdgeRuntime:
                 self.c.age_s = (time.time_ns() - int(sub.time_ns[-1])) / 1e9
         self.c.chunks += 1
         if chunk.received_ns:
+            # arrival of the data (a live source: its first message) -> results handed to
+            # every sink (the MQTT sink publishes in write())
             self.c.lag_s = (time.time_ns() - chunk.received_ns) / 1e9
+            self.c.latencies.append(self.c.lag_s)
         self.c.busy_s += time.perf_counter() - t0
         self._maybe_status()
 
@@ -243,6 +252,7 @@ class EdgeRuntime:
             "cycles_per_busy_s": c.cycles / c.busy_s if c.busy_s > 0 else float("nan"),
             "machine_rate_cycles_per_s": 1.0 / ct,
             "lag_s": c.lag_s, "data_age_s": c.age_s,
+            "latency_ms": _latency_ms(c.latencies),
             "holes": c.holes, "alarms": c.alarms,
             "gaps": len(gaps), "missing_cycles": tr.missing_cycles if tr else 0,
             "last_gaps": [[g.after_cycle, g.before_cycle] for g in gaps[-5:]],
@@ -274,6 +284,15 @@ class EdgeRuntime:
             self._on_status(st)
 
     _on_status: Callable[[dict[str, Any]], None] | None = None
+
+    def idle(self) -> None:
+        """Nothing arrived: keep the status current (every ``status_every_s``) and let the
+        sinks send what they hold (the MQTT sink's queue, e.g. the ``run`` message)."""
+        self._maybe_status()
+        for s in self.sinks:
+            pump = getattr(s, "pump", None)
+            if pump is not None:
+                pump()
 
     # ------------------------------------------------------------------ loop
     def stop(self) -> None:
@@ -316,6 +335,8 @@ class EdgeRuntime:
             for chunk in self.source.chunks():
                 if len(chunk):
                     self.process(chunk)
+                else:  # a live source with nothing new: status and sinks keep going
+                    self.idle()
                 if self._stop.is_set() or (max_cycles is not None
                                            and self.c.cycles >= max_cycles):
                     break
@@ -372,6 +393,16 @@ def _write_seq(state_dir: Path, next_seq: int) -> None:
         fh.flush()
         os.fsync(fh.fileno())
     os.replace(tmp, p)
+
+
+def _latency_ms(lat: deque[float]) -> dict[str, Any]:
+    """p50/p99/max [ms] of the recent chunks' arrival-to-publish latency (None before any)."""
+    if not lat:
+        return {"p50": None, "p99": None, "max": None, "chunks": 0}
+    a = np.asarray(lat) * 1e3
+    p50, p99 = np.percentile(a, [50, 99])
+    return {"p50": round(float(p50), 3), "p99": round(float(p99), 3),
+            "max": round(float(a.max()), 3), "chunks": int(a.size)}
 
 
 def _iso(t_ns: int) -> str:

@@ -227,7 +227,7 @@ class DatabusSource:
                                      name_map=name_map, cycle_time_s=cycle_time_s,
                                      username=username, password=password, security=security,
                                      client_id=client_id, session_expiry_s=session_expiry_s,
-                                     qos=1)
+                                     qos=1, columnar=True)
         self.window_s = window_s
         self.idle_timeout_s = idle_timeout_s
         self.cycle_time_s = cycle_time_s
@@ -251,19 +251,81 @@ class DatabusSource:
         return self
 
     def chunks(self) -> Iterator[Chunk]:
-        """One chunk per poll window with values."""
+        """The values as they arrive: one chunk per burst of messages (at most ``window_s``
+        of waiting for the first), so a message is processed as soon as it is in; an empty
+        chunk after each ``window_s`` without data (the runtime's idle tick)."""
         self.start()
         last_value = time.monotonic()
         while not self._closed and not self._interrupted:
-            rec = self.recorder.collect(duration_s=self.window_s)
-            self.issues.extend(rec.meta.issues)
-            if rec.n_cycles == 0:
+            self.recorder.poll(self.window_s)
+            got = list(self._take())  # also what arrived while waiting for the metadata
+            if not got:
                 if self.idle_timeout_s is not None and \
                         time.monotonic() - last_value > self.idle_timeout_s:
                     return
+                yield self._empty()  # the runtime keeps its status and sinks going
                 continue
             last_value = time.monotonic()
-            yield self._chunk(rec)
+            yield from got
+
+    def _empty(self) -> Chunk:
+        return Chunk(np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64), {},
+                     cycle_time_s=self.cycle_time_s, machine=self.machine)
+
+    def _take(self) -> Iterator[Chunk]:
+        """Chunks of what was decoded: the fast path's arrays, then any general-path values
+        (in cycle order)."""
+        cols, arrived = self.recorder.take_columns()
+        msg = self.recorder.dropped_issue()
+        if msg:
+            self.issues.append(msg)
+        out: list[Chunk] = []
+        if cols is not None:
+            self.issues.extend(cols.issues)
+            ch = self._columns_chunk(cols, arrived)
+            if ch is not None:
+                out.append(ch)
+        if self.recorder.decoder.values:
+            rec = self.recorder.decoder.recording(clear=True)
+            self.issues.extend(rec.meta.issues)
+            if rec.n_cycles:
+                ch = self._chunk(rec)
+                ch.received_ns = arrived or ch.received_ns
+                out.append(ch)
+        elif self.recorder.decoder.issues:
+            self.issues.extend(self.recorder.decoder.issues)
+            self.recorder.decoder.issues = []
+        out.sort(key=lambda c: c.first_cycle if len(c) else 0)
+        yield from out
+
+    def _columns_chunk(self, cols: Any, arrived: int) -> Chunk | None:
+        """A chunk of the fast path's arrays (as :meth:`_chunk` builds one from a recording)."""
+        step_ns = round(self.cycle_time_s * 1e9)
+        t_ns = cols.cycles * step_ns
+        sig = {c: v for c, v in cols.columns.items() if c != "CYCLE"}
+        raw = cols.columns.get("CYCLE")
+        if raw is not None:
+            ok = np.isfinite(raw)
+            if not ok.all():
+                self.issues.append(f"{int((~ok).sum())} rows without a CYCLE value "
+                                   "skipped (the counter is the time base)")
+                t_ns = t_ns[ok]
+                sig = {c: v[ok] for c, v in sig.items()}
+            cycles = raw[ok].astype(np.int64)
+            self.counter_modulus = CYCLE_COUNTER_MODULUS
+        else:
+            cycles = cols.cycles
+        if self.resume_after_cycle is not None and len(cycles):
+            keep = ~self._behind(cycles)
+            cycles, t_ns = cycles[keep], t_ns[keep]
+            sig = {c: v[keep] for c, v in sig.items()}
+        if not len(cycles):
+            return None
+        if not self.machine:
+            self.machine = str((self.recorder.decoder.metadata or {}).get("applicationName",
+                                                                          ""))
+        return Chunk(cycles, t_ns, sig, cycle_time_s=self.cycle_time_s, machine=self.machine,
+                     received_ns=arrived or time.time_ns())
 
     def interrupt(self) -> None:
         """End :meth:`chunks` after the current poll window, also when no data arrives
@@ -280,10 +342,7 @@ class DatabusSource:
         self.recorder.stop()
         while self.recorder.poll(0.0):  # decode everything already in the receive queue
             pass
-        rec = self.recorder.collect(duration_s=0.0)
-        self.issues.extend(rec.meta.issues)
-        if rec.n_cycles:
-            yield self._chunk(rec)
+        yield from self._take()
 
     def _chunk(self, rec: Recording) -> Chunk:
         if not self.machine:
@@ -311,6 +370,11 @@ class DatabusSource:
     def _skip_processed(self, hf: pd.DataFrame, cycles: np.ndarray
                         ) -> tuple[pd.DataFrame, np.ndarray]:
         """Drop the rows a previous run already processed (redelivered after a crash)."""
+        behind = self._behind(cycles)
+        return hf[~behind], cycles[~behind]
+
+    def _behind(self, cycles: np.ndarray) -> np.ndarray:
+        """Rows at or before the resume point (counted as replayed; the check ends past it)."""
         last = int(self.resume_after_cycle)  # type: ignore[arg-type]
         if self.counter_modulus:
             m = self.counter_modulus
@@ -324,7 +388,7 @@ class DatabusSource:
                                "before the restart (redelivered by the broker)")
         if not behind.all():
             self.resume_after_cycle = None  # past the resume point: stop checking
-        return hf[~behind], cycles[~behind]
+        return behind
 
     @property
     def dropped(self) -> int:

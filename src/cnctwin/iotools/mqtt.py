@@ -29,7 +29,7 @@ from types import TracebackType
 from typing import Any
 
 from cnctwin.exceptions import ConfigError, FormatError
-from cnctwin.iotools.databus import DatabusDecoder
+from cnctwin.iotools.databus import DatabusColumns, DatabusDecoder, merge_columns
 from cnctwin.recording import Recording
 
 __all__ = [
@@ -153,7 +153,8 @@ class _Client:
         self.session_present = False
         self.topics: dict[str, int] = {}  # subscriptions, renewed after a session loss
         self.resubscribes = 0
-        self.queue: queue.Queue[tuple[str, bytes]] = queue.Queue(maxsize=max_queue)
+        # (topic, payload, arrival time [ns since the epoch])
+        self.queue: queue.Queue[tuple[str, bytes, int]] = queue.Queue(maxsize=max_queue)
         self.dropped = 0
         self.connected = threading.Event()
         self.connect_rc: Any = None
@@ -193,7 +194,7 @@ class _Client:
 
     def _on_message(self, client: Any, userdata: Any, msg: Any) -> None:
         try:
-            self.queue.put_nowait((msg.topic, bytes(msg.payload)))
+            self.queue.put_nowait((msg.topic, bytes(msg.payload), time.time_ns()))
         except queue.Full:
             self.dropped += 1
 
@@ -269,6 +270,11 @@ class MqttRecorder:
         session (MQTT 3.1.1), nothing is kept. Data that a resumed session delivers before the
         (retained) metadata is held, up to ``max_queue`` messages, and decoded once the
         metadata is known.
+    columnar : bool, default False
+        Decode well-formed bulk messages of numbers straight into arrays
+        (:meth:`DatabusDecoder.decode_columns`, collected by :meth:`take_columns`) instead of
+        one object per value; every other message takes the general path. The live edge
+        source uses it.
 
     Examples
     --------
@@ -297,6 +303,7 @@ class MqttRecorder:
         max_queue: int = 100_000,
         security: MqttSecurity | None = None,
         session_expiry_s: int = 0,
+        columnar: bool = False,
     ) -> None:
         self.metadata_topic = metadata_topic
         self.fixed_topics = list(data_topics) if data_topics else None
@@ -307,7 +314,10 @@ class MqttRecorder:
                                password=password, keepalive_s=30, max_queue=max_queue,
                                security=security, session_expiry_s=session_expiry_s)
         self._max_pending = max_queue
-        self._pending: list[tuple[str, bytes]] = []
+        self._pending: list[tuple[str, bytes, int]] = []
+        self.columnar = columnar
+        self.batches: list[DatabusColumns] = []
+        self.first_arrival_ns = 0
         self._pending_dropped = 0
         self._subscribed: dict[str, int] = {}
         self._dropped_reported = 0
@@ -362,8 +372,9 @@ class MqttRecorder:
         while True:
             remaining = deadline - time.monotonic()
             try:
-                topic, payload = self._client.queue.get(timeout=max(remaining, 0.0)) \
-                    if n == 0 and remaining > 0 else self._client.queue.get_nowait()
+                topic, payload, arrived = self._client.queue.get(
+                    timeout=max(remaining, 0.0)) if n == 0 and remaining > 0 \
+                    else self._client.queue.get_nowait()
             except queue.Empty:
                 return n
             n += 1
@@ -374,23 +385,46 @@ class MqttRecorder:
                 self.decoder.update_metadata(payload, topic=topic)
                 self._subscribe_data()
                 pending, self._pending = self._pending, []
-                for t, p in pending:
-                    self._decode(t, p)
+                for t, p, a in pending:
+                    self._decode(t, p, a)
             elif self.decoder.metadata is None:
                 # a resumed session delivers the queued data before the retained metadata
                 if len(self._pending) < self._max_pending:
-                    self._pending.append((topic, payload))
+                    self._pending.append((topic, payload, arrived))
                 else:
                     self._pending_dropped += 1
             else:
-                self._decode(topic, payload)
+                self._decode(topic, payload, arrived)
 
-    def _decode(self, topic: str, payload: bytes) -> None:
+    def _decode(self, topic: str, payload: bytes, arrived: int) -> None:
+        if not self.first_arrival_ns:
+            self.first_arrival_ns = arrived
+        if self.columnar:
+            batch = self.decoder.decode_columns(payload, topic=topic)
+            if batch is not None:
+                self.batches.append(batch)
+                return
         try:
             self.decoder.decode(payload, topic=topic)
         except FormatError as exc:
             # a bad message must not stop the stream: keep the error as an issue
             self.decoder.issues.append(f"message skipped: {exc}")
+
+    def take_columns(self) -> tuple[DatabusColumns | None, int]:
+        """The fast-path values decoded since the last call (``columnar=True``) and the
+        arrival time of the first message since then [ns since the epoch]; both reset."""
+        batches, self.batches = self.batches, []
+        first, self.first_arrival_ns = self.first_arrival_ns, 0
+        return (merge_columns(batches) if batches else None), first
+
+    def dropped_issue(self) -> str | None:
+        """A message about receive-queue drops since the last call (None without any)."""
+        dropped = self.dropped - self._dropped_reported
+        if not dropped:
+            return None
+        self._dropped_reported = self.dropped
+        return (f"{dropped} MQTT messages dropped: the receive queue was full (decode faster "
+                "or raise max_queue)")
 
     @property
     def ready(self) -> bool:
@@ -416,12 +450,10 @@ class MqttRecorder:
 
     def _recording(self) -> Recording:
         rec = self.decoder.recording(clear=True)
-        dropped = self.dropped - self._dropped_reported
-        if dropped:
-            rec.meta.issues.append(f"{dropped} MQTT messages dropped: the receive queue was "
-                                   "full (decode faster or raise max_queue)")
+        msg = self.dropped_issue()
+        if msg:
+            rec.meta.issues.append(msg)
             rec.meta.partial = True
-            self._dropped_reported = self.dropped
         return rec
 
     def collect(
@@ -599,7 +631,7 @@ def subscribe_data_recorder(
             if ready is not None and not ready.is_set() and client.acked(mid):
                 ready.set()
             try:
-                t, payload = client.queue.get(timeout=0.05)
+                t, payload, _ = client.queue.get(timeout=0.05)
             except queue.Empty:
                 if timeout_s is not None and time.monotonic() - last > timeout_s:
                     return

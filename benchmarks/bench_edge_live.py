@@ -1,0 +1,286 @@
+"""Many machines live: N simulated machines publish Databus messages through a real mosquitto,
+one ``cnctwin edge run --config plant.toml`` serves them all; latency and CPU per machine.
+
+What runs (all on this machine, sharing its cores):
+
+* a private mosquitto on a free port;
+* the publisher (this process, one thread): every machine replays the same simulated drilling
+  run (tool-wear scenario, thesis §5.1: 20 mm CYCLE81 holes at 2400 rpm) as Industrial Edge
+  Databus ``bulk`` messages (documented payload: ``{"seq", "vals": [{"id", "qc", "ts",
+  "val"}]}``), ``--cycles-per-message`` cycles per message (50 = one message per 100 ms),
+  paced in real time; the machines start a few ms apart, as real ones would;
+* the plant: ``cnctwin edge run --config plant.toml`` with one worker process per core; every
+  machine runs the full path (torque + holes + physics anomaly detector) and publishes its
+  results (MQTT, store-and-forward queue, QoS 1) to the same broker.
+
+Reported, in one run:
+
+* latency, as the runtime measures it: from the arrival of a message at the runtime (the
+  MQTT client's receive callback) to the results handed to the MQTT sink (published), per
+  chunk; p50/p99/max over every chunk of every machine (``status.json`` of each machine);
+* latency end to end, as a consumer sees it: from the publisher's send of the message that
+  holds a torque result's last cycle to the arrival of that result at a subscriber (two
+  broker hops included: an upper bound of the above);
+* CPU of the whole plant (supervisor + workers, from ``/proc`` of the process tree, from
+  the first published message to 1 s after the last: start-up not counted) per
+  machine-second of data: machines one core serves at 500 Hz on this path, Databus
+  decoding and MQTT in and out included; beside it the physical need (500 cycles/s per
+  machine) and the bare estimator floor measured in the same run.
+
+Run: ``.venv/bin/python benchmarks/bench_edge_live.py [--machines 100] [--seconds 30]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import orjson
+
+from _common import cpu_model
+
+NEED = 500.0
+COLUMNS = ["CURRENT|SP1", "CMD_SPEED|SP1", "DES_POS|X1", "ENC_POS|X1", "DES_POS|Y1",
+           "ENC_POS|Y1", "DES_POS|Z1", "ENC_POS|Z1", "TORQUE|Z1", "CURRENT|Z1"]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _mosquitto(port: int, conf_dir: Path) -> subprocess.Popen[bytes]:
+    exe = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
+    if not os.path.exists(exe):
+        sys.exit("mosquitto not found: apt-get install mosquitto")
+    conf = conf_dir / "mosquitto.conf"
+    conf.write_text(f"listener {port} 127.0.0.1\nallow_anonymous true\n"
+                    "max_queued_messages 100000\nmax_inflight_messages 100\n")
+    proc = subprocess.Popen([exe, "-c", str(conf)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    for _ in range(100):
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=0.2):
+                return proc
+        except OSError:
+            time.sleep(0.05)
+    proc.kill()
+    sys.exit("mosquitto did not start")
+
+
+def _tree_cpu_s(pid: int) -> float:
+    """User + system CPU [s] of a process and its children so far (/proc; Linux)."""
+    tick = os.sysconf("SC_CLK_TCK")
+    total = 0.0
+    todo = [pid]
+    while todo:
+        p = todo.pop()
+        try:
+            fields = Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[1].split()
+            total += (int(fields[11]) + int(fields[12])) / tick
+            for task in Path(f"/proc/{p}/task").iterdir():
+                kids = (task / "children").read_text().split()
+                todo += [int(k) for k in kids]
+        except (OSError, IndexError, ValueError):
+            continue
+    return total
+
+
+def _metadata(k: int) -> tuple[str, str, bytes]:
+    meta = f"ie/m/j/simatic/v1/m{k:03d}/dp"
+    data = f"ie/d/j/simatic/v1/m{k:03d}/dp/r/NCK/hf"
+    defs = [{"name": "CYCLE", "id": "1", "dataType": "DInt"}] + [
+        {"name": c, "id": str(i + 2), "dataType": "LReal"} for i, c in enumerate(COLUMNS)]
+    doc = {"seq": 1, "hashVersion": 1, "applicationName": f"mill-{k:03d}", "connections": [
+        {"name": "NCK", "type": "sinumerik", "dataPoints": [
+            {"name": "hf", "topic": data, "publishType": "bulk",
+             "dataPointDefinitions": defs}]}]}
+    return meta, data, orjson.dumps(doc)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--machines", type=int, default=100)
+    ap.add_argument("--seconds", type=float, default=30.0, help="machine time published")
+    ap.add_argument("--cycles-per-message", type=int, default=50)
+    ap.add_argument("--workers", type=int, default=0, help="plant workers (0: the cores)")
+    ap.add_argument("--keep", action="store_true", help="keep the temporary folder")
+    args = ap.parse_args()
+    import paho.mqtt.client as mqtt
+
+    from cnctwin.edge import save_spindle_model
+    from cnctwin.sim import scenarios as sc
+    from cnctwin.spindle import SpindleModel, StreamingTorqueEstimator
+
+    tmp = Path(tempfile.mkdtemp(prefix="bench_live_"))
+    n_cyc = int(args.seconds * NEED)
+    holes = max(1, int(args.seconds / 4.4) + 1)
+    rec = sc.tool_wear_run(n_holes=holes, holes_per_set=6, dynamometer=False,
+                           seed=0).recording
+    n_cyc = min(n_cyc, rec.n_cycles)
+    data = {c: rec.hf[c].to_numpy(dtype=np.float64)[:n_cyc] for c in COLUMNS}
+    model = SpindleModel(1.04, 8.42e-5, 0.35, j_kgm2=0.0045)
+    save_spindle_model(model, tmp / "spindle.json")
+
+    # floor, same run: the bare estimator over the same chunks
+    est = StreamingTorqueEstimator(model)
+    c0 = time.process_time()
+    cpm = args.cycles_per_message
+    for k in range(0, n_cyc, cpm):
+        est.update(data["CURRENT|SP1"][k:k + cpm], data["CMD_SPEED|SP1"][k:k + cpm])
+    floor = n_cyc / (time.process_time() - c0)
+
+    port = _free_port()
+    broker = _mosquitto(port, tmp)
+    topics = [_metadata(k) for k in range(args.machines)]
+    pub = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2,
+                      client_id="bench-publisher")
+    pub.max_inflight_messages_set(1000)
+    pub.connect("127.0.0.1", port)
+    pub.loop_start()
+    for meta, _, doc in topics:
+        pub.publish(meta, doc, qos=1, retain=True).wait_for_publish(timeout=10)
+
+    lines = [f"workers = {args.workers}" if args.workers else "", 'out = "state"', "",
+             "[defaults]", f'model = "{tmp / "spindle.json"}"',
+             f'publish = "mqtt://127.0.0.1:{port}/results"', "learn-s = 5",
+             "idle-timeout-s = 5", "session-expiry-s = 0", "no-twin = true", ""]
+    for k, (meta, _, _) in enumerate(topics):
+        lines += ["[[machine]]", f'name = "mill-{k:03d}"',
+                  f'source = "mqtt://127.0.0.1:{port}/{meta}"', ""]
+    (tmp / "plant.toml").write_text("\n".join(lines), encoding="utf-8")
+
+    # a consumer of the results: arrival time of every torque message
+    got: list[tuple[str, int, int, int]] = []  # machine, first_cycle, n, arrival ns
+    runs: set[str] = set()
+    lock = threading.Lock()
+
+    def on_message(client: Any, userdata: Any, msg: Any) -> None:
+        t = time.time_ns()
+        m = orjson.loads(msg.payload)
+        with lock:
+            if m.get("kind") == "torque":
+                got.append((m["machine"], m["first_cycle"], m["n"], t))
+            elif m.get("kind") == "run":
+                runs.add(m["machine"])
+
+    sub = mqtt.Client(callback_api_version=mqtt.CallbackAPIVersion.VERSION2,
+                      client_id="bench-consumer")
+    sub.on_message = on_message
+    sub.connect("127.0.0.1", port)
+    sub.subscribe("results/#", qos=0)
+    sub.loop_start()
+
+    plant = subprocess.Popen([sys.executable, "-m", "cnctwin", "edge", "run", "--config",
+                              str(tmp / "plant.toml"), "--quiet"], cwd=tmp,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 180
+    while len(runs) < args.machines:
+        if plant.poll() is not None or time.monotonic() > deadline:
+            out, err = plant.communicate()
+            sys.exit(f"the plant did not start all machines ({len(runs)}): "
+                     f"{err.decode()[-2000:]}")
+        time.sleep(0.2)
+    time.sleep(1.0)  # every data subscription in place
+
+    cpu_start = _tree_cpu_s(plant.pid)  # start-up (imports, connects) not counted
+    # publish in real time: message j of every machine at t0 + (j + 1) * cpm * 2 ms
+    sent_ns = np.zeros((args.machines, (n_cyc + cpm - 1) // cpm), dtype=np.int64)
+    base = 10_000_000
+    t_ms0 = int(time.time() * 1000)
+    start = time.perf_counter()
+    period = cpm / NEED
+    for j, k in enumerate(range(0, n_cyc, cpm)):
+        due = start + (j + 1) * period
+        wait = due - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+        hi = min(k + cpm, n_cyc)
+        stamps = []
+        for c in range(k, hi):
+            sec, ms = divmod(t_ms0 + 2 * c, 1000)
+            stamps.append(time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(sec)) + f".{ms:03d}Z")
+        for m, (_, topic, _) in enumerate(topics):
+            vals: list[dict[str, Any]] = []
+            for r, c in enumerate(range(k, hi)):
+                ts = stamps[r]
+                vals.append({"id": "1", "qc": 3, "ts": ts, "val": base + c})
+                vals += [{"id": str(i + 2), "qc": 3, "ts": ts, "val": float(data[col][c])}
+                         for i, col in enumerate(COLUMNS)]
+            sent_ns[m, j] = time.time_ns()
+            pub.publish(topic, orjson.dumps({"seq": j + 1, "vals": vals}), qos=1)
+    lag_end = time.perf_counter() - (start + (n_cyc // cpm) * period)
+    time.sleep(1.0)  # the last messages processed; the idle timeout has not ended a machine
+    cpu_s = _tree_cpu_s(plant.pid) - cpu_start
+    out, err = plant.communicate(timeout=300)
+    time.sleep(1.0)
+    sub.loop_stop()
+    pub.loop_stop()
+    broker.terminate()
+    broker.wait(timeout=10)
+
+    summary = json.loads(out.decode().strip().splitlines()[-1])
+    cycles = sum(int(v.get("cycles") or 0) for v in summary.values())
+    errors = {k: v for k, v in summary.items() if "error" in v}
+    lat_p99, lat_p50, lat_max, lost = [], [], [], 0
+    for name in summary:
+        st = json.loads((tmp / "state" / name / "status.json").read_text())
+        lm = st["latency_ms"]
+        if lm["p99"] is not None:
+            lat_p99.append(lm["p99"])
+            lat_p50.append(lm["p50"])
+            lat_max.append(lm["max"])
+        lost += sum(int(v) for v in st["overload"].values())
+    # end to end: per torque result, arrival - send of the message holding its last cycle
+    ext = []
+    for machine, first, n, t_rx in got:
+        m = int(machine.split("-")[1])
+        last = first + n - 1 - base
+        j = last // cpm
+        if 0 <= j < sent_ns.shape[1]:
+            ext.append((t_rx - sent_ns[m, j]) / 1e6)
+    e = np.asarray(ext)
+    load = os.getloadavg()
+    print(f"machine: {cpu_model()}, {os.cpu_count()} vCPU; load average "
+          f"{load[0]:.1f}/{load[1]:.1f}/{load[2]:.1f}; python {platform.python_version()}")
+    print(f"{args.machines} machines x {n_cyc} cycles ({n_cyc / NEED:.0f} s, "
+          f"{cpm} cycles per message, {1 + len(COLUMNS)} datapoints); publisher behind "
+          f"schedule at the end by {lag_end * 1e3:.0f} ms; errors {len(errors)}; "
+          f"cycles processed {cycles} of {args.machines * n_cyc}; counted losses {lost}")
+    print()
+    print("| figure | value |")
+    print("|---|---|")
+    print(f"| latency arrival -> publish, p50 of the machines' p50 [ms] | "
+          f"{np.median(lat_p50):.1f} |")
+    print(f"| latency arrival -> publish, median of the machines' p99 [ms] | "
+          f"{np.median(lat_p99):.1f} |")
+    print(f"| latency arrival -> publish, worst machine's p99 [ms] | {max(lat_p99):.1f} |")
+    print(f"| latency arrival -> publish, max [ms] | {max(lat_max):.1f} |")
+    print(f"| end to end (send -> result at a subscriber), p50 / p99 [ms] | "
+          f"{np.percentile(e, 50):.1f} / {np.percentile(e, 99):.1f} |")
+    print(f"| plant CPU [s] for {n_cyc / NEED * args.machines:.0f} machine-seconds | "
+          f"{cpu_s:.1f} |")
+    print(f"| machines at 500 Hz per core, live (Databus + full path + MQTT) | "
+          f"{cycles / cpu_s / NEED:.0f} |")
+    print(f"| floor: bare estimator, same chunks, machines per core | {floor / NEED:,.0f} |")
+    if args.keep:
+        print(f"kept: {tmp}")
+    else:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
