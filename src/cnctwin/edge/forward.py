@@ -80,37 +80,69 @@ class ForwardQueue:
         """Messages acknowledged and removed."""
         return self._counter("sent")
 
-    def put_many(self, items: list[tuple[str, bytes]]) -> int:
-        """Append messages in order (one transaction); return how many old ones were dropped."""
-        if not items:
-            return 0
+    def put_many(self, items: list[tuple[str, bytes]], *,
+                 remove: list[int] | None = None) -> list[int]:
+        """Append messages in order, and delete acknowledged ones, in one transaction.
+
+        Parameters
+        ----------
+        items : list of (str, bytes)
+            ``(topic, payload)`` to append.
+        remove : list of int, optional
+            Ids of acknowledged messages to delete in the same transaction (one commit per
+            chunk of results instead of two).
+
+        Returns
+        -------
+        list of int
+            The ids of the appended messages, in order (those the bound dropped at once
+            included; :attr:`dropped` counts the drops).
+        """
+        if not items and not remove:
+            return []
         db = self._db
         db.execute("BEGIN")
+        drop = removed = 0
+        ids: list[int] = []
         try:
-            db.executemany("INSERT INTO outbox (topic, payload) VALUES (?, ?)", items)
-            self._len += len(items)
-            drop = max(self._len - self.max_messages, 0)
-            if drop:
-                db.execute("DELETE FROM outbox WHERE id IN (SELECT id FROM outbox ORDER BY id "
-                           "LIMIT ?)", (drop,))
-                db.execute("UPDATE counters SET value = value + ? WHERE name = 'dropped'",
-                           (drop,))
-                self._len -= drop
-            db.execute("UPDATE counters SET value = value + ? WHERE name = 'enqueued'",
-                       (len(items),))
+            if remove:
+                removed = self._delete(remove)
+            if items:
+                db.executemany("INSERT INTO outbox (topic, payload) VALUES (?, ?)", items)
+                last = int(db.execute("SELECT last_insert_rowid()").fetchone()[0])
+                ids = list(range(last - len(items) + 1, last + 1))  # one writer: consecutive
+                self._len += len(items)
+                drop = max(self._len - self.max_messages, 0)
+                if drop:
+                    db.execute("DELETE FROM outbox WHERE id IN (SELECT id FROM outbox ORDER "
+                               "BY id LIMIT ?)", (drop,))
+                    db.execute("UPDATE counters SET value = value + ? WHERE name = "
+                               "'dropped'", (drop,))
+                    self._len -= drop
+                db.execute("UPDATE counters SET value = value + ? WHERE name = 'enqueued'",
+                           (len(items),))
             db.execute("COMMIT")
         except BaseException:
             db.execute("ROLLBACK")
+            self._len = int(self._db.execute("SELECT count(*) FROM outbox").fetchone()[0])
             raise
         self._counts["dropped"] += drop
         self._counts["enqueued"] += len(items)
-        return drop
+        self._counts["sent"] += removed
+        return ids
 
     def peek(self, n: int, *, after_id: int = 0) -> list[tuple[int, str, bytes]]:
         """The oldest ``n`` messages with id > ``after_id``: ``(id, topic, payload)``."""
         rows = self._db.execute("SELECT id, topic, payload FROM outbox WHERE id > ? "
                                 "ORDER BY id LIMIT ?", (after_id, n)).fetchall()
         return [(int(i), str(t), bytes(p)) for i, t, p in rows]
+
+    def _delete(self, ids: list[int]) -> int:
+        cur = self._db.executemany("DELETE FROM outbox WHERE id = ?", [(i,) for i in ids])
+        n = cur.rowcount if cur.rowcount >= 0 else len(ids)
+        self._db.execute("UPDATE counters SET value = value + ? WHERE name = 'sent'", (n,))
+        self._len -= n
+        return int(n)
 
     def remove(self, ids: list[int]) -> None:
         """Delete acknowledged messages."""
@@ -119,15 +151,13 @@ class ForwardQueue:
         db = self._db
         db.execute("BEGIN")
         try:
-            cur = db.executemany("DELETE FROM outbox WHERE id = ?", [(i,) for i in ids])
-            n = cur.rowcount if cur.rowcount >= 0 else len(ids)
-            db.execute("UPDATE counters SET value = value + ? WHERE name = 'sent'", (n,))
+            n = self._delete(ids)
             db.execute("COMMIT")
         except BaseException:
             db.execute("ROLLBACK")
+            self._len = int(self._db.execute("SELECT count(*) FROM outbox").fetchone()[0])
             raise
         self._counts["sent"] += n
-        self._len = int(self._db.execute("SELECT count(*) FROM outbox").fetchone()[0])
 
     def close(self) -> None:
         """Close the file."""

@@ -30,6 +30,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -87,6 +88,7 @@ HOLE_COLUMNS: dict[str, str] = {
 
 _CYCLE_RE = re.compile(r"\b(CYCLE8[1-9]|G8[1-9])\b", re.IGNORECASE)
 _CALL_RE = re.compile(r"_?(CYCLE8[1-9])", re.IGNORECASE)
+_COUNT_RE = re.compile(r"CYCLE8[1-9]", re.IGNORECASE)
 _PARAMS_RE = re.compile(r"CYCLE8[1-9]\s*\(([^)]*)\)", re.IGNORECASE)
 
 
@@ -192,6 +194,24 @@ def find_plunges(
     return out
 
 
+def _event_arrays(ev: pd.DataFrame, *cols: str) -> tuple[Any, ...]:
+    """The cycle column (sorted, stable) and the named columns as object arrays (None for a
+    missing value): plain arrays, since the event tables are small and pandas' per-call
+    overhead (string dtypes, sorting a frame) dominated the per-hole cost at the edge."""
+    ec = ev["cycle"].to_numpy(dtype=np.int64)
+    order = np.argsort(ec, kind="stable")
+    out: list[Any] = [ec[order]]
+    for c in cols:
+        if c in ev.columns:
+            v = ev[c].astype(object).to_numpy()[order]
+            out.append(np.array([None if x is None or x is pd.NA or (isinstance(x, float)
+                                                                     and math.isnan(x))
+                                 else x for x in v], dtype=object))
+        else:
+            out.append(np.full(len(ec), None, dtype=object))
+    return tuple(out)
+
+
 def _cycle_info(rec: Recording, cycles: NDArray[np.int64]) -> tuple[list[str], list[float]]:
     """Drilling-cycle name and reference plane (RFP) active at each cycle, from NC events."""
     ev = rec.events
@@ -200,18 +220,14 @@ def _cycle_info(rec: Recording, cycles: NDArray[np.int64]) -> tuple[list[str], l
     rfp = [math.nan] * n
     if ev.empty:
         return names, rfp
-    ev = ev.sort_values("cycle", kind="stable")
-    ec = ev["cycle"].to_numpy(dtype=np.int64)
-    kinds = ev["kind"].astype(str).to_numpy()
-    texts = ev["gcode"].astype(object).where(ev["gcode"].notna(), "").astype(str).to_numpy()
-    paths = ev["path"].astype(object).where(ev["path"].notna(), "").astype(str).to_numpy()
+    ec, kinds, texts, paths = _event_arrays(ev, "kind", "gcode", "path")
     # modal state walked in event order
     cur_name, cur_rfp = "", math.nan
-    state_name = np.empty(len(ec), dtype=object)
-    state_rfp = np.empty(len(ec))
-    for i in range(len(ec)):
-        if kinds[i] == "block":
-            t = texts[i].upper()
+    state_name: list[str] = []
+    state_rfp: list[float] = []
+    for kind, text, path in zip(kinds.tolist(), texts.tolist(), paths.tolist(), strict=True):
+        if kind == "block":
+            t = str(text or "").upper()
             m = _CYCLE_RE.search(t)
             if m:
                 cur_name = m.group(1).upper()
@@ -224,16 +240,16 @@ def _cycle_info(rec: Recording, cycles: NDArray[np.int64]) -> tuple[list[str], l
                         cur_rfp = math.nan
             elif re.fullmatch(r"\s*MCALL\s*", t) or re.search(r"\bG80\b", t):
                 cur_name, cur_rfp = "", math.nan
-        elif kinds[i] == "call":
-            m = _CALL_RE.search(paths[i])
+        elif kind == "call":
+            m = _CALL_RE.search(str(path or ""))
             if m and not cur_name:
                 cur_name = m.group(1).upper()
-        state_name[i] = cur_name
-        state_rfp[i] = cur_rfp
+        state_name.append(cur_name)
+        state_rfp.append(cur_rfp)
     idx = np.searchsorted(ec, cycles, side="right") - 1
-    for k, j in enumerate(idx):
+    for k, j in enumerate(idx.tolist()):
         if j >= 0:
-            names[k] = str(state_name[j])
+            names[k] = state_name[j]
             rfp[k] = float(state_rfp[j])
     return names, rfp
 
@@ -242,13 +258,13 @@ def _active_tool(rec: Recording, cycles: NDArray[np.int64]) -> list[int | None]:
     ev = rec.events
     if ev.empty or "active_tool" not in ev.columns:
         return [None] * len(cycles)
-    t = ev[["cycle", "active_tool"]].dropna().sort_values("cycle", kind="stable")
-    if t.empty:
+    ec, tools = _event_arrays(ev, "active_tool")
+    known = np.array([t is not None for t in tools.tolist()], dtype=bool)
+    if not known.any():
         return [None] * len(cycles)
-    tc = t["cycle"].to_numpy(dtype=np.int64)
-    tv = t["active_tool"].to_numpy()
+    tc, tv = ec[known], tools[known]
     idx = np.searchsorted(tc, cycles, side="right") - 1
-    return [int(tv[j]) if j >= 0 else None for j in idx]
+    return [int(tv[j]) if j >= 0 else None for j in idx.tolist()]
 
 
 def _contact(
@@ -527,11 +543,15 @@ def hole_record(
         row["tool"] = tools[grp[0]]
         row["cycle"] = name
         rows.append(row)
-    df = pd.DataFrame(rows, columns=_columns())
-    df["tool"] = df["tool"].astype("Int64")
-    for col in ("hole", "set", "position_in_set", "start_cycle", "cut_start_cycle",
-                "cut_end_cycle", "end_cycle"):
-        df[col] = df[col].astype("int64")
+    ints = ("hole", "set", "position_in_set", "start_cycle", "cut_start_cycle",
+            "cut_end_cycle", "end_cycle")
+    columns: dict[str, Any] = {}
+    for col in _columns():  # one frame, typed as built (astype per column cost ~0.2 ms each)
+        vals: list[Any] = [r[col] for r in rows]
+        columns[col] = (pd.array(vals, dtype="Int64") if col == "tool"
+                        else np.asarray(vals, dtype=np.int64) if col in ints
+                        else pd.Series(vals, dtype=object) if not rows else vals)
+    df = pd.DataFrame(columns)
     n_calls = _count_cycle_calls(rec)
     if n_calls and n_calls != len(df):
         issues.append(f"{n_calls} drilling-cycle calls in the NC events but {len(df)} holes "
@@ -563,8 +583,9 @@ def _count_cycle_calls(rec: Recording) -> int:
     ev = rec.events
     if ev.empty:
         return 0
-    calls = ev[ev["kind"] == "call"]["path"].dropna().astype(str)
-    return int(calls.str.contains(r"CYCLE8[1-9]", case=False, regex=True).sum())
+    _, kinds, paths = _event_arrays(ev, "kind", "path")
+    return sum(1 for k, p in zip(kinds.tolist(), paths.tolist(), strict=True)
+               if k == "call" and p is not None and _COUNT_RE.search(str(p)))
 
 
 def hole_records(
