@@ -83,10 +83,43 @@ def _broker() -> tuple[subprocess.Popen[bytes], int] | None:
     return None
 
 
+def _plant_marginal(rec: Recording, tmp: Path, port: int, n_machines: int) -> float:
+    """Cycles per CPU-second that one more machine costs in a plant (``edge run --config``,
+    one worker process): CPU of a 1-machine and an N-machine plant on the same file, the
+    difference over the extra cycles (start-up, imports and the supervisor cancel out)."""
+    import resource
+    import sys
+
+    from cnctwin.edge import save_spindle_model
+    from cnctwin.iotools.parquet import write_parquet
+
+    src = tmp / "plant-input.parquet"
+    if not src.exists():
+        write_parquet(rec, src)
+        save_spindle_model(SpindleModel(1.04, 8.42e-5, 0.35, j_kgm2=0.0045),
+                           tmp / "spindle.json")
+    cpu = {}
+    for n in (1, n_machines):
+        d = Path(tempfile.mkdtemp(dir=tmp))
+        lines = ["workers = 1", 'out = "state"', "[defaults]",
+                 f'model = "{tmp / "spindle.json"}"', f'source = "{src}"', "learn-s = 5",
+                 f'publish = "mqtt://127.0.0.1:{port}/bench"']
+        lines += [f'[[machine]]\nname = "m{k:03d}"' for k in range(n)]
+        (d / "plant.toml").write_text("\n".join(lines) + "\n", encoding="utf-8")
+        r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        subprocess.run([sys.executable, "-m", "cnctwin", "edge", "run", "--config",
+                        str(d / "plant.toml"), "--quiet"], check=True, cwd=d,
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu[n] = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+    return (n_machines - 1) * rec.n_cycles / (cpu[n_machines] - cpu[1])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--holes", type=int, default=12)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--plant-machines", type=int, default=20)
     args = ap.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
@@ -106,7 +139,8 @@ def main() -> None:
             est.update(i[k:k + 50], s[k:k + 50])
         est.flush()
 
-    def runtime(full: bool, mqtt_port: int | None = None) -> Callable[[], Any]:
+    def runtime(full: bool, mqtt_port: int | None = None, chunk: int = 50
+                ) -> Callable[[], Any]:
         def run() -> dict[str, Any]:
             d = Path(tempfile.mkdtemp(dir=tmp))
             procs: list[Any] = [TorqueProcessor(model)]
@@ -115,7 +149,7 @@ def main() -> None:
             sinks: list[Any] = [JsonLinesSink(d / "results.jsonl")]
             if mqtt_port is not None:
                 sinks.append(MqttSink("127.0.0.1", mqtt_port, state_dir=d, machine="bench"))
-            st = EdgeRuntime(ReplaySource(rec, chunk_cycles=50), procs, sinks,
+            st = EdgeRuntime(ReplaySource(rec, chunk_cycles=chunk), procs, sinks,
                              state_dir=d).run()
             assert st["cycles"] == n
             if full:
@@ -173,6 +207,13 @@ def main() -> None:
         try:
             w, c = _measure(runtime(True, port), args.repeat)
             rows.append(("runtime: same + MQTT (store-and-forward queue, QoS 1)", n / w, n / c))
+            w, c = _measure(runtime(True, port, chunk=500), args.repeat)
+            rows.append(("runtime: same, 500-cycle chunks (1 s Databus messages)", n / w,
+                         n / c))
+            per = _plant_marginal(rec, tmp, port, args.plant_machines)
+            rows.append((f"plant: `edge run --config`, 1 worker process, marginal cost of a "
+                         f"machine (1 vs {args.plant_machines} machines, full path + MQTT)",
+                         float("nan"), per))
         finally:
             proc.terminate()
             proc.wait(timeout=5)
@@ -189,7 +230,8 @@ def main() -> None:
     print("| path | cycles/s (wall) | cycles/s (CPU) | machines at 500 Hz per core (CPU) |")
     print("|---|---|---|---|")
     for name, rw, rc in rows:
-        print(f"| {name} | {rw:,.0f} | {rc:,.0f} | {rc / NEED:,.0f} |")
+        wall = "-" if rw != rw else f"{rw:,.0f}"
+        print(f"| {name} | {wall} | {rc:,.0f} | {rc / NEED:,.0f} |")
     print(f"| physical need, one machine | {NEED:.0f} | {NEED:.0f} | 1 |")
 
 
