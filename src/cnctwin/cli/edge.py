@@ -174,6 +174,9 @@ def _add_run_options(r: argparse.ArgumentParser) -> None:
                    help="drill diameter for physics-torque [mm] (8.5)")
     r.add_argument("--point-angle-deg", type=float, default=140.0,
                    help="drill point angle for physics-torque [deg] (140)")
+    r.add_argument("--checkpoint-s", type=float, default=10.0, metavar="S",
+                   help="stream time between checkpoints of the processors' state in OUT "
+                   "(a crashed run resumes from it; 10)")
     r.add_argument("--max-queue", type=int, default=200_000,
                    help="store-and-forward bound [messages]")
     r.add_argument("--idle-timeout-s", type=float, default=None,
@@ -529,7 +532,21 @@ def _build(args: argparse.Namespace) -> Any:
                                publish_hz=args.opcua_publish_hz, security=ua_security))
     if args.mtconnect or args.shdr:
         sinks.append(_mtconnect_sink(args, machine))
-    return EdgeRuntime(src, procs, sinks, state_dir=out, machine=machine)
+    if args.checkpoint_s is not None and args.checkpoint_s <= 0:
+        raise ConfigError(f"--checkpoint-s {args.checkpoint_s}: give a positive number of "
+                          "seconds")
+    rt = EdgeRuntime(src, procs, sinks, state_dir=out, machine=machine,
+                     checkpoint_every_s=args.checkpoint_s)
+    info = rt.resume()  # a run that ended without finishing (crash, kill -9) continues
+    if info["resumed"]:
+        how = ("from its checkpoint (open hole, detectors and estimator restored)"
+               if info["from_checkpoint"] else
+               "without a checkpoint of this source: a hole open at the crash is flagged "
+               "partial, detectors learn again")
+        print(f"{machine}: the last run in {out} did not finish; resuming after cycle "
+              f"{info['after_cycle']} {how}; results it already emitted are not repeated",
+              file=sys.stderr)
+    return rt
 
 
 def _mtconnect_sink(args: argparse.Namespace, machine: str) -> Any:

@@ -198,6 +198,7 @@ class HoleProcessor:
         self.plunges = 0
         self.live_context = live_context
         self.cut: CutTracker | None = None
+        self._resumed_after: int | None = None
 
     def _z(self, chunk: Chunk) -> NDArray[np.float64] | None:
         for c in (f"DES_POS|{self.z_axis}", f"ENC_POS|{self.z_axis}"):
@@ -323,17 +324,26 @@ class HoleProcessor:
                 self._pending = last_cycle + round(self.settle_s / self._cycle_time_s)
                 break
             payload = _row_payload(row)
-            out.append(Result("hole", int(row["end_cycle"]),
-                              {"hole": int(row["hole"]), "row": payload,
-                               "units": HOLE_UNITS}))
+            msg: dict[str, Any] = {"hole": int(row["hole"]), "row": payload,
+                                   "units": HOLE_UNITS}
+            resumed = self._resumed_after
+            if resumed is not None:
+                if int(row["start_cycle"]) <= resumed + 2:
+                    msg["partial"] = True
+                    msg["partial_reason"] = (
+                        f"the runtime restarted at cycle {resumed + 1} without its state "
+                        "while this hole was being drilled: its plunge began before the data "
+                        "this run has; the row covers only the part after the restart")
+                self._resumed_after = None
+            out.append(Result("hole", int(row["end_cycle"]), msg))
             if self.cut is not None:
                 self.cut.hole_done(payload)
             self.holes += 1
             cut_at = ext_cycle
-        for msg in rows.attrs.get("issues", []):
+        for note in rows.attrs.get("issues", []):
             # the event count covers the modal history kept before the buffer: not a finding
-            if "drilling-cycle calls" not in msg and msg not in self.issues:
-                self.issues.append(msg)
+            if "drilling-cycle calls" not in note and note not in self.issues:
+                self.issues.append(note)
         if cut_at is not None and not final:
             self._drop_before(cut_at)
         return out
@@ -386,6 +396,12 @@ class HoleProcessor:
         if self.cut is not None:
             self.cut.gap()
         return []  # hole_record works on the cycle base; a gap inside a hole stays visible
+
+    def resumed_without_state(self, after_cycle: int) -> None:
+        """The runtime restarted after ``after_cycle`` without this processor's state: a hole
+        whose plunge began at or before the restart is flagged partial (its start is not in
+        the data this run sees), never completed from a guess."""
+        self._resumed_after = int(after_cycle)
 
     def finish(self) -> list[Result]:
         return self._evaluate(final=True)

@@ -31,7 +31,7 @@ from cnctwin.edge.sinks import rotated_files
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import CounterGap
 
-__all__ = ["EdgeRuntime", "last_emitted_cycle", "read_status"]
+__all__ = ["EdgeRuntime", "last_emitted", "last_emitted_cycle", "read_checkpoint", "read_status"]
 
 STATUS_FILE = "status.json"
 
@@ -74,11 +74,16 @@ class EdgeRuntime:
         Machine name in the messages (default the source's).
     status_every_s : float, default 1.0
         Wall-clock period of the status message and file [s].
+    checkpoint_every_s : float or None, default 10.0
+        Stream time between checkpoints of the processors' state (``checkpoint.pkl`` in
+        ``state_dir``: the open hole, the detectors, the estimator's history, the cycle base),
+        written atomically after a chunk [s]. None: no checkpoints. See :meth:`resume`.
     """
 
     def __init__(self, source: Source, processors: Sequence[Processor], sinks: Sequence[Sink],
                  *, state_dir: str | PathLike[str] | None = None, machine: str = "",
-                 status_every_s: float = 1.0) -> None:
+                 status_every_s: float = 1.0,
+                 checkpoint_every_s: float | None = 10.0) -> None:
         self.source = source
         self.processors = list(processors)
         self.sinks = list(sinks)
@@ -98,6 +103,11 @@ class EdgeRuntime:
         self._last_status = -1e9
         self._stop = threading.Event()
         self.final_status: dict[str, Any] | None = None
+        self.checkpoint_every_s = checkpoint_every_s
+        self._ckpt_cycle: int | None = None
+        self._suppress: dict[str, int] = {}
+        self.suppressed = 0
+        self.resumed: dict[str, Any] | None = None
 
     # ------------------------------------------------------------------ messages
     def _reserve(self, n: int) -> None:
@@ -113,6 +123,8 @@ class EdgeRuntime:
         _write_seq(self.state_dir, self._seq_reserved)
 
     def _messages(self, results: list[Result], chunk: Chunk | None) -> list[dict[str, Any]]:
+        if self._suppress:
+            results = self._not_yet_emitted(results)
         self._reserve(len(results))
         out = []
         for r in results:
@@ -181,6 +193,7 @@ class EdgeRuntime:
             if getattr(self.source, "live", False):  # device clock vs edge clock
                 self.c.age_s = (time.time_ns() - int(sub.time_ns[-1])) / 1e9
         self.c.chunks += 1
+        self._maybe_checkpoint(chunk.cycle_time_s)
         if chunk.received_ns:
             # arrival of the data (a live source: its first message) -> results handed to
             # every sink (the MQTT sink publishes in write())
@@ -196,6 +209,107 @@ class EdgeRuntime:
             "missing_s": gap.missing * getattr(self.source, "cycle_time_s", 0.002)})]
         for p in self.processors:
             out += p.gap(gap)
+        return out
+
+    # ------------------------------------------------------------------ restart
+    def _maybe_checkpoint(self, cycle_time_s: float) -> None:
+        last = self.c.last_cycle
+        if self.state_dir is None or self.checkpoint_every_s is None or last is None:
+            return
+        if self._ckpt_cycle is not None and \
+                (last - self._ckpt_cycle) * cycle_time_s < self.checkpoint_every_s:
+            return  # (the first chunk is checkpointed at once: a crash after it resumes)
+        self._ckpt_cycle = last
+        write_checkpoint(self.state_dir, {
+            "version": CHECKPOINT_VERSION, "source": source_identity(self.source),
+            "cycle": last, "tracker": self.tracker, "processors": self.processors,
+            "holes": self.c.holes, "alarms": self.c.alarms})
+
+    def resume(self) -> dict[str, Any]:
+        """Continue a run that ended without finishing (a crash, ``kill -9``, a power loss).
+
+        Call before :meth:`run`. When ``status.json`` in the state directory says the last
+        run did not finish and ``results.jsonl`` holds its results:
+
+        * with a checkpoint of the same source that the source can go back to (a replayed
+          file seeks to the checkpoint's cycle; a live source only when the checkpoint is
+          as new as the results), the processors' state is restored from it (open hole,
+          detectors, estimator) and processing repeats the cycles after it: the results
+          equal an uninterrupted run's;
+        * otherwise processing continues after the last emitted cycle with fresh
+          processors, and a hole that was open at the crash is flagged ``partial`` (its
+          start is not in the data the new run sees); detectors learn again.
+
+        Either way a result the previous run already emitted (same kind, cycle at or before
+        its last one) is not emitted again, so the ``(machine, seq)`` key never names a
+        repeat and every cycle's torque appears once. A previous run that finished cleanly
+        is not resumed (a new run of the same file starts over, with a new ``run`` message).
+
+        Returns
+        -------
+        dict
+            ``resumed`` (bool), ``from_checkpoint`` (bool), ``after_cycle``, ``last_emitted``
+            (kind -> cycle); also in the ``run`` message.
+        """
+        info: dict[str, Any] = {"resumed": False, "from_checkpoint": False,
+                                "after_cycle": None, "last_emitted": {}}
+        self.resumed = info
+        if self.state_dir is None:
+            return info
+        try:
+            prev = read_status(self.state_dir)
+        except (FileNotFoundError, ValueError):
+            prev = {}
+        last = last_emitted(self.state_dir / "results.jsonl")
+        if prev.get("state") in (None, "finished") or "torque" not in last:
+            return info
+        info.update(resumed=True, last_emitted=last)
+        self._suppress = {k: v for k, v in last.items() if k not in ("status", "run")}
+        seek = getattr(self.source, "seek", None)
+        ck = read_checkpoint(self.state_dir)
+        if ck is not None and ck.get("source") == source_identity(self.source) and (
+                seek is not None or int(ck["cycle"]) >= last["torque"]):
+            self.processors = list(ck["processors"])
+            self.tracker = ck["tracker"]
+            self.c.holes, self.c.alarms = int(ck["holes"]), int(ck["alarms"])
+            self._ckpt_cycle = int(ck["cycle"])
+            info.update(from_checkpoint=True, after_cycle=int(ck["cycle"]))
+        else:
+            info["after_cycle"] = last["torque"]
+            for p in self.processors:
+                hook = getattr(p, "resumed_without_state", None)
+                if hook is not None:
+                    hook(last["torque"])
+        if seek is not None:
+            seek(info["after_cycle"])
+        return info
+
+    def _not_yet_emitted(self, results: list[Result]) -> list[Result]:
+        """Drop what the previous run already emitted (a resume repeats those cycles)."""
+        out = []
+        for r in results:
+            bound = self._suppress.get(r.kind)
+            if bound is None:
+                out.append(r)
+                continue
+            if r.kind == "torque":
+                n = int(r.payload["n"])
+                first = int(r.payload["first_cycle"])
+                skip = min(max(bound - first + 1, 0), n)
+                self.suppressed += 1 if skip else 0
+                if skip == n:
+                    continue
+                if skip:
+                    pl = dict(r.payload)
+                    for key in ("torque_nm", "speed_rpm", "current_a"):
+                        pl[key] = pl[key][skip:]
+                    pl["first_cycle"], pl["n"] = first + skip, n - skip
+                    r = Result("torque", first + skip, pl)
+                out.append(r)
+            elif r.cycle > bound:
+                out.append(r)
+            else:
+                self.suppressed += 1
         return out
 
     # ------------------------------------------------------------------ overload
@@ -330,7 +444,8 @@ class EdgeRuntime:
         self._emit([Result("run", -1, {
             "started": _iso(time.time_ns()), "source": type(src).__name__,
             "live": bool(getattr(src, "live", False)),
-            "resume_after_cycle": getattr(src, "resume_after_cycle", None)})], None)
+            "resume_after_cycle": getattr(src, "resume_after_cycle", None),
+            "resumed": self.resumed})], None)
         try:
             for chunk in self.source.chunks():
                 if len(chunk):
@@ -367,6 +482,54 @@ class EdgeRuntime:
         self.source.close()
         if self.state_dir is not None:  # a clean end: the next run continues without a gap
             _write_seq(self.state_dir, self._seq)
+            (self.state_dir / CHECKPOINT_FILE).unlink(missing_ok=True)
+
+
+CHECKPOINT_FILE = "checkpoint.pkl"
+CHECKPOINT_VERSION = 1
+
+
+def source_identity(source: Any) -> dict[str, Any]:
+    """What a checkpoint must match to be restored for ``source`` (its ``identity()``, or
+    the class and machine name)."""
+    ident = getattr(source, "identity", None)
+    if ident is not None:
+        return dict(ident())
+    return {"kind": type(source).__name__, "machine": getattr(source, "machine", "")}
+
+
+def write_checkpoint(state_dir: Path, doc: dict[str, Any]) -> None:
+    """Pickle ``doc`` to ``checkpoint.pkl`` atomically (temporary file, fsync, rename)."""
+    import pickle
+
+    p = state_dir / CHECKPOINT_FILE
+    tmp = p.with_suffix(".tmp")
+    with tmp.open("wb") as fh:
+        pickle.dump(doc, fh, protocol=pickle.HIGHEST_PROTOCOL)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, p)
+
+
+def read_checkpoint(state_dir: Path) -> dict[str, Any] | None:
+    """The checkpoint in ``state_dir``, or None (none, another version, unreadable).
+
+    The file is the runtime's own, written into its state directory; like any pickle it
+    must not come from elsewhere.
+    """
+    import pickle
+
+    p = state_dir / CHECKPOINT_FILE
+    if not p.exists():
+        return None
+    try:
+        with p.open("rb") as fh:
+            doc = pickle.load(fh)
+    except Exception:  # a truncated or foreign file: resume without state, never fail
+        return None
+    if not isinstance(doc, dict) or doc.get("version") != CHECKPOINT_VERSION:
+        return None
+    return doc
 
 
 SEQ_FILE = "seq.json"
@@ -426,6 +589,38 @@ def read_status(state_dir: str | PathLike[str]) -> dict[str, Any]:
     return doc
 
 
+def last_emitted(results: str | PathLike[str], *, tail_bytes: int = 1 << 20
+                 ) -> dict[str, int]:
+    """The last cycle of each result kind in ``results`` (a JSON lines file) and its newest
+    rotated file; a torque message counts to its last cycle (``first_cycle + n - 1``).
+
+    Read from the end (``tail_bytes`` of each file); a line a crash cut short is skipped.
+    Empty for a first run.
+    """
+    p = Path(results)
+    out: dict[str, int] = {}
+    for f in [p, *reversed(rotated_files(p))]:
+        if not f.is_file():
+            continue
+        with f.open("rb") as fh:
+            fh.seek(0, os.SEEK_END)
+            size = fh.tell()
+            fh.seek(max(size - tail_bytes, 0))
+            lines = fh.read().split(b"\n")
+        for line in lines:
+            try:
+                m = json.loads(line)
+                kind = str(m["kind"])
+                c = int(m["first_cycle"]) + int(m["n"]) - 1 if kind == "torque" \
+                    else int(m["cycle"])
+            except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+                continue
+            out[kind] = max(out.get(kind, c), c)
+        if "torque" in out:
+            break
+    return out
+
+
 def last_emitted_cycle(results: str | PathLike[str], *, tail_bytes: int = 1 << 20
                        ) -> int | None:
     """The last cycle a runtime wrote a torque value for into ``results`` (a JSON lines file).
@@ -438,22 +633,4 @@ def last_emitted_cycle(results: str | PathLike[str], *, tail_bytes: int = 1 << 2
     is the resume point of a live source: the broker redelivers messages whose
     acknowledgement the crash cut off, and their cycles are skipped, not emitted twice.
     """
-    p = Path(results)
-    candidates = [p, *reversed(rotated_files(p))]
-    for f in candidates:
-        if not f.is_file():
-            continue
-        with f.open("rb") as fh:
-            fh.seek(0, os.SEEK_END)
-            size = fh.tell()
-            fh.seek(max(size - tail_bytes, 0))
-            lines = fh.read().split(b"\n")
-        for line in reversed(lines):
-            if b'"first_cycle"' not in line:
-                continue
-            try:
-                m = json.loads(line)
-                return int(m["first_cycle"]) + int(m["n"]) - 1
-            except (json.JSONDecodeError, KeyError, TypeError, ValueError):
-                continue
-    return None
+    return last_emitted(results, tail_bytes=tail_bytes).get("torque")

@@ -14,6 +14,7 @@ import urllib.parse
 from collections.abc import Iterator
 from dataclasses import dataclass
 from os import PathLike
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -126,11 +127,14 @@ class ReplaySource:
             raise ConfigError(f"chunk_cycles must be >= 1, not {chunk_cycles}")
         if speed is not None and speed < 0:
             raise ConfigError(f"speed must be >= 0 (0 = as fast as possible), not {speed}")
+        self.path: str | None = None
         if not isinstance(recording, Recording):
             from cnctwin.iotools import read_recording
 
+            self.path = str(Path(recording).resolve())
             recording = read_recording(recording)
         self.recording = recording
+        self.start_after_cycle: int | None = None
         self.chunk_cycles = int(chunk_cycles)
         self.speed = speed or None
         self.machine = recording.meta.machine
@@ -140,6 +144,18 @@ class ReplaySource:
                                                           if recording.has(c)]
         self._cols = cols
         self.scheduled_ns = 0
+
+    def identity(self) -> dict[str, Any]:
+        """What a checkpoint of this replay must match: the file and its cycle range."""
+        cyc = self.recording.cycles
+        return {"kind": "replay", "path": self.path, "machine": self.machine,
+                "n_cycles": int(cyc.size), "first": int(cyc[0]) if cyc.size else None,
+                "last": int(cyc[-1]) if cyc.size else None,
+                "chunk_cycles": self.chunk_cycles}
+
+    def seek(self, after_cycle: int | None) -> None:
+        """Start (the next :meth:`chunks`) at the first cycle after ``after_cycle``."""
+        self.start_after_cycle = after_cycle
 
     def chunks(self) -> Iterator[Chunk]:
         """Chunks of ``chunk_cycles`` rows (a chunk can contain a recorded gap)."""
@@ -151,10 +167,12 @@ class ReplaySource:
             else rec.events
         ev_cycles = ev["cycle"].to_numpy(dtype=np.int64) if not ev.empty else None
         start_wall = time.perf_counter_ns()
-        first = int(cyc[0]) if cyc.size else 0
+        begin = 0 if self.start_after_cycle is None else int(
+            np.searchsorted(cyc, self.start_after_cycle, side="right"))
+        first = int(cyc[begin]) if begin < cyc.size else 0
         step_ns = self.cycle_time_s * 1e9
         k = self.chunk_cycles
-        for lo in range(0, cyc.size, k):
+        for lo in range(begin, cyc.size, k):
             hi = min(lo + k, cyc.size)
             if self.speed:
                 due = start_wall + int((int(cyc[hi - 1]) + 1 - first) * step_ns / self.speed)
