@@ -245,7 +245,7 @@ class DatabusSource:
                                      name_map=name_map, cycle_time_s=cycle_time_s,
                                      username=username, password=password, security=security,
                                      client_id=client_id, session_expiry_s=session_expiry_s,
-                                     qos=1, columnar=True)
+                                     qos=1, columnar=True, manual_ack=True)
         self.window_s = window_s
         self.idle_timeout_s = idle_timeout_s
         self.cycle_time_s = cycle_time_s
@@ -276,8 +276,10 @@ class DatabusSource:
         last_value = time.monotonic()
         while not self._closed and not self._interrupted:
             self.recorder.poll(self.window_s)
+            acks = self.recorder.take_acks()
             got = list(self._take())  # also what arrived while waiting for the metadata
             if not got:
+                self.recorder.ack(acks)  # nothing made of them (e.g. skipped as replayed)
                 if self.idle_timeout_s is not None and \
                         time.monotonic() - last_value > self.idle_timeout_s:
                     return
@@ -285,6 +287,9 @@ class DatabusSource:
                 continue
             last_value = time.monotonic()
             yield from got
+            # the generator resumes only after the runtime has written the results of these
+            # chunks to every sink: now the broker may forget the messages
+            self.recorder.ack(acks)
 
     def _empty(self) -> Chunk:
         return Chunk(np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64), {},

@@ -144,7 +144,8 @@ class _Client:
 
     def __init__(self, host: str, port: int, *, client_id: str, username: str | None,
                  password: str | None, keepalive_s: int, max_queue: int,
-                 security: MqttSecurity | None = None, session_expiry_s: int = 0) -> None:
+                 security: MqttSecurity | None = None, session_expiry_s: int = 0,
+                 manual_ack: bool = False) -> None:
         mqtt = _paho()
         if session_expiry_s > 0 and not client_id:
             raise ConfigError("a persistent MQTT session needs a stable client_id")
@@ -153,8 +154,11 @@ class _Client:
         self.session_present = False
         self.topics: dict[str, int] = {}  # subscriptions, renewed after a session loss
         self.resubscribes = 0
-        # (topic, payload, arrival time [ns since the epoch])
-        self.queue: queue.Queue[tuple[str, bytes, int]] = queue.Queue(maxsize=max_queue)
+        # (topic, payload, arrival time [ns since the epoch], (mid, qos) to acknowledge or
+        # None: QoS 0, or paho acknowledged it already)
+        self.queue: queue.Queue[tuple[str, bytes, int, tuple[int, int] | None]] = \
+            queue.Queue(maxsize=max_queue)
+        self.manual_ack = manual_ack
         self.dropped = 0
         self.connected = threading.Event()
         self.connect_rc: Any = None
@@ -164,7 +168,8 @@ class _Client:
         # messages for this client id while it is away (up to the expiry interval)
         self.client = mqtt.Client(
             callback_api_version=mqtt.CallbackAPIVersion.VERSION2, client_id=client_id,
-            protocol=mqtt.MQTTv5 if self.session_expiry_s > 0 else mqtt.MQTTv311)
+            protocol=mqtt.MQTTv5 if self.session_expiry_s > 0 else mqtt.MQTTv311,
+            manual_ack=manual_ack)
         if username is not None:
             self.client.username_pw_set(username, password)
         if security is not None:
@@ -194,9 +199,16 @@ class _Client:
 
     def _on_message(self, client: Any, userdata: Any, msg: Any) -> None:
         try:
-            self.queue.put_nowait((msg.topic, bytes(msg.payload), time.time_ns()))
+            self.queue.put_nowait((msg.topic, bytes(msg.payload), time.time_ns(),
+                                   (msg.mid, msg.qos) if self.manual_ack and msg.qos else None))
         except queue.Full:
+            # not acknowledged with manual_ack: the broker sends it again after a reconnect
             self.dropped += 1
+
+    def ack(self, acks: list[tuple[int, int]]) -> None:
+        """Acknowledge messages (``manual_ack``): the broker forgets them."""
+        for mid, qos in acks:
+            self.client.ack(mid, qos)
 
     def start(self, timeout_s: float) -> None:
         try:
@@ -275,6 +287,10 @@ class MqttRecorder:
         (:meth:`DatabusDecoder.decode_columns`, collected by :meth:`take_columns`) instead of
         one object per value; every other message takes the general path. The live edge
         source uses it.
+    manual_ack : bool, default False
+        QoS 1 messages are acknowledged to the broker only by :meth:`ack` (the live edge
+        source does it after their results are written), not when they arrive; with a
+        persistent session a crash in between makes the broker deliver them again.
 
     Examples
     --------
@@ -304,6 +320,7 @@ class MqttRecorder:
         security: MqttSecurity | None = None,
         session_expiry_s: int = 0,
         columnar: bool = False,
+        manual_ack: bool = False,
     ) -> None:
         self.metadata_topic = metadata_topic
         self.fixed_topics = list(data_topics) if data_topics else None
@@ -312,9 +329,11 @@ class MqttRecorder:
                                       salvage=salvage)
         self._client = _Client(host, port, client_id=client_id, username=username,
                                password=password, keepalive_s=30, max_queue=max_queue,
-                               security=security, session_expiry_s=session_expiry_s)
+                               security=security, session_expiry_s=session_expiry_s,
+                               manual_ack=manual_ack)
         self._max_pending = max_queue
-        self._pending: list[tuple[str, bytes, int]] = []
+        self._pending: list[tuple[str, bytes, int, tuple[int, int] | None]] = []
+        self._unacked: list[tuple[int, int]] = []
         self.columnar = columnar
         self.batches: list[DatabusColumns] = []
         self.first_arrival_ns = 0
@@ -372,7 +391,7 @@ class MqttRecorder:
         while True:
             remaining = deadline - time.monotonic()
             try:
-                topic, payload, arrived = self._client.queue.get(
+                topic, payload, arrived, ack = self._client.queue.get(
                     timeout=max(remaining, 0.0)) if n == 0 and remaining > 0 \
                     else self._client.queue.get_nowait()
             except queue.Empty:
@@ -384,19 +403,24 @@ class MqttRecorder:
                     and topic.startswith(self.metadata_topic[:-1])):
                 self.decoder.update_metadata(payload, topic=topic)
                 self._subscribe_data()
+                if ack is not None:
+                    self._client.ack([ack])
                 pending, self._pending = self._pending, []
-                for t, p, a in pending:
-                    self._decode(t, p, a)
+                for t, p, a, k in pending:
+                    self._decode(t, p, a, k)
             elif self.decoder.metadata is None:
                 # a resumed session delivers the queued data before the retained metadata
                 if len(self._pending) < self._max_pending:
-                    self._pending.append((topic, payload, arrived))
+                    self._pending.append((topic, payload, arrived, ack))
                 else:
                     self._pending_dropped += 1
             else:
-                self._decode(topic, payload, arrived)
+                self._decode(topic, payload, arrived, ack)
 
-    def _decode(self, topic: str, payload: bytes, arrived: int) -> None:
+    def _decode(self, topic: str, payload: bytes, arrived: int,
+                ack: tuple[int, int] | None = None) -> None:
+        if ack is not None:
+            self._unacked.append(ack)
         if not self.first_arrival_ns:
             self.first_arrival_ns = arrived
         if self.columnar:
@@ -409,6 +433,17 @@ class MqttRecorder:
         except FormatError as exc:
             # a bad message must not stop the stream: keep the error as an issue
             self.decoder.issues.append(f"message skipped: {exc}")
+
+    def take_acks(self) -> list[tuple[int, int]]:
+        """The acknowledgements of the messages decoded so far (``manual_ack``); send them
+        with :meth:`ack` once what was made of those messages is safely written."""
+        acks, self._unacked = self._unacked, []
+        return acks
+
+    def ack(self, acks: list[tuple[int, int]]) -> None:
+        """Acknowledge messages to the broker (``manual_ack``): it will not send them again."""
+        if acks:
+            self._client.ack(acks)
 
     def take_columns(self) -> tuple[DatabusColumns | None, int]:
         """The fast-path values decoded since the last call (``columnar=True``) and the
@@ -631,7 +666,7 @@ def subscribe_data_recorder(
             if ready is not None and not ready.is_set() and client.acked(mid):
                 ready.set()
             try:
-                t, payload, _ = client.queue.get(timeout=0.05)
+                t, payload, _, _ = client.queue.get(timeout=0.05)
             except queue.Empty:
                 if timeout_s is not None and time.monotonic() - last > timeout_s:
                     return
