@@ -47,6 +47,17 @@ def spindle_model(tmp_path_factory: pytest.TempPathFactory) -> SpindleModel:
 
 
 @pytest.fixture()
+def persistent_broker(tmp_path: Path) -> Iterator[Broker]:
+    """A mosquitto that keeps sessions and queued messages across its own restart."""
+    b = Broker(require_mosquitto(), persistence_dir=tmp_path / "mosquitto")
+    b.start()
+    try:
+        yield b
+    finally:
+        b.stop()
+
+
+@pytest.fixture()
 def broker() -> Iterator[Broker]:
     b = Broker(require_mosquitto())
     b.start()

@@ -15,7 +15,6 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +25,6 @@ import pytest
 from cnctwin.edge import save_spindle_model
 from cnctwin.iotools.mqtt import MqttRecorder
 from cnctwin.spindle import SpindleModel
-from tests._services import require_mosquitto
 from tests.edge.conftest import Broker, publisher
 from tests.edge.test_mqtt_edge import DATA, META, _bulk, _metadata
 
@@ -140,16 +138,6 @@ def _wait_cycles(path: Path, n: int, proc: subprocess.Popen[bytes], timeout_s: f
             return
         time.sleep(0.1)
     raise AssertionError(f"fewer than {n} cycles in {path} after {timeout_s} s")
-
-
-@pytest.fixture()
-def persistent_broker(tmp_path: Path) -> Iterator[Broker]:
-    b = Broker(require_mosquitto(), persistence_dir=tmp_path / "mosquitto")
-    b.start()
-    try:
-        yield b
-    finally:
-        b.stop()
 
 
 def test_runtime_process_loses_nothing_across_kill_and_stop(persistent_broker: Broker,

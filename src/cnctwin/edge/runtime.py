@@ -216,7 +216,8 @@ class EdgeRuntime:
         last = self.c.last_cycle
         if self.state_dir is None or self.checkpoint_every_s is None or last is None:
             return
-        if self._ckpt_cycle is not None and \
+        due = bool(getattr(self.source, "checkpoint_due", False))
+        if not due and self._ckpt_cycle is not None and \
                 (last - self._ckpt_cycle) * cycle_time_s < self.checkpoint_every_s:
             return  # (the first chunk is checkpointed at once: a crash after it resumes)
         self._ckpt_cycle = last
@@ -224,6 +225,16 @@ class EdgeRuntime:
             "version": CHECKPOINT_VERSION, "source": source_identity(self.source),
             "cycle": last, "tracker": self.tracker, "processors": self.processors,
             "holes": self.c.holes, "alarms": self.c.alarms})
+        done = getattr(self.source, "checkpointed", None)
+        if done is not None:  # a live source acknowledges what the checkpoint covers
+            done()
+
+    def _hold_acks(self) -> None:
+        """With checkpoints, a live source acknowledges messages only when one covers them."""
+        hold = getattr(self.source, "hold_acks_until_checkpoint", None)
+        if hold is not None and self.state_dir is not None and \
+                self.checkpoint_every_s is not None:
+            hold(True)
 
     def resume(self) -> dict[str, Any]:
         """Continue a run that ended without finishing (a crash, ``kill -9``, a power loss).
@@ -267,13 +278,17 @@ class EdgeRuntime:
         self._suppress = {k: v for k, v in last.items() if k not in ("status", "run")}
         seek = getattr(self.source, "seek", None)
         ck = read_checkpoint(self.state_dir)
+        self._hold_acks()
+        redelivers = bool(getattr(self.source, "redelivers_after_checkpoint", False))
         if ck is not None and ck.get("source") == source_identity(self.source) and (
-                seek is not None or int(ck["cycle"]) >= last["torque"]):
+                seek is not None or redelivers or int(ck["cycle"]) >= last["torque"]):
             self.processors = list(ck["processors"])
             self.tracker = ck["tracker"]
             self.c.holes, self.c.alarms = int(ck["holes"]), int(ck["alarms"])
             self._ckpt_cycle = int(ck["cycle"])
             info.update(from_checkpoint=True, after_cycle=int(ck["cycle"]))
+            if redelivers:  # the broker repeats what followed the checkpoint: process it
+                setattr(self.source, "resume_after_cycle", int(ck["cycle"]))  # noqa: B010
         else:
             info["after_cycle"] = last["torque"]
             for p in self.processors:
@@ -441,6 +456,7 @@ class EdgeRuntime:
         self._on_status = on_status
         self.state = "running"
         src = self.source
+        self._hold_acks()
         self._emit([Result("run", -1, {
             "started": _iso(time.time_ns()), "source": type(src).__name__,
             "live": bool(getattr(src, "live", False)),
@@ -474,6 +490,9 @@ class EdgeRuntime:
         for p in self.processors:
             results += p.finish()
         self._emit(results, None)
+        done = getattr(self.source, "checkpointed", None)
+        if done is not None:  # everything is written: nothing to repeat
+            done()
         self.state = "finished"
         self._maybe_status(force=True)
         self.final_status = self.status()

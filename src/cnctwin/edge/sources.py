@@ -230,6 +230,10 @@ class DatabusSource:
         their acknowledgement off, are skipped and counted (``replayed_rows`` and an issue),
         until the first newer row. Compared modulo the SINUMERIK counter (2**31) when the
         ``CYCLE`` column is mapped.
+    ack_batch : int, default 10
+        With acknowledgements held until checkpoints (:meth:`hold_acks_until_checkpoint`):
+        ask the runtime for a checkpoint once this many messages wait (a broker sends only
+        so many unacknowledged QoS 1 messages: mosquitto's default is 20).
     """
 
     def __init__(self, host: str, port: int = 1883, *, metadata_topic: str,
@@ -238,7 +242,8 @@ class DatabusSource:
                  username: str | None = None, password: str | None = None,
                  machine: str = "", ready_timeout_s: float = 30.0,
                  security: MqttSecurity | None = None, client_id: str = "",
-                 session_expiry_s: int = 0, resume_after_cycle: int | None = None) -> None:
+                 session_expiry_s: int = 0, resume_after_cycle: int | None = None,
+                 ack_batch: int = 10) -> None:
         from cnctwin.iotools.mqtt import MqttRecorder
 
         self.recorder = MqttRecorder(host, port, metadata_topic=metadata_topic,
@@ -256,6 +261,10 @@ class DatabusSource:
         self.live = True
         self.resume_after_cycle = resume_after_cycle
         self.replayed_rows = 0
+        self._hold_acks = False
+        self._pending_acks: list[tuple[int, int]] = []
+        self.checkpoint_due = False
+        self.ack_batch = ack_batch
         self._started = False
         self._closed = False
         self._interrupted = False
@@ -286,10 +295,19 @@ class DatabusSource:
                 yield self._empty()  # the runtime keeps its status and sinks going
                 continue
             last_value = time.monotonic()
-            yield from got
-            # the generator resumes only after the runtime has written the results of these
-            # chunks to every sink: now the broker may forget the messages
-            self.recorder.ack(acks)
+            if self._hold_acks:
+                # acknowledged when a checkpoint covers them: a crash before it makes the
+                # broker deliver them again, and the runtime rebuilds its state from the
+                # checkpoint with them (the last chunk of the burst carries the burst's acks)
+                yield from got[:-1]
+                self._pending_acks += acks
+                self.checkpoint_due = len(self._pending_acks) >= self.ack_batch
+                yield got[-1]
+            else:
+                yield from got
+                # the generator resumes only after the runtime has written the results of
+                # these chunks to every sink: now the broker may forget the messages
+                self.recorder.ack(acks)
 
     def _empty(self) -> Chunk:
         return Chunk(np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64), {},
@@ -349,6 +367,24 @@ class DatabusSource:
                                                                           ""))
         return Chunk(cycles, t_ns, sig, cycle_time_s=self.cycle_time_s, machine=self.machine,
                      received_ns=arrived or time.time_ns())
+
+    def hold_acks_until_checkpoint(self, on: bool = True) -> None:
+        """Acknowledge messages only when :meth:`checkpointed` says a checkpoint of the
+        runtime covers them (the runtime turns this on when it writes checkpoints)."""
+        self._hold_acks = bool(on)
+
+    def checkpointed(self) -> None:
+        """The runtime wrote a checkpoint after the last chunk yielded: acknowledge its
+        messages and those before it."""
+        acks, self._pending_acks = self._pending_acks, []
+        self.checkpoint_due = False
+        self.recorder.ack(acks)
+
+    @property
+    def redelivers_after_checkpoint(self) -> bool:
+        """After a crash the broker delivers again everything after the last checkpoint
+        (persistent session, acknowledgements held until checkpoints)."""
+        return self._hold_acks and self.recorder._client.session_expiry_s > 0
 
     def interrupt(self) -> None:
         """End :meth:`chunks` after the current poll window, also when no data arrives

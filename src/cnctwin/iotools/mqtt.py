@@ -347,7 +347,10 @@ class MqttRecorder:
     def start(self, *, timeout_s: float = 10.0) -> MqttRecorder:
         """Connect and subscribe to the metadata topic."""
         self._client.start(timeout_s)
-        self._client.subscribe(self.metadata_topic, self.qos)
+        # QoS 0: the metadata is retained (a new subscription gets it again), and a QoS 1
+        # subscription would queue it behind the data messages a resumed session holds
+        # unacknowledged (the broker sends only so many: mosquitto 20), which wait for it
+        self._client.subscribe(self.metadata_topic, 0 if self._client.manual_ack else self.qos)
         return self
 
     def stop(self) -> None:
