@@ -19,12 +19,14 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
+import orjson
 import pandas as pd
 from numpy.typing import NDArray
 
 from cnctwin.recording import CounterGap, Recording, RecordingMeta, empty_events
 
-__all__ = ["RESULT_KINDS", "Chunk", "Processor", "Result", "Sink", "Source", "no_events"]
+__all__ = ["RESULT_KINDS", "Chunk", "MessageBatch", "Processor", "Result", "Sink", "Source",
+           "dumps", "no_events"]
 
 _NO_EVENTS = empty_events()  # shared and never modified: building one costs ~3 ms
 
@@ -133,6 +135,31 @@ class Result:
     kind: str
     cycle: int
     payload: dict[str, Any]
+
+
+def dumps(message: dict[str, Any]) -> bytes:
+    """One message as compact JSON bytes (orjson; NaN becomes null)."""
+    return orjson.dumps(message, option=orjson.OPT_SERIALIZE_NUMPY)
+
+
+class MessageBatch(list[dict[str, Any]]):
+    """The messages of one emission, handed to every sink; :meth:`encoded` gives their JSON,
+    encoded once however many sinks ask for it (the MQTT and JSON lines sinks both do)."""
+
+    _encoded: list[bytes] | None = None
+
+    def encoded(self) -> list[bytes]:
+        """:func:`dumps` of each message (computed on the first call)."""
+        if self._encoded is None:
+            self._encoded = [dumps(m) for m in self]
+        return self._encoded
+
+
+def encoded(messages: list[dict[str, Any]]) -> list[bytes]:
+    """The JSON of ``messages``: shared when they come as a :class:`MessageBatch`."""
+    if isinstance(messages, MessageBatch):
+        return messages.encoded()
+    return [dumps(m) for m in messages]
 
 
 @runtime_checkable

@@ -26,7 +26,7 @@ import numpy as np
 import orjson
 
 from cnctwin.edge.cycles import CycleTracker
-from cnctwin.edge.pipeline import Chunk, Processor, Result, Sink, Source
+from cnctwin.edge.pipeline import Chunk, MessageBatch, Processor, Result, Sink, Source
 from cnctwin.edge.sinks import rotated_files
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import CounterGap
@@ -145,7 +145,7 @@ class EdgeRuntime:
         return out
 
     def _emit(self, results: list[Result], chunk: Chunk | None) -> None:
-        msgs = self._messages(results, chunk)
+        msgs = MessageBatch(self._messages(results, chunk))  # JSON encoded once for all sinks
         for s in self.sinks:
             s.write(msgs, chunk)
 

@@ -16,11 +16,10 @@ from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
-import orjson
 import pandas as pd
 
 from cnctwin.edge.forward import ForwardQueue
-from cnctwin.edge.pipeline import Chunk
+from cnctwin.edge.pipeline import Chunk, dumps, encoded
 from cnctwin.exceptions import ConfigError
 from cnctwin.iotools.mqtt import MqttSecurity, connect_error, refusal
 from cnctwin.recording import Recording, RecordingMeta, find_gaps
@@ -51,9 +50,6 @@ def rotated_files(path: str | PathLike[str]) -> list[Path]:
     return sorted(p.parent.glob(f"{p.stem}.*{p.suffix}"))
 
 
-def dumps(message: dict[str, Any]) -> bytes:
-    """One message as compact JSON bytes (NaN becomes null)."""
-    return orjson.dumps(message, option=orjson.OPT_SERIALIZE_NUMPY)
 
 
 class JsonLinesSink:
@@ -105,7 +101,7 @@ class JsonLinesSink:
         return rotated_files(self.path)
 
     def write(self, messages: list[dict[str, Any]], chunk: Chunk | None) -> None:
-        lines = [dumps(m) + b"\n" for m in messages
+        lines = [e + b"\n" for m, e in zip(messages, encoded(messages), strict=True)
                  if self.kinds is None or m["kind"] in self.kinds]
         if lines:
             data = b"".join(lines)
@@ -400,7 +396,8 @@ class MqttSink:
             self._last_id = qid
 
     def write(self, messages: list[dict[str, Any]], chunk: Chunk | None) -> None:
-        items = [(self.topic(m["kind"]), dumps(m)) for m in messages]
+        items = [(self.topic(m["kind"]), e)
+                 for m, e in zip(messages, encoded(messages), strict=True)]
         ready = self._client is not None and self._connected.is_set() \
             and not self._lost.is_set()
         # one transaction per chunk: the acknowledged messages go out with the new ones in
