@@ -24,7 +24,7 @@ def test_gaps_are_reported() -> None:
 
 
 def test_time_from_anchors_uses_counter_as_clock() -> None:
-    # Real file: 78 ticks between HFTimestamps 156 ms apart (data-formats.md 1.2).
+    # Real file: 78 ticks between HFTimestamps 156 ms apart (docs/reference/data-formats.md 1.2).
     t0 = pd.Timestamp("2023-12-22T14:26:01.312Z")
     times = cycles_to_time([5558199, 5558277], [(5558199, t0)], cycle_time_s=0.002)
     assert (times[1] - times[0]) == pd.Timedelta(milliseconds=156)

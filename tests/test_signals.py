@@ -7,7 +7,7 @@ import pytest
 from cnctwin import SignalNotFoundError
 from cnctwin.signals import CATALOG, HF_CODES, LF_CODES, axis_kind, lookup, parse_column, unit
 
-# SINUMERIK Connector FAQ (data-formats.md section 1.3): every HF code.
+# SINUMERIK Connector FAQ (docs/reference/data-formats.md section 1.3): every HF code.
 CONNECTOR_CODES = {
     "CYCLE", "ENC_POS", "ENC1_POS", "ENC2_POS", "DES_POS", "CTRL_POS", "CTRL_DIFF", "CTRL_DIFF2",
     "CONT_DEV", "VEL_FFW", "TORQUE_FFW", "CMD_SPEED", "CURRENT", "TORQUE", "LOAD", "POWER",

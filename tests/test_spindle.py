@@ -312,7 +312,8 @@ def test_streaming_without_inertia_has_no_delay() -> None:
 
 
 def test_temperature_compensation_of_kt() -> None:
-    # physics-and-performance.md §2: NdFeB ~ -0.1 %/K -> 40 K warm-up lowers Kt by ~4 %
+    # docs/reference/physics-and-performance.md §2: NdFeB ~ -0.1 %/K -> 40 K warm-up lowers Kt by
+    # ~4 %
     model = SpindleModel(1.04, 8.42e-5, 0.35, kt_temp_coeff_per_k=-0.001,
                          reference_temperature_c=20.0)
     hot = float(model.cutting_torque(4.32, 2400.0, temperature_c=60.0))

@@ -108,7 +108,7 @@ def test_table_4_1_predictions_and_errors() -> None:
 
 
 def test_thesis_no_load_currents_from_eq_4_2() -> None:
-    # physics-and-performance.md §2 [D]: no-load current 0.43 A @1100, 0.53 @2400,
+    # docs/reference/physics-and-performance.md §2 [D]: no-load current 0.43 A @1100, 0.53 @2400,
     # 0.60 @3200, 0.75 @5000 rpm from Eq. (4.2)
     np.testing.assert_allclose(
         THESIS_FIT.current_a([1100, 2400, 3200, 5000]), [0.43, 0.53, 0.60, 0.75], atol=0.006

@@ -48,7 +48,7 @@ def draw_spindle(seed: int) -> tuple[dict[str, Any], float]:
     values (1.04, 8.42e-5, 0.35; Eq. 4.4); 4/6/8 poles; base speed 5500-7500 rpm (thesis
     datasheet 7000 rpm, §4.1), realized through the DC-link voltage so that the no-load
     voltage limit sits at the base speed (u = p omega psi, m = 1.05: 380-730 V); NdFeB
-    remanence coefficient -0.09 ... -0.12 %/K (physics-and-performance.md §2).
+    remanence coefficient -0.09 ... -0.12 %/K (docs/reference/physics-and-performance.md §2).
     """
     g = np.random.default_rng(seed)
     kt = float(g.uniform(0.85, 1.2))

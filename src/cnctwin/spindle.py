@@ -864,7 +864,7 @@ class SpindleModel:
         Inertia of rotor + spindle + tool holder [kg m^2] (not given in the thesis).
     kt_temp_coeff_per_k : float, default 0.0
         Relative change of Kt per kelvin of motor temperature [1/K]; NdFeB magnets lose about
-        0.09-0.12 %/K (physics-and-performance.md §2), i.e. about -0.001.
+        0.09-0.12 %/K (docs/reference/physics-and-performance.md §2), i.e. about -0.001.
     b_temp_coeff_per_k, tau_f_temp_coeff_per_k : float, default 0.0
         Relative change of B and tau_f per kelvin [1/K], if identified.
     reference_temperature_c : float or None, default None

@@ -76,7 +76,7 @@ __all__ = [
 
 NDFEB_KT_TEMP_COEFF_PER_K = -0.00105
 """Relative change of Kt per kelvin of magnet temperature [1/K]: the middle of the NdFeB
-remanence coefficient range -0.09 ... -0.12 %/K (physics-and-performance.md §2)."""
+remanence coefficient range -0.09 ... -0.12 %/K (docs/reference/physics-and-performance.md §2)."""
 
 
 # ====================================================================== friction models

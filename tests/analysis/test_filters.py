@@ -97,7 +97,7 @@ def test_causal_filter_multichannel() -> None:
 
 
 def test_fold_frequency_table_physics_doc() -> None:
-    # physics-and-performance.md §2: alias at 500 Hz sampling
+    # docs/reference/physics-and-performance.md §2: alias at 500 Hz sampling
     f = stator_frequency_hz(np.array([2400, 3200, 5000, 7000]), 8)
     np.testing.assert_allclose(f, [160, 213.33, 333.33, 466.67], atol=0.01)
     np.testing.assert_allclose(fold_frequency(f, FS), [160, 213.33, 166.67, 33.33], atol=0.01)

@@ -1,4 +1,5 @@
-"""Gaps, wraps and late data on the CYCLE time base (data-formats.md §1.2: the counter runs
+"""Gaps, wraps and late data on the CYCLE time base (docs/reference/data-formats.md §1.2: the
+counter runs
 0..2147483647 and wraps; a real file had a gap of 3860 cycles)."""
 
 from __future__ import annotations
@@ -77,7 +78,7 @@ def test_real_capture4analysis_gap(c4a_file: Any, spindle_model: SpindleModel) -
                      [mem]).run()
     gaps = [(m["after_cycle"], m["before_cycle"]) for m in mem.messages if m["kind"] == "gap"]
     assert gaps == [(g.after_cycle, g.before_cycle) for g in rec.meta.gaps] == [
-        (5559591, 5563451)]  # data-formats.md §1.2: one gap of 3860 ticks
+        (5559591, 5563451)]  # docs/reference/data-formats.md §1.2: one gap of 3860 ticks
     assert st["cycles"] == rec.n_cycles == 3818 and st["holes"] == 0
     tq = [m for m in mem.messages if m["kind"] == "torque"]
     tau = np.concatenate([m["torque_nm"] for m in tq])

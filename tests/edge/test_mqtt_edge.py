@@ -1,7 +1,8 @@
 """Live MQTT: Databus messages in, results out, and store-and-forward across a broker restart.
 
 A private mosquitto on a free loopback port (conftest.Broker). Databus payloads are built as
-in tests/iotools (documented structure, data-formats.md §2): metadata on the metadata topic
+in tests/iotools (documented structure, docs/reference/data-formats.md §2): metadata on the
+metadata topic
 (retained), bulk data messages with one value per datapoint and cycle.
 """
 

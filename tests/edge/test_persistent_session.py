@@ -3,7 +3,8 @@
 The live source keeps an MQTT 5 persistent session (stable client id, clean start off, session
 expiry), so a real mosquitto (started on a free loopback port) queues the QoS 1 Databus messages
 that arrive while the runtime is away, and a stop (SIGTERM) processes what was already received
-instead of dropping it. Payloads: the documented Databus structure (data-formats.md §2), as in
+instead of dropping it. Payloads: the documented Databus structure (docs/reference/data-formats.md
+§2), as in
 test_mqtt_edge.py. Expected torque: thesis Eq. 4.4 by hand.
 """
 

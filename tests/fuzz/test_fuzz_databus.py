@@ -3,7 +3,8 @@
 Every input ends either in accepted values (losses in ``decoder.issues``) or in a project
 exception (:class:`cnctwin.exceptions.CnctwinError`) whose message names the topic; never a
 raw ValueError/KeyError/TypeError/AttributeError/IndexError from inside the parser. Seeds:
-the documented message structure (data-formats.md §2), mutated by hypothesis: truncation,
+the documented message structure (docs/reference/data-formats.md §2), mutated by hypothesis:
+truncation,
 byte flips, removed brackets, NaN/Inf/huge numbers, wrong JSON types, non-UTF-8 bytes, empty
 and very large messages. The example budget is bounded for CI (``max_examples``).
 """

@@ -7,7 +7,7 @@ max-scw/CaptureDataParser, MIT) were counted by hand with ``orjson.loads`` on th
 cycle 5558098, last 5565774; one counter step of 3860 between rows 1493 and 1494 (0-based)
 of the sorted counter (5559591 -> 5563451, i.e. 3859 missing cycles); ``CURRENT|6`` in
 [-5.371338, 5.197021]; ``LOAD|2`` max 54.071045. The format is described in
-``/work/shared/reference/data-formats.md`` section 1.
+``docs/reference/data-formats.md`` section 1.
 """
 
 from __future__ import annotations
@@ -104,7 +104,7 @@ def test_real_lf(real: Recording) -> None:
     first = lf[(lf["cycle"] == 5558360) & (lf["signal"] == "/Channel/State/actToolLength2")]
     assert first["text"].iloc[0] == "75.316999999999993"
     assert first["value"].iloc[0] == pytest.approx(75.317, abs=1e-12)
-    # LF wall clock is ~1 h 02 min behind the HF clock (data-formats.md 1.2)
+    # LF wall clock is ~1 h 02 min behind the HF clock (docs/reference/data-formats.md 1.2)
     assert real.meta.attrs["lf_wall_clock_offset_s"] == pytest.approx(-3732.2, abs=10.0)
     assert len(real.meta.attrs["lf_wall_clock"]) == 70
 

@@ -2,7 +2,7 @@
 
 Payloads are hand-written to the structure in the Databus payload-format documentation
 (industrial-edge/common-databus-payload-format, docs/payload-format/PayloadFormat.md; summary in
-shared/reference/data-formats.md section 2): metadata with connections -> dataPoints ->
+docs/reference/data-formats.md section 2): metadata with connections -> dataPoints ->
 dataPointDefinitions, bulk ``vals``, timeseries ``records``, deprecated ``single``.
 """
 

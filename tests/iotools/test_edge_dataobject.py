@@ -2,7 +2,7 @@
 
 The messages are hand-written to the structure documented by Siemens (time-behaviour page of
 the Manage MyMachines /Edge developer documentation; reproduced in
-shared/reference/data-formats.md section 1.6): CYCLE [6, 8, 9, 10] with period_ms 2 and
+docs/reference/data-formats.md section 1.6): CYCLE [6, 8, 9, 10] with period_ms 2 and
 timestamp 2094-01-01T07:18:06.354 gives t = .354, .358, .360, .362 s (t(i) = t(i-1) +
 (CYCLE(i) - CYCLE(i-1)) * 2 ms).
 """

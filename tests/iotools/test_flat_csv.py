@@ -32,7 +32,8 @@ from cnctwin.iotools import (
 )
 from cnctwin.recording import CYCLE_COUNTER_MODULUS, EVENT_COLUMNS, Recording
 
-# KIT header.csv long names (data-formats.md 1.3); codes not listed keep the code as name
+# KIT header.csv long names (docs/reference/data-formats.md 1.3); codes not listed keep the code as
+# name
 LONG_NAMES = {
     "ENC_POS": "ActualAxisPosition", "DES_POS": "CommandedAxisPosition", "LOAD": "Load",
     "CURRENT": "Current", "POWER": "Power", "TORQUE": "Torque", "CMD_SPEED": "CommandedSpeed",

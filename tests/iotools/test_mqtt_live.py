@@ -2,7 +2,8 @@
 
 The broker is started by the fixture (``mosquitto -p PORT``, mosquitto 2.x listens on loopback
 only without a config file) and stopped by its pid. Databus payloads are hand-written
-(same as in ``test_databus.py``; documented structure, data-formats.md section 2); the Data
+(same as in ``test_databus.py``; documented structure, docs/reference/data-formats.md section 2);
+the Data
 Recorder message is the real Capture4Analysis file (3818 HF rows, first CYCLE 5558098,
 78 block events; counted by hand with python json), sent as JSON and as a zip archive.
 """

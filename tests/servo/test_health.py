@@ -4,11 +4,12 @@ Each sequence is 12 simulated "production" recordings of about 10 s: every recor
 own randomly drawn back-and-forth program on X1 (2-4 feeds from 1500-7200 mm/min, random
 strokes, some Y moves), on a machine whose X1 loop is drawn at random
 (``cnctwin.sim.scenarios.random_loop_overrides``: Kv 1.5-4 (m/min)/mm, FFW mode 1-4, MA jerk
-filter 4-16 ms, MD32810 1-4 ms, Coulomb 80-220 N; physics-and-performance.md §1.2). From a hidden
+filter 4-16 ms, MD32810 1-4 ms, Coulomb 80-220 N; docs/reference/physics-and-performance.md §1.2).
+From a hidden
 recording index (5..10) on, one hidden parameter changes by a hidden amount:
 
 * Coulomb friction ``axes.X1.coulomb_n`` x U(1.25, 1.6) or x U(0.6, 0.8) (worn guideway /
-  lubrication loss vs. run-in; the AMM friction test's purpose, peers.md §1.1);
+  lubrication loss vs. run-in; the AMM friction test's purpose, docs/reference/peers.md §1.1);
 * Kv ``axes.X1.kv_m_min_per_mm`` x U(0.75, 0.9) or x U(1.1, 1.25) (a changed MD32200).
 
 The analysis sees only the Recordings. Tolerances: the alarm on the changed parameter fires at

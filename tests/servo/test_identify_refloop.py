@@ -1,6 +1,7 @@
 """Identification on the unit-test reference loop (tests/servo/_refloop.py, NOT the simulator).
 
-Hidden parameters are drawn at random from the ranges of physics-and-performance.md §1.2
+Hidden parameters are drawn at random from the ranges of docs/reference/physics-and-performance.md
+§1.2
 (Kv 1-3 (m/min)/mm, MA jerk filter 1-16 cycles, speed-loop equivalent time 1-4 ms) and
 recovered from the recording alone.
 """

@@ -2,7 +2,8 @@
 
 Square and circle milling paths (thesis §3.1.2, Fig. 3.2/3.3) are simulated with
 ``cnctwin.sim.simulate`` on a machine whose X1/Y1 loop parameters are drawn at random (seeded)
-from realistic ranges (physics-and-performance.md §1.2: Kv 1-3 (m/min)/mm, MA jerk filter of
+from realistic ranges (docs/reference/physics-and-performance.md §1.2: Kv 1-3 (m/min)/mm, MA jerk
+filter of
 3-12 position-control cycles (MD32410 type 2 is set in cycles: 1-16), FFW mode MD32620 0-4
 (none, speed or torque feedforward with PT1 or dead-time balancing), weight 0.7-1, MD32810
 1-4 ms, MD32910 0-4 ms, Coulomb 50-250 N, viscous 0.05-0.5 N/(mm/s)).

@@ -26,7 +26,8 @@ def trace() -> Recording:
 
 @pytest.mark.parametrize("axis", ["X1", "Y1", "C1", "SP1"])
 def test_c4a_vel_ffw_is_per_second_not_per_minute(c4a: Recording, axis: str) -> None:
-    # data-formats.md §1.3 (Siemens): VEL_FFW in mm/s (deg/s), as the catalog now declares.
+    # docs/reference/data-formats.md §1.3 (Siemens): VEL_FFW in mm/s (deg/s), as the catalog now
+    # declares.
     # The file says per second: VEL_FFW / (d(DES_POS)/dt in unit/s) = 1.000.
     d = axis_data(c4a, axis)
     v = derivative(d.signals["DES_POS"], d.segments, d.cycle_time_s, kind="backward")
@@ -56,7 +57,8 @@ def test_c4a_kv_identified_without_ctrl_pos(c4a: Recording, axis: str) -> None:
     # CMD_SPEED is 1.175 x the actual speed at steady velocity on every moving feed axis
     assert ident.value("speed_gain") == pytest.approx(0.851, abs=0.003)
     # Kv in CMD_SPEED units: 33.3 1/s = 2.00 (m/min)/mm, a typical MD32200 value
-    # (physics-and-performance.md §1.2: 808D default 33.33 = 2 (m/min)/mm); 3 % tolerance
+    # (docs/reference/physics-and-performance.md §1.2: 808D default 33.33 = 2 (m/min)/mm); 3 %
+    # tolerance
     assert ident.value("kv_command_1_s") == pytest.approx(33.33, rel=0.03)
     # referred to the actual speed: 28.4 1/s = 1.70 (m/min)/mm
     assert ident.value("kv_m_min_mm") == pytest.approx(1.70, rel=0.03)

@@ -30,7 +30,7 @@ def test_mean_drilling_torque_within_3_percent_of_thesis(material: str, speed: f
 
 
 def test_fitted_constants_near_handbook_values() -> None:
-    # physics-and-performance.md §3: C45 annealed kc1 1500 / mc 0.22; GG 1150 / 0.20
+    # docs/reference/physics-and-performance.md §3: C45 annealed kc1 1500 / mc 0.22; GG 1150 / 0.20
     steel = fit_kienzle([(n, f, m) for mat, n, f, m in THESIS_DRILLING_CUTS if mat == "aisi1045"])
     assert steel.kc1_n_per_mm2 == pytest.approx(MATERIALS["aisi1045"].kc1_n_per_mm2, rel=1e-3)
     assert steel.kc1_n_per_mm2 == pytest.approx(1500, rel=0.10)

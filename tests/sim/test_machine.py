@@ -22,7 +22,7 @@ def test_thesis_default_layout() -> None:
 
 
 def test_kv_unit_conversion() -> None:
-    # MD10230: 1 (m/min)/mm = 16.666667 1/s (physics-and-performance.md §1.2)
+    # MD10230: 1 (m/min)/mm = 16.666667 1/s (docs/reference/physics-and-performance.md §1.2)
     assert FeedAxis("X1", kv_m_min_per_mm=1.0).kv_per_s == pytest.approx(16.666667, rel=1e-7)
 
 
@@ -89,7 +89,8 @@ def test_validation(key: str, value: object, match: str) -> None:
 
 
 def test_dynamic_response_adaptation_times() -> None:
-    # K3 / 802S example (physics-and-performance.md §1.2): DRA = difference of the equivalent
+    # K3 / 802S example (docs/reference/physics-and-performance.md §1.2): DRA = difference of the
+    # equivalent
     # times to the slowest axis; without FFW the equivalent time is 1/Kv
     fast = FeedAxis("Z1", ffw_mode=0, kv_m_min_per_mm=2.5)
     slow = FeedAxis("SP", ffw_mode=0, kv_m_min_per_mm=0.5)

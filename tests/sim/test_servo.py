@@ -1,6 +1,6 @@
 """Tests of the feed-axis servo kernel (:mod:`cnctwin.sim.servo`).
 
-Expected values come from the position-loop laws in physics-and-performance.md §1.2
+Expected values come from the position-loop laws in docs/reference/physics-and-performance.md §1.2
 (Kv definition MD32200, e = v / Kv without feedforward, jerk filter MD32402/MD32410) and from
 statics (motor current = force x lead / (2 pi Kt)).
 """
@@ -18,7 +18,7 @@ from cnctwin.machine import FeedAxis, Machine
 from cnctwin.sim.servo import N_KERNEL_OUTPUTS, ServoState, simulate_servo
 
 TC = 0.002
-FEED_MM_MIN = 400.0  # thesis feed (physics-and-performance.md §1.2, §3)
+FEED_MM_MIN = 400.0  # thesis feed (docs/reference/physics-and-performance.md §1.2, §3)
 V_MM_S = FEED_MM_MIN / 60.0
 
 
@@ -35,7 +35,8 @@ def _x_axis(**changes: object) -> FeedAxis:
 
 
 def test_following_error_without_ffw_is_v_over_kv() -> None:
-    # physics-and-performance.md §1.2: e = v / Kv; 400 mm/min at Kv 2.5 (m/min)/mm -> 0.160 mm
+    # docs/reference/physics-and-performance.md §1.2: e = v / Kv; 400 mm/min at Kv 2.5 (m/min)/mm
+    # -> 0.160 mm
     ax = _x_axis(ffw_mode=0, jerk_filter_type=0)
     tr = simulate_servo(_ramp(2000)[None, :], [ax])
     fe = tr.axis("DES_POS", "X1") - tr.axis("ENC_POS", "X1")
@@ -146,7 +147,8 @@ def test_contour_deviation_small_while_following_error_grows(path: str, mode: in
 
 
 def test_quadrant_glitch_at_reversal() -> None:
-    # A3 (physics-and-performance.md §1.2): friction at axis reversal -> quadrant errors
+    # A3 (docs/reference/physics-and-performance.md §1.2): friction at axis reversal -> quadrant
+    # errors
     des = _circle()
     m = Machine.thesis_default()
     tr = simulate_servo(des, [m.axis("X1"), m.axis("Y1")])

@@ -1,6 +1,6 @@
 """End-to-end tests of :func:`cnctwin.sim.simulation.simulate`, read back through Recordings.
 
-Expected values: e = v / Kv (physics-and-performance.md §1.2), thesis §3.1.2 (contour
+Expected values: e = v / Kv (docs/reference/physics-and-performance.md §1.2), thesis §3.1.2 (contour
 deviation near zero while following error follows the path), statics for cutting forces.
 """
 
@@ -92,7 +92,8 @@ def test_square_following_error_vs_contour_deviation(square: Recording) -> None:
 
 
 def test_following_error_v_over_kv_through_recording() -> None:
-    # physics-and-performance.md §1.2: 400 mm/min at Kv 2.5 without FFW -> 0.160 mm (+-2 %)
+    # docs/reference/physics-and-performance.md §1.2: 400 mm/min at Kv 2.5 without FFW -> 0.160 mm
+    # (+-2 %)
     m = Machine.thesis_default().with_overrides(
         {"axes.X1.ffw_mode": 0, "axes.X1.jerk_filter_type": 0})
     rec = simulate(LINE, m).recording

@@ -88,7 +88,7 @@ def test_current_falls_while_motor_warms() -> None:
                                                            (8, 5000.0, 166.67)])
 def test_stator_frequency_line_folds_about_250_hz(poles: int, speed: float,
                                                   alias_hz: float) -> None:
-    # thesis Eq. 4.1 f = N poles / 120; physics-and-performance.md §2 alias table
+    # thesis Eq. 4.1 f = N poles / 120; docs/reference/physics-and-performance.md §2 alias table
     motor = SpindleMotor(pole_count=poles, ripple_amplitude_a=0.1)
     tr = simulate_spindle(np.full(12000, speed), 0.0, motor, rng=np.random.default_rng(3))
     x = tr.current_a[4000:] - tr.current_a[4000:].mean()

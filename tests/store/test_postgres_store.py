@@ -74,7 +74,7 @@ def test_block_layout(pg_url: str) -> None:
 
 def test_bytes_per_sample(pg_url: str) -> None:
     """float8[] blocks: ~8 B/sample on disk, against ~42 B/sample for one row per value
-    (physics-and-performance.md section 5, measured on this 2-vCPU machine)."""
+    (docs/reference/physics-and-performance.md section 5, measured on this 2-vCPU machine)."""
     rec = make_recording(machine="m1", start="2024-03-02T08:00:00", n=60_000)
     with open_store(pg_url) as st:
         st.ingest(rec)

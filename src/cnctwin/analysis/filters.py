@@ -359,7 +359,7 @@ def fold_frequency(f_hz: ArrayLike, fs_hz: float) -> NDArray[np.float64]:
     Notes
     -----
     ``f_a = |f - fs * round(f / fs)|``. At 500 Hz sampling (Nyquist 250 Hz) a 333 Hz stator
-    line (8 poles, 5000 rpm) appears at 167 Hz (physics-and-performance.md §2).
+    line (8 poles, 5000 rpm) appears at 167 Hz (docs/reference/physics-and-performance.md §2).
 
     Examples
     --------

@@ -3,7 +3,7 @@
 The format (Siemens "Analyze MyWorkpiece /Capture4Analysis" and its successor "SINUMERIK Data
 Recorder") is one JSON object per file, ``{"Header": ..., "Payload": [...], "Footer": ...}``,
 optionally zipped, and a job run may span several files chained by
-``Footer.FilePathChain`` (see ``/work/shared/reference/data-formats.md`` section 1).
+``Footer.FilePathChain`` (see ``docs/reference/data-formats.md`` section 1).
 
 * :func:`read_capture4analysis` reads a ``.json`` or ``.zip`` (one or more chained files) into a
   :class:`~cnctwin.recording.Recording`.

@@ -4,7 +4,7 @@
 :func:`cnctwin.iotools.capture4analysis.read_capture4analysis` chunk by chunk and rolls files
 at a size limit (``Footer.FilePathChain``); :func:`write_capture4analysis` writes a whole
 recording with it. Both are re-exported from :mod:`cnctwin.iotools.capture4analysis` and
-:mod:`cnctwin.iotools`. The format is described in ``/work/shared/reference/data-formats.md``
+:mod:`cnctwin.iotools`. The format is described in ``docs/reference/data-formats.md``
 section 1.
 """
 

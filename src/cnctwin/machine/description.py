@@ -49,7 +49,7 @@ class SpindleMotor:
 
     Defaults describe the 5-axis Spinner machining centre of the thesis (SINUMERIK 840D sl,
     S120 drive). Kinds: [T] thesis, [S] datasheet/manual (see docs/simulator.md and
-    physics-and-performance.md §2), [D] derived, [E] engineering estimate.
+    docs/reference/physics-and-performance.md §2), [D] derived, [E] engineering estimate.
 
     Attributes
     ----------
@@ -111,7 +111,7 @@ class SpindleMotor:
         q-axis inductance Lq [H] (Lq > Ld: interior magnets; reluctance torque with id < 0
         makes mean Iq fall in field weakening, thesis Fig. 3.8a). [E] 0.009
     dc_link_v : float
-        DC-link voltage [V]. [S] ALM 600-720 V (physics-and-performance.md §2)
+        DC-link voltage [V]. [S] ALM 600-720 V (docs/reference/physics-and-performance.md §2)
     modulation_max : float
         Maximum phase-voltage amplitude as a fraction of Vdc/sqrt(3) (space-vector modulation;
         > 1 = over-modulation) [-]. [E] 1.05, which puts the voltage limit of the no-load
@@ -124,17 +124,19 @@ class SpindleMotor:
         Rated torque for LOAD % and torque utilisation [Nm]. [E] 25
     inertia_kg_m2 : float
         Rotor + spindle shaft + tool holder inertia J [kg m^2]. [E] 0.015 (motor spindles of
-        this size: 0.01-0.03; J is not given in the thesis, physics-and-performance.md §4)
+        this size: 0.01-0.03; J is not given in the thesis,
+        docs/reference/physics-and-performance.md §4)
     current_loop_time_constant_s : float
         Equivalent first-order time constant of the closed current loop [s].
-        [S] torque rise time 0.5-0.8 ms on S120 (physics-and-performance.md §1.3); 0.0005
+        [S] torque rise time 0.5-0.8 ms on S120 (docs/reference/physics-and-performance.md §1.3);
+        0.0005
     speed_ctrl_kp_nm_s_per_rad : float
         Speed-controller proportional gain [Nm s/rad]. [E] 2.4 (~25 Hz with J = 0.015)
     speed_ctrl_ti_s : float
         Speed-controller integral time [s]. [E] 0.02
     position_ctrl_kv_per_s : float
         Spindle position-loop gain in rigid tapping (mode 1) [1/s]. [S] Kv <= 3 (m/min)/mm
-        = 50 1/s for 840D sl spindles (physics-and-performance.md §1.2); 30
+        = 50 1/s for 840D sl spindles (docs/reference/physics-and-performance.md §1.2); 30
     spos_speed_rpm : float
         Largest speed of the move to the programmed angle when position control takes over
         (SPOS, rigid tapping) [rpm]. [S] MD35300 SPIND_POSCTRL_VELO, default 500
@@ -272,7 +274,7 @@ class FeedAxis:
         Rotary axis (positions in deg) instead of linear (mm).
     kv_m_min_per_mm : float
         Position-loop gain MD32200 [(m/min)/mm]. [S] 2.5 (802S example Z axis,
-        physics-and-performance.md §1.2)
+        docs/reference/physics-and-performance.md §1.2)
     ffw_mode : int
         MD32620 FFW_MODE: 0 none, 1 speed FFW + PT1 balancing, 2 torque FFW + PT1,
         3 speed FFW + dead-time balancing, 4 torque FFW + dead time. [E] 3
@@ -503,7 +505,8 @@ def dynamic_response_adaptation_times(axes: list[FeedAxis] | tuple[FeedAxis, ...
     -----
     The equivalent time is :attr:`FeedAxis.position_equivalent_time_s`; K3 / 802S example:
     0.060 x (1/0.5 - 1/2.5) = 0.096 s for a spindle with Kv 0.5 interpolating with a Z axis
-    with Kv 2.5 (times in min x ... as in the manual; physics-and-performance.md §1.2).
+    with Kv 2.5 (times in min x ... as in the manual; docs/reference/physics-and-performance.md
+    §1.2).
     """
     eq = {ax.name: ax.position_equivalent_time_s for ax in axes}
     slowest = max(eq.values()) if eq else 0.0

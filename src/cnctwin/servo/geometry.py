@@ -195,7 +195,8 @@ def contour_error(
     The distance is the normal distance to the nearest segment, positive on the left of the
     direction of travel. Corner rounding is the distance from the corner point to the nearest
     actual point; overshoot is the largest distance on the outer side within ``window_mm``
-    of the corner (contour-error definitions: Siemens A3 p. 73, physics-and-performance.md
+    of the corner (contour-error definitions: Siemens A3 p. 73,
+    docs/reference/physics-and-performance.md
     §1.2).
     """
     ax, ay = axes

@@ -199,7 +199,8 @@ def fit_friction_per_direction(
     Notes
     -----
     Positive direction ``tau = Fc+ + b+ v``, negative ``tau = -Fc- + b- v`` (Coulomb + viscous
-    per direction, the quantities of the AMM universal axis test, peers.md §1.1). A weight
+    per direction, the quantities of the AMM universal axis test, docs/reference/peers.md §1.1). A
+    weight
     offset of a vertical axis adds to ``Fc+`` and subtracts from ``Fc-``. Weighted least
     squares on run means with their within-run standard errors (AR(1)-inflated);
     the covariance is scaled by the reduced chi-square when it exceeds 1 (scatter of the runs

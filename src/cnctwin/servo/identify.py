@@ -5,7 +5,7 @@ Pure fitting functions first (:func:`fit_setpoint_chain`, :func:`fit_speed_loop`
 :func:`identify_axis`, which uses whatever signals a recording has and lists what it could not
 identify and why (``AxisIdentification.not_identified``).
 
-Loop structure (thesis Fig. 3.1; physics-and-performance.md §1.2)::
+Loop structure (thesis Fig. 3.1; docs/reference/physics-and-performance.md §1.2)::
 
     DES_POS -> jerk filter (MD32402/MD32410) -> delay + PT1 (dynamic response adaptation
     MD32910, feedforward balancing) -> CTRL_POS

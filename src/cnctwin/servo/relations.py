@@ -247,7 +247,7 @@ def check_relations(rec: Recording, axis: str, *, atol: float = 0.0) -> Relation
     Notes
     -----
     Relations (thesis Fig. 3.1 and Table 2.1; Siemens HF signal definitions,
-    data-formats.md §1.3):
+    docs/reference/data-formats.md §1.3):
 
     * ``following_error``: ``FOLLOWING_ERROR = DES_POS - ENC_POS``
     * ``ctrl_diff2``: ``CTRL_DIFF2 = CTRL_POS - ENC_POS``

@@ -277,7 +277,8 @@ def drill_torque_nm(
     Notes
     -----
     Mc = f kc D^2 sin(kappa) / 8000 (ISCAR), kc = kc1.1 h^-mc (v_ref/vc)^z, h = (f/2) sin(kappa)
-    (physics-and-performance.md §3), times :func:`wear_factor` and ``hardness_factor``.
+    (docs/reference/physics-and-performance.md §3), times :func:`wear_factor` and
+    ``hardness_factor``.
     """
     d = drill if drill is not None else Drill()
     m = get_material(material)

@@ -315,7 +315,8 @@ def random_loop_overrides(
         ``Machine.with_overrides`` keys: per axis Kv MD32200 U(1.5, 4) (m/min)/mm, FFW mode
         MD32620 from {1, 2, 3, 4}, jerk filter time MD32410 U(4, 16) ms (moving average),
         MD32810 U(1, 4) ms, MD32800 U(0.3, 0.8) ms, speed-controller gain x U(0.7, 1.4) and
-        Coulomb friction U(80, 220) N. Ranges: physics-and-performance.md §1.2 [S]/[E].
+        Coulomb friction U(80, 220) N. Ranges: docs/reference/physics-and-performance.md §1.2
+        [S]/[E].
     """
     rng = np.random.default_rng([seed, 0x5EED])
     ref = Machine.thesis_default()

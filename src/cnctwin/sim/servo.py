@@ -3,7 +3,8 @@
 One compiled call (:func:`simulate_servo`) runs every feed axis of a machine for a chunk of
 position-control cycles (2 ms) and integrates the drive's speed and current loops and the
 mechanics at the 125 us controller cycle inside (``inner_steps`` = 16). Structure per axis,
-following thesis Fig. 3.1 and SINUMERIK function manuals G2/K3/B2 (physics-and-performance.md
+following thesis Fig. 3.1 and SINUMERIK function manuals G2/K3/B2
+(docs/reference/physics-and-performance.md
 §1.2)::
 
     DES_POS -> jerk filter (MD32402/MD32410) -> dynamic response adaptation (MD32910)

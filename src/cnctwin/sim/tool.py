@@ -105,7 +105,7 @@ class ToolThermal:
     ----------
     heat_fraction : float
         Fraction eta of the cutting power entering the drill [-]. [E] 0.10 (5-15 %,
-        physics-and-performance.md §3)
+        docs/reference/physics-and-performance.md §3)
     heat_capacity_j_per_k : float
         Heat capacity of the tip region C [J/K]. [E] 3.3 (~16 g carbide)
     resistance_k_per_w : float

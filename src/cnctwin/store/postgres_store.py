@@ -20,7 +20,8 @@ Schema (in the schema named by the URL, default ``cnctwin``)::
 Why blocks of arrays and not one row per value: a machine produces 500 Hz x ~70 signals =
 35 k samples/s (up to 180 k with 6 axes x 60 signals). One row per value costs ~42 B/sample on
 disk (24 B tuple header + 4 B line pointer + key columns + value; measured, reference
-physics-and-performance.md section 5: ~650 GB/day/machine) and the COPY rate is bound by
+docs/reference/physics-and-performance.md section 5: ~650 GB/day/machine) and the COPY rate is
+bound by
 rows (0.23 M rows/s from Python, 1.75 M rows/s server-side). A block of 1000 cycles (2 s) of
 one signal is one row of ~8 kB: per-row overhead is amortised over 1000 samples, so storage is
 <= 8 B/sample (the float64 itself; TOAST compresses where the values allow, with lz4 when the

@@ -26,7 +26,7 @@ References
 .. [2] VDI 3323 material groups; C45 (AISI 1045) annealed kc1.1 = 1500 N/mm^2, mc = 0.22;
    grey cast iron kc1.1 = 1150 N/mm^2, mc = 0.20 (ISCAR handbook tables).
 .. [3] Komet Brinkhaus "WP1+X": breakage detection from the first part without teach-in
-   (docs/reference peers.md §1.5, the baseline to beat).
+   (docs/reference docs/reference/peers.md §1.5, the baseline to beat).
 """
 
 from __future__ import annotations

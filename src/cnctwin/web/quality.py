@@ -1,6 +1,6 @@
 """Signal-quality accounting of a recording: effective rate, gaps, clock jitter, repairs.
 
-Peers fall back silently to a lower rate or hide dropped samples (shared/reference/peers.md,
+Peers fall back silently to a lower rate or hide dropped samples (docs/reference/peers.md,
 "ten features" no. 5); the dashboard shows what the recording's metadata says instead. Every
 figure comes from :class:`~cnctwin.recording.RecordingMeta` and the cycle counter, so it can be
 computed from a store's catalog row without loading the signals.
@@ -125,7 +125,8 @@ def signal_quality(meta: RecordingMeta, *, n_cycles: int, first_cycle: int | Non
     Notes
     -----
     ``effective_rate_hz = n_cycles / ((last - first + 1) * cycle_time_s)`` and
-    ``coverage = n_cycles / (last - first + 1)``: the counter is the clock (data-formats.md
+    ``coverage = n_cycles / (last - first + 1)``: the counter is the clock
+    (docs/reference/data-formats.md
     §1.2), so missing cycles lower the rate instead of stretching time. The anchor jitter
     measures how far the wall-clock stamps a source wrote scatter about that clock.
     """
