@@ -104,3 +104,32 @@ def test_square_contour_and_circle_test() -> None:
     # a lagging loop shrinks the circle (Siemens A3: radius error ~ v^2/(2 R Kv^2) without FFW)
     assert res.radius_deviation_mm < 0.0
     assert res.circular_deviation_mz_mm <= res.circular_deviation_lsc_mm + 1e-12
+
+
+@pytest.mark.parametrize("seed", [1, 4])
+def test_kv_without_cmd_speed_from_steady_following_error(seed: int) -> None:
+    """Recordings without CMD_SPEED (an edge device set up with fewer signals), feedforward
+    off. With CTRL_POS, Kv comes from v = Kv (CTRL_POS - ENC_POS) on the constant-velocity runs
+    (Siemens FB1 G2: following error = v / Kv without feedforward) and must be the hidden Kv
+    within the 5 % of issue 5. Without CTRL_POS too, DES_POS - ENC_POS holds the setpoint
+    chain's lag as well (this branch had no test, issue 16; it reported a Kv 7-16 % low):
+    Kv is then not identified, with the reason, and the total lag is still given."""
+    hidden = {**_draw(seed), "ffw_mode": 0, "ffw_weight": 1.0}
+    rec = _simulate(SQUARE, hidden, seed)
+    kv_true = hidden["kv_m_min_per_mm"]
+    no_cmd = rec.copy()
+    no_cmd.hf = rec.hf.drop(columns=[c for c in rec.columns
+                                     if c.split("|")[0] in ("CMD_SPEED", "VEL_FFW")])
+    ident = identify_axis(no_cmd, "X1", n_bootstrap=10)
+    assert ident.value("kv_m_min_mm") == pytest.approx(kv_true, rel=0.05)
+    assert "v = Kv*e" in ident.params["kv_m_min_mm"].method
+    bare = no_cmd.copy()
+    bare.hf = no_cmd.hf.drop(columns=[c for c in no_cmd.columns
+                                      if c.split("|")[0] in ("CTRL_POS", "CTRL_DIFF",
+                                                             "CTRL_DIFF2")])
+    ident = identify_axis(bare, "X1", n_bootstrap=10)
+    assert "kv_m_min_mm" not in ident.params
+    assert "setpoint chain" in ident.not_identified["kv_m_min_mm"]
+    # the total steady lag: 1/Kv plus the chain (jerk filter about half its length, the
+    # dynamic response adaptation, the speed loop's equivalent time): above 1/Kv
+    assert ident.value("lag_time_s") > 1.0 / (kv_true * KV_PER_S_PER_M_MIN_MM)

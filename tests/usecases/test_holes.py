@@ -130,10 +130,13 @@ def test_wear_run_without_events(wear6) -> None:  # type: ignore[no-untyped-def]
     h = hole_record(rec, store=False)
     assert len(h) == 6
     assert (h["surface_source"] == "current").all()
-    # the current onset lags the first touch of the drill point by less than the cone
-    # (1.55 mm = 0.23 s at 6.67 mm/s)
-    lag_s = (h["cut_start_cycle"] - truth["cut_first_cycle"]) * rec.meta.cycle_time_s
-    assert ((lag_s > -0.05) & (lag_s < 0.23)).all(), lag_s.tolist()
+    # the current onset lags the first touch of the drill point: the cutting torque grows with
+    # the engaged part of the cone (1.55 mm = 0.23 s at 6.67 mm/s) and is seen once above the
+    # noise. Never before the touch (causal), and the search walks back from the threshold
+    # crossing to where the rise begins: within 35 cycles (0.07 s, 0.47 mm of feed, a third of
+    # the cone). Measured: 22-28 cycles; without the walk back 37-43 (issue 16's mutant).
+    lag = h["cut_start_cycle"] - truth["cut_first_cycle"]
+    assert ((lag >= 0) & (lag <= 35)).all(), lag.tolist()
     np.testing.assert_allclose(h["depth_mm"], 20.0, atol=0.6)
     assert h["tool"].isna().all()
 
