@@ -241,10 +241,13 @@ def _machine_args(plant_path: Path, m: Any) -> argparse.Namespace:
 
 def _plant_worker(plant_path: str, names: list[str], report_queue: Any) -> None:
     """Worker process of ``edge run --config``: run the named machines (one thread each)."""
+    import os
+
     from cnctwin.edge.plant import run_machines, worker_signals
 
     stop = threading.Event()
     worker_signals(stop)
+    report_queue.put(("", "ready", os.getpid()))  # a stop now drains instead of killing
     plant = _read_plant(Path(plant_path))
     builders = []
     for name in names:

@@ -281,7 +281,9 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
 Worker = Callable[[str, list[str], Any], None]
 """``worker(plant_path, machine_names, report_queue)``: a top-level function (picklable by
 reference) that runs the named machines of the plant file in a worker process and puts
-``(name, what, value)`` tuples on the queue (:func:`run_machines` does the running)."""
+``(name, what, value)`` tuples on the queue (:func:`run_machines` does the running); first
+``("", "ready", os.getpid())`` once its SIGTERM handler is installed
+(:func:`worker_signals`), so that a stop never kills it half-started."""
 
 
 @dataclass
@@ -291,6 +293,8 @@ class _Slot:
     restarts: int = 0
     next_start: float = 0.0
     finished: set[str] = field(default_factory=set)
+    ready: bool = False  # its SIGTERM handler is installed (a stop is then a clean drain)
+    term_sent: bool = False
 
 
 class PlantRunner:
@@ -342,6 +346,7 @@ class PlantRunner:
 
     def _start(self, slot: _Slot) -> None:
         names = [n for n in slot.names if n not in slot.finished]
+        slot.ready = slot.term_sent = False
         slot.proc = self._ctx.Process(target=self.worker,
                                       args=(str(self.plant.path), names, self._queue),
                                       name=f"cnctwin-edge-{'+'.join(names)[:40]}", daemon=False)
@@ -354,7 +359,11 @@ class PlantRunner:
             return
         while True:
             name, what, value = item
-            if what in ("done", "error"):
+            if what == "ready":  # value: the worker's pid
+                for s in self.slots:
+                    if s.proc is not None and s.proc.pid == value:
+                        s.ready = True
+            elif what in ("done", "error"):
                 self.results[name] = (what, value)
                 for s in self.slots:
                     if name in s.names:
@@ -384,8 +393,13 @@ class PlantRunner:
             now = time.monotonic()
             if self._stop.is_set() and stop_sent is None:
                 stop_sent = self._stop_sent = now
+            if stop_sent is not None:
+                # SIGTERM once a worker can take it (its handler installed: it drains); one
+                # still starting gets it as soon as it reports ready
                 for s in self.slots:
-                    if s.proc is not None and s.proc.is_alive():
+                    if s.proc is not None and s.proc.is_alive() and s.ready \
+                            and not s.term_sent:
+                        s.term_sent = True
                         os.kill(s.proc.pid, signal.SIGTERM)
             if stop_sent is not None and now - stop_sent > stop_timeout_s:
                 for s in self.slots:  # drained too long: the state directories still hold
