@@ -8,7 +8,7 @@
 * Ingest is idempotent and crash-consistent; bad files and partitions are reported, counted
   and skipped; an unreachable scheduler is an error, not a fall-back.
 
-The fleet (conftest): 20 machines x 2 days x 1 part cycle, seed 11, parameters drawn per
+The fleet (conftest): 12 machines x 2 days x 1 part cycle, seed 11, parameters drawn per
 machine, faults hidden in ``truth.json`` and recovered here only through the public commands.
 """
 
@@ -46,7 +46,7 @@ def test_cli_cluster_equals_embedded_and_single_process(
     res = tmp_path / "res"
     sched = ["--scheduler", dask_cluster.address]
     out = cnctwin("fleet", "ingest", str(fleet_dir), "--store", str(store), *sched)
-    assert "40 ingested, 0 already stored, 0 failed (of 40)" in out.stdout
+    assert "24 ingested, 0 already stored, 0 failed (of 24)" in out.stdout
     cnctwin("fleet", "holes", "--store", str(store), "--out", str(res), *sched)
     out = cnctwin("fleet", "health", "--store", str(store), "--out", str(res), *sched)
     assert dask_cluster.address.split("://")[1].split(":")[0] in out.stderr or "Dask" in out.stderr
@@ -71,11 +71,11 @@ def test_cli_cluster_equals_embedded_and_single_process(
     pd.testing.assert_frame_equal(_sorted(health, HEALTH_KEY),
                                   _sorted(reference_health, HEALTH_KEY))
 
-    # 20 machines x 2 days x 3 holes; every partition complete
-    assert len(holes) == 120
+    # 12 machines x 2 days x 3 holes; every partition complete
+    assert len(holes) == 72
     assert not holes["partial"].any() and not health["partial"].any()
     # the faults: exactly the injected (machine, kind, axis), alarmed from their first day on
-    assert len(truth) == 8
+    assert len(truth) == 5
     assert _alarm_set(alarms) == {(f["machine"], f["kind"], f["axis"]) for f in truth}
     for f in truth:
         days = sorted(alarms.loc[(alarms["machine"] == f["machine"])
@@ -98,7 +98,7 @@ def _check_fleet_page(store: Path, res: Path, truth: list[dict[str, Any]]) -> No
         doc = client.get("/api/fleet").json()
         assert doc["tables"] == ["alarms", "health", "holes"]
         ranked = [m["machine"] for m in doc["machines"]]
-        assert len(ranked) == 20
+        assert len(ranked) == 12
         assert set(ranked[: len(faulty)]) == faulty, "machines with alarms first"
         by_wear = [m["machine"] for m in client.get("/api/fleet?sort=wear").json()["machines"]]
         assert set(by_wear[: len(worn)]) == worn
@@ -233,9 +233,9 @@ def test_postgres_store_same_as_duckdb(
     sched = ["--scheduler", dask_cluster.address]
     machines = sorted({f["machine"] for f in truth})[:2]  # alarms to compare, too
     out = cnctwin("fleet", "ingest", str(fleet_dir), "--store", pg_url, *sched)
-    assert "40 ingested" in out.stdout
+    assert "24 ingested" in out.stdout
     out = cnctwin("fleet", "ingest", str(fleet_dir), "--store", pg_url, *sched)
-    assert "0 ingested, 40 already stored" in out.stdout
+    assert "0 ingested, 24 already stored" in out.stdout
     mflags = [a for m in machines for a in ("--machine", m)]
     for store, res in ((pg_url, tmp_path / "pg"), (str(fleet_store), tmp_path / "dk")):
         cnctwin("fleet", "health", "--store", store, "--out", str(res), *mflags, *sched)
