@@ -193,12 +193,12 @@ class EdgeRuntime:
             if getattr(self.source, "live", False):  # device clock vs edge clock
                 self.c.age_s = (time.time_ns() - int(sub.time_ns[-1])) / 1e9
         self.c.chunks += 1
-        self._maybe_checkpoint(chunk.cycle_time_s)
         if chunk.received_ns:
             # arrival of the data (a live source: its first message) -> results handed to
-            # every sink (the MQTT sink publishes in write())
+            # every sink (the MQTT sink publishes in write()); the checkpoint comes after
             self.c.lag_s = (time.time_ns() - chunk.received_ns) / 1e9
             self.c.latencies.append(self.c.lag_s)
+        self._maybe_checkpoint(chunk.cycle_time_s)
         self.c.busy_s += time.perf_counter() - t0
         self._maybe_status()
 
