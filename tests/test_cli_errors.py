@@ -74,3 +74,14 @@ def test_license_matches_pyproject() -> None:
     first = (ROOT / "README.md").read_text(encoding="utf-8")[:2500]
     assert "make demo" in first and "make test" in first
     assert "Koç University" in first and "LICENSE" in first
+
+
+def test_fleet_job_on_a_folder_that_is_no_store(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """The hint names the command that makes a store, not the library's ``create=True``."""
+    (tmp_path / "empty").mkdir()
+    code = main(["fleet", "health", "--store", str(tmp_path / "empty"), "--out",
+                 str(tmp_path / "res")])
+    err = capsys.readouterr().err
+    assert code == 2 and "cnctwin fleet ingest DIR --store" in err
+    assert "create=True" not in err and "Traceback" not in err

@@ -141,6 +141,7 @@ def _write(df: pd.DataFrame, path: Path) -> Path:
 
 
 def _cmd_job(args: argparse.Namespace) -> int:
+    from cnctwin.exceptions import StoreError
     from cnctwin.fleet import (
         compare_partition,
         drift_alarms,
@@ -153,7 +154,14 @@ def _cmd_job(args: argparse.Namespace) -> int:
         wear_trend,
     )
 
-    parts = partitions(args.store, machines=args.machines)
+    try:
+        parts = partitions(args.store, machines=args.machines)
+    except StoreError as exc:
+        if "create=True" not in str(exc):
+            raise
+        # the library's hint names its own argument; here the store comes from ingest
+        raise StoreError(f"--store {args.store}: no cnctwin store there; make it with "
+                         f"`cnctwin fleet ingest DIR --store {args.store}`") from None
     if not parts:
         from cnctwin.exceptions import ConfigError
 
