@@ -233,3 +233,26 @@ def test_edge_run_with_an_opcua_source(sim_rec: Any, tmp_path: Path) -> None:
             if x.strip()]
     torque = [m for m in msgs if m["kind"] == "torque"]
     assert torque and sum(m["n"] for m in torque) == status["cycles"]
+
+
+def test_incomplete_timestamps_wait_by_our_clock_not_the_servers() -> None:
+    """Values of one server write arrive together, each with the write's source timestamp; a
+    timestamp whose other values have not arrived yet waits up to 3 intervals of *local*
+    arrival time. A server clock an hour behind ours must not flush it at once (half a row),
+    nor one an hour ahead hold it until a newer timestamp comes (issue noted in session 5).
+    No server: the subscription callback is called directly."""
+    import datetime as dt
+
+    from cnctwin.iotools.opcua_client import NodeMap, OpcUaRecorder
+
+    for skew_h in (-1.0, 1.0):
+        rec = OpcUaRecorder("opc.tcp://127.0.0.1:4840", NodeMap(
+            {"CURRENT|SP1": "ns=2;i=1", "CMD_SPEED|SP1": "ns=2;i=2"}), interval_s=0.1)
+        rec._id_to_name = {"ns=2;i=1": "CURRENT|SP1", "ns=2;i=2": "CMD_SPEED|SP1"}
+        ts = dt.datetime.now(dt.UTC).replace(tzinfo=None) + dt.timedelta(hours=skew_h)
+        rec._on_value("ns=2;i=1", 3.0, ts)  # the speed of this write not here yet
+        rec._flush()
+        assert rec._rows == []  # neither flushed half at once ...
+        time.sleep(0.35)  # ... nor held longer than 3 intervals of our clock
+        rec._flush()
+        assert len(rec._rows) == 1 and rec._rows[0][2] == {"CURRENT|SP1": 3.0}

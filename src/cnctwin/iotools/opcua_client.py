@@ -265,6 +265,7 @@ class OpcUaRecorder:
         self._id_to_name: dict[str, str] = {}
         self._latest: dict[str, Any] = {}
         self._pending: dict[int, dict[str, Any]] = {}
+        self._arrived: dict[int, int] = {}  # source timestamp -> local arrival [ns]
         self._rows: list[tuple[int, int, dict[str, Any]]] = []  # (cycle, t_ns, values)
         self._gaps: list[CounterGap] = []
         self._issues: list[str] = []
@@ -287,21 +288,26 @@ class OpcUaRecorder:
         t_ns = int(pd.Timestamp(ts).tz_localize("UTC").value if pd.Timestamp(ts).tzinfo is None
                    else pd.Timestamp(ts).value)
         with self._lock:
+            if t_ns not in self._pending:
+                self._arrived[t_ns] = time.time_ns()  # aged by our clock, not the server's
             self._pending.setdefault(t_ns, {})[name] = value
 
     def _flush(self, *, final: bool = False) -> None:
         """Turn pending timestamps into rows: those older than one interval (all values of a
         server write arrive together), or all of them at the end."""
+        # a timestamp waits for the rest of its values up to 3 intervals after its first value
+        # arrived here (the server's clock may run ahead of or behind ours)
         horizon = time.time_ns() - int(3 * self.interval_s * 1e9)
         with self._lock:
-            ready = sorted(t for t in self._pending if final or t <= horizon or
-                           len(self._pending[t]) == len(self.nodes.all))
+            ready = sorted(t for t in self._pending if final or self._arrived[t] <= horizon
+                           or len(self._pending[t]) == len(self.nodes.all))
             if not final and self._pending:
-                newest = max(self._pending)
-                ready = [t for t in ready if t < newest or
-                         len(self._pending[t]) == len(self.nodes.all)]
+                newest = max(self._pending)  # still arriving, unless complete or aged
+                ready = [t for t in ready if t < newest or self._arrived[t] <= horizon
+                         or len(self._pending[t]) == len(self.nodes.all)]
             for t in ready:
                 vals = self._pending.pop(t)
+                self._arrived.pop(t, None)
                 if self._last_t is not None and t <= self._last_t:
                     self._issues.append(f"source timestamp {pd.Timestamp(t, tz='UTC')} not "
                                         "after the previous one: values merged into it")
