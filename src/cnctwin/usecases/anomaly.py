@@ -778,6 +778,28 @@ class TappingDetector(Detector):
             return 0.0
         return max(f[1] / rc, f[2] / rz) - self.threshold_ratio
 
+    def _forward_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> bool:
+        """True (and the state advanced) when no sample of the chunk is in extraction: then
+        every sample only resets the window, as :meth:`_update` would one by one."""
+        n = np.asarray(x["speed_rpm"], dtype=np.float64)
+        if n.size == 0 or bool((n * self.direction > 1.0).any()):
+            return False
+        self._prev = (float(np.asarray(x["current_a"])[-1]),
+                      float(np.asarray(x["z_error_mm"])[-1]))
+        self._dc.clear()
+        self._dz.clear()
+        self._since = 0
+        return True
+
+    def learn_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> None:
+        if not self._forward_chunk(x):  # extraction in the chunk: sample by sample
+            super().learn_chunk(x)
+
+    def score_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> NDArray[np.float64]:
+        if self._forward_chunk(x):  # no extraction: nothing to judge (score 0, as one by one)
+            return np.zeros(len(np.asarray(x["speed_rpm"])))
+        return super().score_chunk(x)
+
     @classmethod
     def _unit_test_params(cls) -> dict[str, Any]:
         return {"window": 10, "n_bins": 50}
