@@ -526,7 +526,7 @@ class OpcUaSource:
     _last_cycle: int | None = None
 
     def chunks(self) -> Iterator[Chunk]:
-        """One chunk per poll window with rows."""
+        """One chunk per poll window with rows; an empty one after a window without any."""
         self.start()
         last = time.monotonic()
         while not self._interrupted:
@@ -536,6 +536,9 @@ class OpcUaSource:
                 if self.idle_timeout_s is not None and \
                         time.monotonic() - last > self.idle_timeout_s:
                     return
+                # the runtime's idle tick: its status and sinks keep going without data
+                yield Chunk(np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64), {},
+                            cycle_time_s=self.recorder.interval_s, machine=self.machine)
                 continue
             last = time.monotonic()
             self._done += len(rows)
