@@ -106,7 +106,6 @@ class EdgeRuntime:
         self.checkpoint_every_s = checkpoint_every_s
         self._ckpt_cycle: int | None = None
         self._suppress: dict[str, int] = {}
-        self.suppressed = 0
         self.resumed: dict[str, Any] | None = None
 
     # ------------------------------------------------------------------ messages
@@ -243,8 +242,9 @@ class EdgeRuntime:
         run did not finish and ``results.jsonl`` holds its results:
 
         * with a checkpoint of the same source that the source can go back to (a replayed
-          file seeks to the checkpoint's cycle; a live source only when the checkpoint is
-          as new as the results), the processors' state is restored from it (open hole,
+          file seeks to the checkpoint's cycle; a live source whose broker delivers again
+          what followed the checkpoint, or whose checkpoint is as new as the results), the
+          processors' state is restored from it (open hole,
           detectors, estimator) and processing repeats the cycles after it: the results
           equal an uninterrupted run's;
         * otherwise processing continues after the last emitted cycle with fresh
@@ -311,7 +311,6 @@ class EdgeRuntime:
                 n = int(r.payload["n"])
                 first = int(r.payload["first_cycle"])
                 skip = min(max(bound - first + 1, 0), n)
-                self.suppressed += 1 if skip else 0
                 if skip == n:
                     continue
                 if skip:
@@ -323,8 +322,6 @@ class EdgeRuntime:
                 out.append(r)
             elif r.cycle > bound:
                 out.append(r)
-            else:
-                self.suppressed += 1
         return out
 
     # ------------------------------------------------------------------ overload
