@@ -81,6 +81,13 @@ def session_client_id(machine: str, metadata_topic: str) -> str:
     return f"cnctwin-edge-{slug}"[:64]
 
 
+def _idle_chunk(cycle_time_s: float, machine: str) -> Chunk:
+    """An empty chunk: a live source had nothing new in its poll window; the runtime keeps
+    its status and sinks going on it (:meth:`~cnctwin.edge.EdgeRuntime.idle`)."""
+    return Chunk(np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64), {},
+                 cycle_time_s=cycle_time_s, machine=machine)
+
+
 def _events_between(events: pd.DataFrame, lo: int, hi: int,
                     cycles: np.ndarray | None = None) -> pd.DataFrame:
     """Events of cycles ``lo..hi`` (``events`` sorted by cycle; ``cycles`` its cycle column).
@@ -292,7 +299,7 @@ class DatabusSource:
                 if self.idle_timeout_s is not None and \
                         time.monotonic() - last_value > self.idle_timeout_s:
                     return
-                yield self._empty()  # the runtime keeps its status and sinks going
+                yield _idle_chunk(self.cycle_time_s, self.machine)  # runtime ticks
                 continue
             last_value = time.monotonic()
             if self._hold_acks:
@@ -308,10 +315,6 @@ class DatabusSource:
                 # the generator resumes only after the runtime has written the results of
                 # these chunks to every sink: now the broker may forget the messages
                 self.recorder.ack(acks)
-
-    def _empty(self) -> Chunk:
-        return Chunk(np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64), {},
-                     cycle_time_s=self.cycle_time_s, machine=self.machine)
 
     def _take(self) -> Iterator[Chunk]:
         """Chunks of what was decoded: the fast path's arrays, then any general-path values
@@ -537,8 +540,7 @@ class OpcUaSource:
                         time.monotonic() - last > self.idle_timeout_s:
                     return
                 # the runtime's idle tick: its status and sinks keep going without data
-                yield Chunk(np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64), {},
-                            cycle_time_s=self.recorder.interval_s, machine=self.machine)
+                yield _idle_chunk(self.recorder.interval_s, self.machine)
                 continue
             last = time.monotonic()
             self._done += len(rows)
