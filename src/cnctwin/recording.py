@@ -22,6 +22,7 @@ Nothing a reader accepted is silently dropped: what it repaired or could not kee
 from __future__ import annotations
 
 import dataclasses
+import json
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -49,6 +50,11 @@ __all__ = [
     "empty_events",
     "empty_lf",
     "find_gaps",
+    "jsonable",
+    "meta_from_dict",
+    "meta_from_json",
+    "meta_to_dict",
+    "meta_to_json",
     "unwrap_cycles",
 ]
 
@@ -184,6 +190,165 @@ class RecordingMeta:
             issues=list(self.issues),
             attrs=dict(self.attrs),
         )
+
+
+# ---------------------------------------------------------------------------- meta <-> JSON
+def jsonable(value: Any) -> Any:
+    """``value`` with everything JSON cannot hold made plain (recursively).
+
+    Timestamps become ISO 8601 text, numpy scalars and arrays numbers and lists, mapping keys
+    text; anything else unknown its ``str()``.
+    """
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [jsonable(v) for v in value]
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    if isinstance(value, pd.Timestamp):
+        return value.isoformat()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return jsonable(value.tolist())
+    return str(value)
+
+
+def meta_to_dict(meta: RecordingMeta) -> dict[str, Any]:
+    """:class:`RecordingMeta` as plain JSON-ready values: the one encoding of the metadata.
+
+    Every file and store that keeps a recording's metadata (Parquet schema metadata, the
+    simulator's ``meta.json``, the stores' catalog) writes this form.
+
+    Parameters
+    ----------
+    meta : RecordingMeta
+        The metadata.
+
+    Returns
+    -------
+    dict
+        ``time_anchors`` as ``[cycle, ISO 8601 time]`` pairs, ``gaps`` as ``[after, before]``
+        pairs, ``axis_map`` keys as text, ``attrs`` through :func:`jsonable`.
+    """
+    return {
+        "machine": meta.machine,
+        "cycle_time_s": float(meta.cycle_time_s),
+        "axis_map": {str(k): v for k, v in meta.axis_map.items()},
+        "units": dict(meta.units),
+        "source_files": [str(s) for s in meta.source_files],
+        "source_format": meta.source_format,
+        "time_anchors": [[int(c), pd.Timestamp(t).isoformat()] for c, t in meta.time_anchors],
+        "gaps": [[int(g.after_cycle), int(g.before_cycle)] for g in meta.gaps],
+        "wraps": int(meta.wraps),
+        "issues": list(meta.issues),
+        "partial": bool(meta.partial),
+        "attrs": jsonable(meta.attrs),
+    }
+
+
+def _anchor_time(value: Any) -> pd.Timestamp:
+    if isinstance(value, int | np.integer):  # ns since the epoch (stores before one encoding)
+        return pd.Timestamp(int(value), unit="ns", tz="UTC")
+    return pd.Timestamp(value)
+
+
+def meta_from_dict(doc: dict[str, Any]) -> RecordingMeta:
+    """Inverse of :func:`meta_to_dict`; keys it does not know are ignored.
+
+    Parameters
+    ----------
+    doc : dict
+        As written by :func:`meta_to_dict`. Anchor times may also be integer nanoseconds since
+        the epoch (the stores' catalog before the encodings were made one).
+
+    Returns
+    -------
+    RecordingMeta
+
+    Raises
+    ------
+    ConfigError
+        If ``doc`` is not a mapping or a value has the wrong shape (names the key).
+    """
+    if not isinstance(doc, dict):
+        raise ConfigError(f"recording metadata must be a JSON object, not {type(doc).__name__}")
+    key = "machine"
+    try:
+        kw: dict[str, Any] = {}
+        for key in ("machine", "source_format"):
+            if key in doc:
+                kw[key] = str(doc[key])
+        key = "cycle_time_s"
+        if key in doc:
+            kw[key] = float(doc[key])
+        key = "axis_map"
+        kw[key] = {int(k): str(v) for k, v in (doc.get(key) or {}).items()}
+        key = "units"
+        kw[key] = {str(k): str(v) for k, v in (doc.get(key) or {}).items()}
+        key = "source_files"
+        kw[key] = [str(s) for s in doc.get(key) or []]
+        key = "time_anchors"
+        kw[key] = [(int(c), _anchor_time(t)) for c, t in doc.get(key) or []]
+        key = "gaps"
+        kw[key] = [CounterGap(int(a), int(b)) for a, b in doc.get(key) or []]
+        key = "wraps"
+        kw[key] = int(doc.get(key) or 0)
+        key = "issues"
+        kw[key] = [str(s) for s in doc.get(key) or []]
+        key = "partial"
+        kw[key] = bool(doc.get(key) or False)
+        key = "attrs"
+        kw[key] = dict(doc.get(key) or {})
+    except (TypeError, ValueError, AttributeError) as exc:
+        raise ConfigError(f"recording metadata: {key!r} has the wrong form ({exc}); "
+                          "expected what meta_to_dict writes") from exc
+    return RecordingMeta(**kw)
+
+
+def meta_to_json(meta: RecordingMeta) -> str:
+    """:func:`meta_to_dict` as JSON text (the one encoding of :class:`RecordingMeta`).
+
+    Parameters
+    ----------
+    meta : RecordingMeta
+        The metadata.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> m = RecordingMeta(machine="DMC", axis_map={1: "X1"})
+    >>> meta_from_json(meta_to_json(m)) == m
+    True
+    """
+    return json.dumps(meta_to_dict(meta))
+
+
+def meta_from_json(text: str | bytes) -> RecordingMeta:
+    """Inverse of :func:`meta_to_json`.
+
+    Parameters
+    ----------
+    text : str or bytes
+        JSON text.
+
+    Returns
+    -------
+    RecordingMeta
+
+    Raises
+    ------
+    ConfigError
+        If the text is not JSON or not the metadata's form.
+    """
+    try:
+        doc = json.loads(text)
+    except ValueError as exc:
+        raise ConfigError(f"recording metadata is not valid JSON: {exc}") from exc
+    return meta_from_dict(doc)
 
 
 def unwrap_cycles(

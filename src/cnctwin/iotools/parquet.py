@@ -28,38 +28,19 @@ import orjson
 import pandas as pd
 
 from cnctwin.exceptions import FormatError
-from cnctwin.recording import CounterGap, ExternalChannel, Recording, RecordingMeta
+from cnctwin.recording import (
+    ExternalChannel,
+    Recording,
+    RecordingMeta,
+    meta_from_json,
+    meta_to_json,
+)
 
-__all__ = ["meta_from_json", "meta_to_json", "read_parquet", "write_parquet"]
+__all__ = ["read_parquet", "write_parquet"]
 
 _META_KEY = b"cnctwin.meta"
 _CHANNEL_KEY = b"cnctwin.channel"
 _UNIT_KEY = b"unit"
-
-
-def meta_to_json(meta: RecordingMeta) -> bytes:
-    """Serialize :class:`RecordingMeta` to JSON (anchors as ISO strings, gaps as pairs).
-
-    Values in ``attrs`` that JSON cannot hold are written as their ``str()``.
-    """
-    d = dataclasses.asdict(meta)
-    d["axis_map"] = {str(k): v for k, v in meta.axis_map.items()}
-    d["time_anchors"] = [[int(c), pd.Timestamp(t).isoformat()] for c, t in meta.time_anchors]
-    d["gaps"] = [[g.after_cycle, g.before_cycle] for g in meta.gaps]
-    return orjson.dumps(
-        d, default=str, option=orjson.OPT_SERIALIZE_NUMPY | orjson.OPT_NON_STR_KEYS
-    )
-
-
-def meta_from_json(data: bytes | str) -> RecordingMeta:
-    """Inverse of :func:`meta_to_json`."""
-    d: dict[str, Any] = orjson.loads(data)
-    fields = {f.name for f in dataclasses.fields(RecordingMeta)}
-    kw = {k: v for k, v in d.items() if k in fields}
-    kw["axis_map"] = {int(k): v for k, v in (d.get("axis_map") or {}).items()}
-    kw["time_anchors"] = [(int(c), pd.Timestamp(t)) for c, t in d.get("time_anchors") or []]
-    kw["gaps"] = [CounterGap(int(a), int(b)) for a, b in d.get("gaps") or []]
-    return RecordingMeta(**kw)
 
 
 def _with_units(table: Any, units: dict[str, str], extra: dict[bytes, bytes]) -> Any:
@@ -97,7 +78,7 @@ def write_parquet(rec: Recording, path: str | PathLike[str]) -> Path:
                           path=str(out))
     out.mkdir(parents=True, exist_ok=True)
     hf = pa.Table.from_pandas(rec.hf.reset_index(), preserve_index=False)
-    hf = _with_units(hf, rec.meta.units, {_META_KEY: meta_to_json(rec.meta)})
+    hf = _with_units(hf, rec.meta.units, {_META_KEY: meta_to_json(rec.meta).encode()})
     pq.write_table(hf, out / "hf.parquet")
     pq.write_table(pa.Table.from_pandas(rec.lf, preserve_index=False), out / "lf.parquet")
     pq.write_table(pa.Table.from_pandas(rec.events, preserve_index=False),

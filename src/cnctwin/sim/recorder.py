@@ -31,6 +31,8 @@ from cnctwin.recording import (
     RecordingMeta,
     cycles_to_time,
     find_gaps,
+    meta_from_dict,
+    meta_to_dict,
 )
 
 __all__ = [
@@ -309,13 +311,8 @@ class ParquetChunkSink:
         doc = {
             "format": "cnctwin.sim chunks",
             "format_version": _CHUNK_FORMAT_VERSION,
-            "machine": meta.machine,
-            "cycle_time_s": meta.cycle_time_s,
-            "axis_map": {str(k): v for k, v in meta.axis_map.items()},
-            "source_format": meta.source_format,
-            "time_anchors": [[int(c), pd.Timestamp(t).isoformat()] for c, t in meta.time_anchors],
-            "gaps": self._gaps,
-            "attrs": _jsonable(meta.attrs),
+            **meta_to_dict(meta),
+            "gaps": [list(g) for g in self._gaps],
             "hf_files": [p.name for p in self.files],
             "hf_time_column": False,
             "float32_columns": sorted(self._f32),
@@ -380,18 +377,6 @@ def _write_frame(frame: pd.DataFrame, path: Path, compression: str) -> None:
                    compression=compression)
 
 
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, str | int | float | bool) or obj is None:
-        return obj
-    return str(obj)
-
-
 def read_parquet_chunks(directory: str | Path) -> Recording:
     """Read a :class:`ParquetChunkSink` directory back into one :class:`Recording`.
 
@@ -400,8 +385,6 @@ def read_parquet_chunks(directory: str | Path) -> Recording:
     ConfigError
         If ``meta.json`` is missing (not a simulator output directory).
     """
-    from cnctwin.recording import CounterGap
-
     d = Path(directory)
     meta_path = d / "meta.json"
     if not meta_path.exists():
@@ -413,20 +396,12 @@ def read_parquet_chunks(directory: str | Path) -> Recording:
     f32 = [c for c in doc.get("float32_columns", []) if c in hf.columns]
     if f32:
         hf[f32] = hf[f32].astype(np.float64)
-    anchors = [(int(c), pd.Timestamp(t)) for c, t in doc["time_anchors"]]
+    meta = meta_from_dict(doc)
+    meta.source_files = [str(d / n) for n in doc["hf_files"]]
+    anchors = meta.time_anchors
     if "time" not in hf.columns:  # format 2: time from the counter, as the simulator did
         hf.insert(0, "time", cycles_to_time(hf.index.to_numpy(), anchors,
                                             cycle_time_s=doc["cycle_time_s"]))
-    meta = RecordingMeta(
-        machine=doc["machine"],
-        cycle_time_s=doc["cycle_time_s"],
-        axis_map={int(k): v for k, v in doc["axis_map"].items()},
-        source_files=[str(d / n) for n in doc["hf_files"]],
-        source_format=doc["source_format"],
-        time_anchors=anchors,
-        gaps=[CounterGap(int(a), int(b)) for a, b in doc["gaps"]],
-        attrs=doc["attrs"],
-    )
     lf = pd.read_parquet(d / "lf.parquet") if (d / "lf.parquet").exists() else None
     if lf is not None and "text" in lf.columns:  # missing text is None, as in memory
         text = lf["text"].astype(object)

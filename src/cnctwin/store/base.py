@@ -33,10 +33,10 @@ from cnctwin.exceptions import ConfigError, SignalNotFoundError
 from cnctwin.recording import (
     EVENT_COLUMNS,
     LF_COLUMNS,
-    CounterGap,
     ExternalChannel,
     Recording,
-    RecordingMeta,
+    jsonable,
+    meta_to_json,
 )
 from cnctwin.signals import parse_column
 
@@ -51,8 +51,6 @@ __all__ = [
     "external_meta",
     "hole_rows",
     "holes_frame",
-    "meta_from_json",
-    "meta_to_json",
     "normalize_events",
     "normalize_lf",
     "resolve_columns",
@@ -155,60 +153,6 @@ def default_recording_id(rec: Recording) -> str:
 
 
 # ---------------------------------------------------------------------------- meta <-> JSON
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, pd.Timestamp):
-        return value.isoformat()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    return str(value)
-
-
-def meta_to_json(meta: RecordingMeta) -> str:
-    """:class:`RecordingMeta` as a JSON object (time anchors as ``[cycle, ns since epoch]``).
-
-    ``attrs`` values that JSON cannot hold are stored as their ``str()`` (numpy scalars and
-    arrays as numbers/lists, timestamps as ISO text).
-    """
-    doc = {
-        "machine": meta.machine,
-        "cycle_time_s": meta.cycle_time_s,
-        "axis_map": {str(k): v for k, v in meta.axis_map.items()},
-        "units": meta.units,
-        "source_files": [str(s) for s in meta.source_files],
-        "source_format": meta.source_format,
-        "time_anchors": [[int(c), int(pd.Timestamp(t).value)] for c, t in meta.time_anchors],
-        "gaps": [[g.after_cycle, g.before_cycle] for g in meta.gaps],
-        "wraps": meta.wraps,
-        "issues": list(meta.issues),
-        "partial": meta.partial,
-        "attrs": meta.attrs,
-    }
-    return json.dumps(doc, default=_jsonable)
-
-
-def meta_from_json(text: str) -> RecordingMeta:
-    """Inverse of :func:`meta_to_json`."""
-    doc = json.loads(text)
-    return RecordingMeta(
-        machine=doc["machine"],
-        cycle_time_s=float(doc["cycle_time_s"]),
-        axis_map={int(k): v for k, v in doc["axis_map"].items()},
-        units=dict(doc["units"]),
-        source_files=list(doc["source_files"]),
-        source_format=doc["source_format"],
-        time_anchors=[
-            (int(c), pd.Timestamp(int(ns), unit="ns", tz="UTC")) for c, ns in doc["time_anchors"]
-        ],
-        gaps=[CounterGap(int(a), int(b)) for a, b in doc["gaps"]],
-        wraps=int(doc["wraps"]),
-        issues=list(doc["issues"]),
-        partial=bool(doc["partial"]),
-        attrs=dict(doc["attrs"]),
-    )
-
-
 def catalog_row(rec: Recording, recording_id: str) -> dict[str, Any]:
     """The catalog entry (:data:`CATALOG_COLUMNS`) of ``rec``."""
     n = rec.n_cycles
@@ -493,7 +437,7 @@ def hole_rows(holes: pd.DataFrame | Sequence[dict[str, Any]]) -> list[dict[str, 
         t = row["start_time"]
         row["start_ns"] = int(t.value) if t is not None else None
         row["start_time"] = t.floor("us").to_pydatetime() if t is not None else None
-        row["extra"] = json.dumps({c: rec[c] for c in extra_cols}, default=_jsonable)
+        row["extra"] = json.dumps({c: rec[c] for c in extra_cols}, default=jsonable)
         out.append(row)
     return out
 

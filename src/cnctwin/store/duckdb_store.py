@@ -45,7 +45,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from cnctwin.exceptions import StoreError
-from cnctwin.recording import ExternalChannel, Recording
+from cnctwin.recording import ExternalChannel, Recording, meta_from_json
 from cnctwin.store.base import (
     CATALOG_COLUMNS,
     HOLE_TABLE_COLUMNS,
@@ -57,7 +57,6 @@ from cnctwin.store.base import (
     external_meta,
     hole_rows,
     holes_frame,
-    meta_from_json,
     normalize_events,
     normalize_lf,
     to_utc,

@@ -54,7 +54,7 @@ import pyarrow.parquet as pq
 from psycopg import sql as psql
 
 from cnctwin.exceptions import ConfigError, StoreError
-from cnctwin.recording import ExternalChannel, Recording
+from cnctwin.recording import ExternalChannel, Recording, meta_from_json
 from cnctwin.store.base import (
     CATALOG_COLUMNS,
     HOLE_TABLE_COLUMNS,
@@ -67,7 +67,6 @@ from cnctwin.store.base import (
     external_meta,
     hole_rows,
     holes_frame,
-    meta_from_json,
     normalize_events,
     normalize_lf,
     time_runs,

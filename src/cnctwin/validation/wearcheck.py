@@ -20,7 +20,7 @@ import pandas as pd
 from numpy.typing import ArrayLike
 
 from cnctwin.exceptions import ConfigError
-from cnctwin.recording import Recording, RecordingMeta, cycles_to_time
+from cnctwin.recording import Recording, RecordingMeta, cycles_to_time, meta_from_dict
 from cnctwin.usecases.holes import hole_record
 from cnctwin.usecases.wear import (
     WearEstimator,
@@ -259,7 +259,7 @@ def hole_record_chunked(
                           "simulator's ParquetChunkSink (tool_wear_run(out, fmt='parquet'))")
     doc = json.loads((directory / "meta.json").read_text(encoding="utf-8"))
     files: list[str] = doc["hf_files"]
-    anchors = [(int(c), pd.Timestamp(t)) for c, t in doc["time_anchors"]]
+    anchors = meta_from_dict(doc).time_anchors
     origin = anchors[0][1]
     events = pd.read_parquet(directory / "events.parquet") if (
         directory / "events.parquet").exists() else None

@@ -157,7 +157,7 @@ def _entry_from_recording(entry_id: str, kind: str, label: str, rec: Recording,
 
 
 def _entry_from_catalog(row: pd.Series) -> Entry:
-    from cnctwin.store.base import meta_from_json
+    from cnctwin.recording import meta_from_json
 
     meta: RecordingMeta = meta_from_json(str(row["meta"]))
     n = int(row["n_cycles"])
