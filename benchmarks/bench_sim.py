@@ -47,14 +47,15 @@ from pathlib import Path
 from typing import Any
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the frozen kernels: tests/sim
 
 import numpy as np
+from tests.sim.reference_kernels import servo_kernel_reference, spindle_kernel_reference
 
 import cnctwin.sim.servo as servo_mod
 import cnctwin.sim.simulation as sim_mod
 import cnctwin.sim.spindle as spindle_mod
 from _common import cpu_model, export_rev, pin_one_core, replace_section
-from cnctwin.sim._reference import servo_kernel_reference, spindle_kernel_reference
 from cnctwin.sim.cutting import drilling_load
 from cnctwin.sim.machine import Machine
 from cnctwin.sim.recorder import ParquetChunkSink, RecordedChunk

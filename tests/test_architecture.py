@@ -117,3 +117,15 @@ def test_the_edge_runtime_does_not_load_matplotlib() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == "False"
+
+
+def test_no_frozen_or_hand_written_copies_in_the_package() -> None:
+    """Issue 16, point 6: the frozen reference kernels live in tests/, the classifiers come
+    from scikit-learn (no hand-written logistic regression in the installed package)."""
+    import cnctwin
+
+    root = Path(cnctwin.__file__).parent
+    assert not list(root.rglob("*reference*.py"))
+    hits = [p.name for p in root.rglob("*.py")
+            if "def logistic_fit" in p.read_text(encoding="utf-8")]
+    assert hits == []

@@ -1,6 +1,7 @@
 """The optimised servo and spindle kernels against the pre-optimisation reference kernels.
 
-:mod:`cnctwin.sim._reference` keeps the kernels as they were before the speed work (issue #3).
+``tests/sim/reference_kernels.py`` keeps the kernels as they were before the speed work
+(issue #3), outside the installed package.
 The servo kernel skips cycles of settled axes (a bitwise fixed point of its state), which must
 not change a single bit of the output (``np.rint`` instead of ``round`` for the encoder gives the
 same bits). The spindle kernel extrapolates the friction torque with a quadratic Taylor model
@@ -16,10 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from cnctwin.sim._reference import servo_kernel_reference, spindle_kernel_reference
 from cnctwin.sim.machine import Machine
 from cnctwin.sim.servo import _N_OUT, ServoState, _servo_kernel, servo_parameters
 from cnctwin.sim.spindle import _TRACE_FIELDS, SpindleState, _kernel, _param_vector
+from tests.sim.reference_kernels import servo_kernel_reference, spindle_kernel_reference
 
 TC = 0.002
 

@@ -19,7 +19,6 @@ from cnctwin.recording import Recording
 from cnctwin.usecases.umich import (
     feature_table,
     loeo_classification,
-    logistic_fit,
     unfinished_backtest,
 )
 
@@ -52,12 +51,6 @@ def test_features_match_raw_csv(table: pd.DataFrame) -> None:
     assert list(table["n_rows"]) == [991, 210, 726, 123, 27, 853, 159, 259, 388, 410, 1355,
                                      1557, 523, 72]
     assert int(table["worn"].sum()) == 8 and len(table) == 14
-
-
-def test_logistic_fit_separable_direction() -> None:
-    x = np.array([[-2.0], [-1.0], [1.0], [2.0]])
-    w, b = logistic_fit(x, np.array([0.0, 0.0, 1.0, 1.0]), alpha=0.1)
-    assert w[0] > 0 and abs(b) < 1e-9
 
 
 def test_loeo_is_no_better_than_the_baseline(table: pd.DataFrame) -> None:

@@ -28,7 +28,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from numpy.typing import NDArray
 
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import Recording
@@ -40,7 +39,6 @@ __all__ = [
     "cutting_rows",
     "feature_table",
     "loeo_classification",
-    "logistic_fit",
     "unfinished_backtest",
 ]
 
@@ -111,31 +109,6 @@ def feature_table(recordings: Sequence[Recording]) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def logistic_fit(
-    x: NDArray[np.float64], y: NDArray[np.float64], *, alpha: float = 1.0, n_iter: int = 50
-) -> tuple[NDArray[np.float64], float]:
-    """L2-penalized logistic regression by Newton's method (IRLS); returns (weights, bias).
-
-    The bias is not penalized. ``P(y=1) = 1 / (1 + exp(-(x @ w + b)))``.
-    """
-    n, p = x.shape
-    a = np.column_stack([x, np.ones(n)])
-    beta = np.zeros(p + 1)
-    pen = alpha * np.eye(p + 1)
-    pen[-1, -1] = 0.0
-    for _ in range(n_iter):
-        z = a @ beta
-        mu = 1.0 / (1.0 + np.exp(-z))
-        w = np.maximum(mu * (1 - mu), 1e-9)
-        grad = a.T @ (mu - y) + pen @ beta
-        hess = a.T @ (a * w[:, None]) + pen
-        step = np.linalg.solve(hess, grad)
-        beta -= step
-        if np.max(np.abs(step)) < 1e-10:
-            break
-    return beta[:-1], float(beta[-1])
-
-
 @dataclass(frozen=True)
 class LoeoClassification:
     """Leave-one-experiment-out worn/unworn classification.
@@ -162,11 +135,6 @@ class LoeoClassification:
     features: list[str]
 
 
-def _balanced(y: NDArray[np.bool_], p: NDArray[np.bool_]) -> float:
-    rec = [float(np.mean(p[y == c] == c)) for c in (True, False) if (y == c).any()]
-    return float(np.mean(rec))
-
-
 def loeo_classification(
     table: pd.DataFrame,
     *,
@@ -184,7 +152,7 @@ def loeo_classification(
     features : sequence of str
         Feature columns.
     classifier : {'logistic', 'centroid'}
-        L2 logistic regression (:func:`logistic_fit`) or nearest centroid, both on features
+        L2 logistic regression or nearest centroid (scikit-learn), both on features
         standardized with the training fold's mean and standard deviation.
     normalize_feed : bool, default True
         Replace each feature by its residual from a line over ``feedrate`` fitted on the
@@ -199,6 +167,14 @@ def loeo_classification(
     """
     if classifier not in ("logistic", "centroid"):
         raise ConfigError(f"classifier must be 'logistic' or 'centroid', not {classifier!r}")
+    try:
+        from sklearn.linear_model import LogisticRegression
+        from sklearn.neighbors import NearestCentroid
+        from sklearn.pipeline import make_pipeline
+        from sklearn.preprocessing import StandardScaler
+    except ImportError as exc:  # pragma: no cover - the 'learn' extra is part of 'all'
+        raise ConfigError("the worn/unworn classification needs scikit-learn: "
+                          "pip install 'cnctwin[learn]'") from exc
     x_all = table[list(features)].to_numpy(dtype=np.float64)
     y_all = table["worn"].to_numpy(dtype=bool)
     f_all = table["feedrate"].to_numpy(dtype=np.float64)
@@ -211,30 +187,30 @@ def loeo_classification(
                 c = np.polyfit(f_all[tr], xtr[:, j], 1)
                 xtr[:, j] -= np.polyval(c, f_all[tr])
                 xte[:, j] -= np.polyval(c, f_all[k : k + 1])
-        mu = xtr.mean(axis=0)
-        sd = xtr.std(axis=0)
-        sd = np.where(sd > 0, sd, 1.0)
-        xtr = (xtr - mu) / sd
-        xte = (xte - mu) / sd
         ytr = y_all[tr]
         p_worn = math.nan
         if classifier == "logistic":
-            w, b = logistic_fit(xtr, ytr.astype(np.float64), alpha=alpha)
-            p_worn = float(1.0 / (1.0 + math.exp(-float(xte[0] @ w + b))))
+            # scikit-learn minimizes C * sum(log-loss) + |w|^2 / 2 with the intercept not
+            # penalized: C = 1 / alpha is the L2 penalty alpha * |w|^2 / 2 on the log-loss
+            model = make_pipeline(StandardScaler(), LogisticRegression(C=1.0 / alpha))
+            model.fit(xtr, ytr)
+            p_worn = float(model.predict_proba(xte)[0, list(model.classes_).index(True)])
             pred = p_worn >= 0.5
         else:
-            c1 = xtr[ytr].mean(axis=0)
-            c0 = xtr[~ytr].mean(axis=0)
-            pred = bool(np.sum((xte[0] - c1) ** 2) < np.sum((xte[0] - c0) ** 2))
+            model = make_pipeline(StandardScaler(), NearestCentroid())
+            pred = bool(model.fit(xtr, ytr).predict(xte)[0])
         base = bool(ytr.mean() > 0.5)
         rows.append({"experiment": table["experiment"].iloc[k], "worn": bool(y_all[k]),
                      "predicted": bool(pred), "p_worn": p_worn, "baseline": base})
+    from sklearn.metrics import balanced_accuracy_score
+
     per = pd.DataFrame(rows)
     y = per["worn"].to_numpy(dtype=bool)
     p = per["predicted"].to_numpy(dtype=bool)
     bl = per["baseline"].to_numpy(dtype=bool)
     return LoeoClassification(
-        per, float(np.mean(p == y)), _balanced(y, p), float(np.mean(bl == y)), _balanced(y, bl),
+        per, float(np.mean(p == y)), float(balanced_accuracy_score(y, p)),
+        float(np.mean(bl == y)), float(balanced_accuracy_score(y, bl)),
         classifier, list(features),
     )
 

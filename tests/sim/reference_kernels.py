@@ -10,7 +10,7 @@ The position-control setpoint of the spindle (SPOS move to the nearest turn, fin
 interpolation over the cycle) is a physics correction of session 2 made after the speed work;
 both kernels call the same :func:`cnctwin.sim.spindle._position_setpoint` for it.
 
-Not part of the public API; do not use in new code.
+Kept in ``tests/`` so that the installed package carries only the kernels it runs (issue 16).
 """
 
 from __future__ import annotations
