@@ -70,7 +70,7 @@ def test_empty_file(tmp_path: Path) -> None:
     """An empty file used to escape as pandas' EmptyDataError."""
     p = tmp_path / "wear.csv"
     p.write_text("", encoding="utf-8")
-    with pytest.raises(FormatError, match="cannot read") as info:
+    with pytest.raises(FormatError, match="empty file") as info:
         read_vicomtech(p)
     assert info.value.path == str(p)
 

@@ -28,8 +28,6 @@ time comes from a time channel or from the waveform properties ``wf_increment`` 
 
 from __future__ import annotations
 
-import csv
-import io
 import re
 import warnings
 from os import PathLike
@@ -39,6 +37,7 @@ import numpy as np
 import pandas as pd
 
 from cnctwin.exceptions import CnctwinWarning, ConfigError, FormatError
+from cnctwin.iotools._csvtable import header_delimiter, read_csv_table
 from cnctwin.iotools._text import read_utf8_text
 from cnctwin.recording import ExternalChannel, Recording
 
@@ -126,20 +125,6 @@ def _classify(header: str, *, path: str) -> tuple[str, float] | None:
     return None
 
 
-def _sniff(text: str) -> tuple[str, str]:
-    """Delimiter and decimal mark of a small CSV sample."""
-    first = text.splitlines()[0] if text else ""
-    delim = max((";", ",", "\t"), key=first.count)
-    if first.count(delim) == 0:
-        delim = ","
-    decimal = "."
-    if delim == ";":
-        body = "\n".join(text.splitlines()[1:5])
-        if re.search(r"\d,\d", body):
-            decimal = ","
-    return delim, decimal
-
-
 def read_dynamometer_csv(
     path: str | PathLike[str],
     *,
@@ -175,12 +160,10 @@ def read_dynamometer_csv(
     p = Path(path)
     spath = str(p)
     text = read_utf8_text(p)
-    delim, decimal = _sniff(text)
-    reader = csv.reader(io.StringIO(text), delimiter=delim)
-    try:
-        header = next(reader)
-    except StopIteration:
-        raise FormatError("empty file", path=spath) from None
+    if not text.strip():
+        raise FormatError("empty file", path=spath)
+    table = read_csv_table(text, path=spath, delimiter=header_delimiter(text.splitlines()[0]))
+    header = table.header
     kinds: list[tuple[str, float] | None] = [_classify(h, path=spath) for h in header]
     canon = [k[0] for k in kinds if k is not None]
     if not any(c in DYNAMOMETER_COLUMNS or c in _UNKNOWN for c in canon):
@@ -193,35 +176,19 @@ def read_dynamometer_csv(
     if dup:
         raise FormatError(f"columns map twice onto {sorted(dup)}", path=spath,
                           position="line 1")
-    rows: list[list[float]] = []
-    for row in reader:
-        line = reader.line_num
-        if not row or all(not c.strip() for c in row):
-            continue
-        if len(row) != len(header):
-            raise FormatError(f"row has {len(row)} fields, the header {len(header)}",
-                              path=spath, position=f"line {line}")
-        vals: list[float] = []
-        for h, cell in zip(header, row, strict=True):
-            c = cell.strip()
-            if decimal == ",":
-                c = c.replace(",", ".")
-            try:
-                vals.append(float(c) if c else np.nan)
-            except ValueError:
-                raise FormatError(f"value {cell!r} is not a number", path=spath,
-                                  position=f"line {line}", field=h) from None
-        rows.append(vals)
-    arr = np.asarray(rows, dtype=np.float64).reshape(len(rows), len(header))
+    # a decimal comma only where ';' separates the fields (German locale exports)
+    decimal_comma = table.header and header_delimiter(text.splitlines()[0]) == ";" and (
+        table.has_decimal_comma())
     cols: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
     for j, (h, k) in enumerate(zip(header, kinds, strict=True)):
+        values = table.numbers(j, decimal_comma=bool(decimal_comma))
         if k is None:
             key = _normalise(h.lower()) or f"col{j}"
-            cols[key] = arr[:, j]
+            cols[key] = values
             units[key] = ""
         else:
-            cols[k[0]] = arr[:, j] * k[1]
+            cols[k[0]] = values * k[1]
             if k[0] != "time_s":
                 units[k[0]] = DYNAMOMETER_COLUMNS.get(k[0], "unknown")
     return _channel(cols, units, fs_hz=fs_hz, name=name, source=spath)

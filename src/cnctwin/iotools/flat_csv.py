@@ -33,7 +33,6 @@ Cells and events, so that a trial reads like the Capture4Analysis recording it c
 
 from __future__ import annotations
 
-import csv
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -43,6 +42,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from cnctwin.exceptions import FormatError
+from cnctwin.iotools._csvtable import CsvTable, read_csv_table
 from cnctwin.recording import (
     CYCLE_COUNTER_MODULUS,
     EVENT_COLUMNS,
@@ -101,54 +101,16 @@ def flat_csv_paths(path: str | PathLike[str]) -> dict[str, Path]:
     return {s[1:-4]: Path(stem + s) for s in FLAT_CSV_SUFFIXES}
 
 
-def _read_rows(path: Path, *, salvage: bool, issues: list[str]) -> tuple[list[str], list[
-        tuple[int, list[str]]], bool]:
-    """Header and (line number, row) pairs; rows of the wrong length raise or are dropped."""
-    with path.open(newline="", encoding="utf-8-sig") as fh:
-        reader = csv.reader(fh)
-        try:
-            header = next(reader)
-        except StopIteration:
-            raise FormatError("empty file", path=str(path)) from None
-        header = [h.strip() for h in header]
-        rows: list[tuple[int, list[str]]] = []
-        bad: list[int] = []
-        for row in reader:
-            line = reader.line_num
-            if not row:
-                continue
-            if len(row) != len(header):
-                if not salvage:
-                    raise FormatError(
-                        f"row has {len(row)} fields, the header has {len(header)} (pass "
-                        "salvage=True to keep the good rows)", path=str(path),
-                        position=f"line {line}",
-                    )
-                bad.append(line)
-                continue
-            rows.append((line, row))
+def _read_rows(path: Path, *, salvage: bool, issues: list[str]) -> tuple[CsvTable, bool]:
+    """The file's cells; rows of the wrong length raise or, with ``salvage``, are dropped."""
+    table = read_csv_table(path, path=str(path), salvage=salvage, encoding="utf-8",
+                           hint="pass salvage=True to keep the good rows")
+    bad = table.dropped_lines
     if bad:
         shown = ", ".join(map(str, bad[:10])) + (" ..." if len(bad) > 10 else "")
         issues.append(f"{path.name}: {len(bad)} row(s) of the wrong length dropped (lines "
                       f"{shown})")
-    return header, rows, bool(bad)
-
-
-def _to_float(rows: list[tuple[int, list[str]]], header: list[str], path: Path,
-              cols: list[int]) -> np.ndarray:
-    out = np.empty((len(rows), len(cols)), dtype=np.float64)
-    for i, (line, row) in enumerate(rows):
-        for j, c in enumerate(cols):
-            cell = row[c].strip()
-            if cell == "":
-                out[i, j] = np.nan
-                continue
-            try:
-                out[i, j] = float(cell)
-            except ValueError:
-                raise FormatError(f"value {cell!r} is not a number", path=str(path),
-                                  position=f"line {line}", field=header[c]) from None
-    return out
+    return table, bool(bad)
 
 
 def _read_header(path: Path, issues: list[str]) -> tuple[dict[int, str], dict[str, str],
@@ -156,13 +118,13 @@ def _read_header(path: Path, issues: list[str]) -> tuple[dict[int, str], dict[st
     """Axis map and long name -> address from ``_header.csv``."""
     axis_map: dict[int, str] = {}
     name_to_addr: dict[str, str] = {}
-    with path.open(newline="", encoding="utf-8-sig") as fh:
-        reader = csv.DictReader(fh)
-        fields = [f.strip() for f in (reader.fieldnames or [])]
-        if "Address" not in fields:
-            raise FormatError(f"header file needs an 'Address' column, found {fields}",
-                              path=str(path), position="line 1", field="Address")
-        entries = [{(k or "").strip(): (v or "").strip() for k, v in r.items()} for r in reader]
+    table = read_csv_table(path, path=str(path))
+    fields = table.header
+    if "Address" not in fields:
+        raise FormatError(f"header file needs an 'Address' column, found {fields}",
+                          path=str(path), position="line 1", field="Address")
+    cells = [[v.strip() for v in table.text(j)] for j in range(len(fields))]
+    entries = [{h: cells[j][k] for j, h in enumerate(fields)} for k in range(table.n_rows)]
     empty_axis = 0
     for e in entries:
         addr = e.get("Address", "")
@@ -198,52 +160,50 @@ def _events(path: Path, kind: str, colmap: dict[str, str], *, salvage: bool,
     Number cells are stripped; text cells (``GCode``, ``IpoGC``, ``Path``) are kept verbatim
     (G-code may end in blanks: ``"D0"`` + 15 blanks in the real recording).
     """
-    header, rows, partial = _read_rows(path, salvage=salvage, issues=issues)
+    table, partial = _read_rows(path, salvage=salvage, issues=issues)
+    header = table.header
     if "HFProbeCounter" not in header:
         raise FormatError("event file needs an 'HFProbeCounter' column", path=str(path),
                           position="line 1", field="HFProbeCounter")
     idx = {h: i for i, h in enumerate(header)}
     unknown = [h for h in header if h not in colmap]
     columns = (*EVENT_COLUMNS, *_EXTRA_EVENT_COLS, *unknown)
-    data: dict[str, list[Any]] = {c: [] for c in columns}
-    for line, row in rows:
-        rec: dict[str, Any] = dict.fromkeys(columns)
-        rec["kind"] = kind
-        for src, dst in colmap.items():
-            if src not in idx:
-                continue
-            raw = row[idx[src]]
-            if dst == "cycle" or dst in _INT_EVENT_COLS:
-                cell = raw.strip()
-                if cell in _NULL_CELLS:
-                    if dst == "cycle":
-                        raise FormatError("empty HFProbeCounter", path=str(path),
-                                          position=f"line {line}", field=src)
-                    continue
-                try:
-                    rec[dst] = int(float(cell))
-                except ValueError:
-                    raise FormatError(f"value {cell!r} is not an integer", path=str(path),
-                                      position=f"line {line}", field=src) from None
+    n = table.n_rows
+    frame: dict[str, Any] = {}
+    for src, dst in colmap.items():
+        if src not in idx:
+            continue
+        if dst == "cycle" or dst in _INT_EVENT_COLS:
+            values = table.numbers(idx[src], missing=_NULL_CELLS)
+            nan = np.isnan(values)
+            if dst == "cycle":
+                if nan.any():
+                    raise FormatError("empty HFProbeCounter", path=str(path),
+                                      position=f"line {int(table.lines[np.argmax(nan)])}",
+                                      field=src)
+                frame[dst] = _unwrap_near(values.astype(np.int64), ref_cycle)
             else:
-                rec[dst] = None if raw in _NULL_CELLS else raw
-        for h in unknown:
-            raw = row[idx[h]]
-            rec[h] = None if raw in _NULL_CELLS else raw
-        for c in columns:
-            data[c].append(rec[c])
+                ints = pd.array(np.where(nan, 0, values).astype(np.int64), dtype="Int64")
+                ints[nan] = pd.NA
+                frame[dst] = ints
+        else:
+            frame[dst] = _text_cells(table, idx[src])
+    for h in unknown:
+        frame[h] = _text_cells(table, idx[h])
     if unknown:
         issues.append(f"{path.name}: columns not in the event schema kept as extra (text) "
                       f"columns: {', '.join(unknown)}")
-    frame: dict[str, Any] = {}
     for c in columns:
-        if c == "cycle":
-            frame[c] = _unwrap_near(np.asarray(data[c], dtype=np.int64), ref_cycle)
-        elif c in _INT_EVENT_COLS:
-            frame[c] = pd.array(data[c], dtype="Int64")
-        else:
-            frame[c] = pd.Series(data[c], dtype="object")
-    return pd.DataFrame(frame), partial
+        if c not in frame:
+            frame[c] = (pd.array([pd.NA] * n, dtype="Int64") if c in _INT_EVENT_COLS
+                        else pd.Series([None] * n, dtype="object"))
+    frame["kind"] = pd.Series([kind] * n, dtype="object")
+    return pd.DataFrame({c: frame[c] for c in columns}), partial
+
+
+def _text_cells(table: CsvTable, j: int) -> pd.Series:
+    """Text cells verbatim, a missing value (:data:`_NULL_CELLS`) as None."""
+    return pd.Series([None if v in _NULL_CELLS else v for v in table.text(j)], dtype="object")
 
 
 def _sorted_unique(hf: pd.DataFrame, lines: NDArray[np.int64], name: str, issues: list[str]
@@ -345,7 +305,8 @@ def read_flat_csv(
         issues.append(f"no {files['header'].name}: axis names from the default axis map "
                       f"{DEFAULT_AXIS_MAP}")
 
-    header, rows, partial = _read_rows(hfpath, salvage=salvage, issues=issues)
+    table, partial = _read_rows(hfpath, salvage=salvage, issues=issues)
+    header = table.header
     addresses = [name_to_addr.get(h, h) if "|" not in h else h for h in header]
     if "CYCLE" not in addresses:
         raise FormatError(f"no CYCLE column in {hfpath.name} (columns: {header[:5]} ...)",
@@ -354,9 +315,10 @@ def read_flat_csv(
     time_i = next((i for i, h in enumerate(header) if h.lower() in ("time", "timestamp")),
                   None)
     sig_idx = [i for i in range(len(header)) if i not in (ci, time_i)]
-    values = _to_float(rows, header, hfpath, [ci, *sig_idx])
+    values = np.column_stack([table.numbers(j) for j in (ci, *sig_idx)]) if table.n_rows else (
+        np.empty((0, 1 + len(sig_idx))))
     if np.isnan(values[:, 0]).any():
-        line = rows[int(np.flatnonzero(np.isnan(values[:, 0]))[0])][0]
+        line = int(table.lines[int(np.flatnonzero(np.isnan(values[:, 0]))[0])])
         raise FormatError("empty CYCLE value", path=str(hfpath), position=f"line {line}",
                           field="CYCLE")
     cycles, wraps = unwrap_cycles(values[:, 0].astype(np.int64))
@@ -384,12 +346,11 @@ def read_flat_csv(
         code, _, num = a.partition("|")
         names.append(f"{code}|{axis_map[int(num)]}" if num.isdigit() else a)
     hf = pd.DataFrame(values[:, 1:], columns=names, index=pd.Index(cycles, name="cycle"))
-    hf = _sorted_unique(hf, np.array([ln for ln, _ in rows], dtype=np.int64), hfpath.name,
-                        issues)
+    hf = _sorted_unique(hf, table.lines, hfpath.name, issues)
 
     anchors: list[tuple[int, pd.Timestamp]] = []
     if time_i is not None:
-        t = pd.to_datetime(pd.Series([r[time_i] for _, r in rows]), utc=True, errors="coerce")
+        t = pd.to_datetime(pd.Series(table.text(time_i)), utc=True, errors="coerce")
         ok = t.notna().to_numpy()
         if ok.any():
             j = int(np.flatnonzero(ok)[0])

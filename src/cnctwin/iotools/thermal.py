@@ -26,7 +26,6 @@ The index is ``time_s`` when the file has a time column; otherwise it is the hol
 from __future__ import annotations
 
 import csv
-import io
 import re
 from os import PathLike
 from pathlib import Path
@@ -35,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from cnctwin.exceptions import FormatError
+from cnctwin.iotools._csvtable import read_csv_table
 from cnctwin.iotools._text import read_utf8_text
 from cnctwin.recording import ExternalChannel
 
@@ -139,7 +139,7 @@ def read_thermal_camera_csv(
     delim = ","
     for i, line in enumerate(lines[:100]):
         d = max((";", ",", "\t"), key=line.count)
-        cells = next(csv.reader([line], delimiter=d)) if line.strip() else []
+        cells = next(csv.reader([line], delimiter=d)) if line.strip() else []  # header only
         kinds = [_classify(c) for c in cells]
         if len(cells) >= 2 and any(k is not None and k[0] == "temp" for k in kinds):
             header_line, delim = i, d
@@ -149,43 +149,29 @@ def read_thermal_camera_csv(
             "no header with a temperature column found in the first 100 lines; expected e.g. "
             "time_s,hole,temperature_c or FLIR columns like 'Sp1 [°C]'", path=spath,
         )
-    body = "\n".join(lines[header_line:])
-    decimal_comma = delim == ";" and bool(re.search(r"\d,\d", "\n".join(
-        lines[header_line + 1: header_line + 5])))
-    reader = csv.reader(io.StringIO(body), delimiter=delim)
-    header = [h.strip() for h in next(reader)]
-    rows: list[tuple[int, list[str]]] = []
-    for row in reader:
-        line_no = header_line + reader.line_num
-        if not row or all(not c.strip() for c in row):
-            continue
-        if len(row) != len(header):
-            raise FormatError(f"row has {len(row)} fields, the header {len(header)}",
-                              path=spath, position=f"line {line_no}")
-        rows.append((line_no, [c.strip() for c in row]))
-    if not rows:
+    table = read_csv_table(text, path=spath, delimiter=delim, header_line=header_line + 1)
+    if not table.n_rows:
         raise FormatError("no readings after the header", path=spath,
                           position=f"line {header_line + 1}")
+    decimal_comma = delim == ";" and table.has_decimal_comma()
+    header = table.header
     kinds = [_classify(h) for h in header]
     cols: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
     time_s: np.ndarray | None = None
     hole: np.ndarray | None = None
     temps: list[tuple[str, np.ndarray]] = []
-    first_line = rows[0][0]
+    first_line = int(table.lines[0])
     for j, (h, k) in enumerate(zip(header, kinds, strict=True)):
-        cells = [r[j].replace(",", ".") if decimal_comma else r[j] for _, r in rows]
         if k is not None and k[0] == "time":
+            cells = [c.strip() for c in table.text(j)]
+            if decimal_comma:
+                cells = [c.replace(",", ".") for c in cells]
             time_s = _parse_time(cells, spath, first_line, h) * float(k[1])
             continue
-        try:
-            vals = np.array([float(c) if c else np.nan for c in cells], dtype=np.float64)
-        except ValueError:
-            bad = next(i for i, c in enumerate(cells) if c and not _is_float(c))
-            if k is None:  # a text column (frame label, comment): keep as is
-                continue
-            raise FormatError(f"value {cells[bad]!r} is not a number", path=spath,
-                              position=f"line {rows[bad][0]}", field=h) from None
+        if k is None and not table.is_numeric(j, decimal_comma=decimal_comma):
+            continue  # a text column (frame label, comment): not a reading
+        vals = table.numbers(j, decimal_comma=decimal_comma)
         if k is None:
             key = _norm(h) or f"col{j}"
             cols[key] = vals
@@ -228,11 +214,3 @@ def read_thermal_camera_csv(
         index = pd.Index(hole, name="hole")
     data = pd.DataFrame(out, index=index)
     return ExternalChannel(name=name, data=data, units=out_units, fs_hz=None, source=spath)
-
-
-def _is_float(s: str) -> bool:
-    try:
-        float(s)
-    except ValueError:
-        return False
-    return True

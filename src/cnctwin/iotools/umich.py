@@ -43,7 +43,6 @@ column is 1.0 for valid and 0.0 for invalid rows, and the count is in ``meta.iss
 
 from __future__ import annotations
 
-import csv
 import re
 from os import PathLike
 from pathlib import Path
@@ -53,6 +52,7 @@ import numpy as np
 import pandas as pd
 
 from cnctwin.exceptions import FormatError
+from cnctwin.iotools._csvtable import read_csv_table
 from cnctwin.recording import EVENT_COLUMNS, Recording, RecordingMeta
 
 __all__ = [
@@ -96,6 +96,10 @@ _INVALID_X1_POSITION = 198.0
 _EXP_RE = re.compile(r"experiment_(\d+)", re.IGNORECASE)
 
 
+_MISSING = ("", "na", "NA", "Na", "nA")
+"""Cells read as a missing value (NaN); ``nan`` is NaN anyway."""
+
+
 def _yes_no(value: str, name: str) -> bool | None:
     """``yes``/``no`` (and y/n, true/false, 1/0) as a bool; an empty cell is ``None``."""
     v = value.strip().lower()
@@ -130,25 +134,15 @@ def read_umich_labels(path: str | PathLike[str]) -> dict[int, dict[str, Any]]:
     if not p.exists():
         raise FormatError("labels file not found", path=str(p))
     out: dict[int, dict[str, Any]] = {}
-    try:
-        with p.open(newline="", encoding="utf-8") as fh:
-            reader = csv.DictReader(fh)
-            needed = {"No", "tool_condition"}
-            if reader.fieldnames is None or not needed <= set(reader.fieldnames):
-                raise FormatError(
-                    f"header must contain {sorted(needed)}, found {reader.fieldnames}",
-                    path=str(p), position="line 1",
-                )
-            entries = [(reader.line_num, row) for row in reader]
-            n_fields = len(reader.fieldnames)
-    except UnicodeDecodeError as exc:
-        raise FormatError(f"not UTF-8 text ({exc})", path=str(p)) from None
+    table = read_csv_table(p, path=str(p))
+    needed = {"No", "tool_condition"}
+    if not needed <= set(table.header):
+        raise FormatError(f"header must contain {sorted(needed)}, found {table.header}",
+                          path=str(p), position="line 1")
+    cells = [table.text(j) for j in range(len(table.header))]
     first_line: dict[int, int] = {}
-    for line, row in entries:
-        if None in row or None in row.values():  # DictReader: extra fields / missing fields
-            got = n_fields + len(row.get(None) or []) - sum(v is None for v in row.values())
-            raise FormatError(f"row has {got} fields, the header {n_fields}", path=str(p),
-                              position=f"line {line}")
+    for k, line in enumerate(table.lines.tolist()):
+        row = {h: cells[j][k] for j, h in enumerate(table.header)}
         try:
             no = int(row["No"])
             labels: dict[str, Any] = {
@@ -205,41 +199,28 @@ def read_umich(
     if not p.exists():
         raise FormatError("file not found", path=spath)
     issues: list[str] = []
-    try:
-        with p.open(newline="", encoding="utf-8") as fh:
-            rows = list(csv.reader(fh))
-    except UnicodeDecodeError as exc:
-        raise FormatError(f"not UTF-8 text ({exc})", path=spath) from None
-    if not rows:
-        raise FormatError("empty file", path=spath)
-    header = rows[0]
-    for line, row in enumerate(rows[1:], start=2):
-        if len(row) != len(header):
-            if not row:
-                raise FormatError("empty line inside the data", path=spath,
-                                  position=f"line {line}")
-            raise FormatError(
-                f"row has {len(row)} fields, the header {len(header)}", path=spath,
-                position=f"line {line}",
-            )
-    raw = pd.DataFrame(rows[1:], columns=header, dtype=object)
-    first = raw.columns[0]
+    table = read_csv_table(p, path=spath)
+    if table.blank_lines:
+        raise FormatError("empty line inside the data", path=spath,
+                          position=f"line {table.blank_lines[0]}")
+    raw = {h: j for j, h in enumerate(table.header)}
+    first = table.header[0] if table.header else ""
     if first == "" or first.startswith("Unnamed"):
-        raw = raw.drop(columns=[first])
-    missing = [c for c in _REQUIRED if c not in raw.columns]
+        raw.pop(first)
+    missing = [c for c in _REQUIRED if c not in raw]
     if missing:
         raise FormatError(
             f"not a UMich CNC mill file: missing column(s) {missing}", path=spath,
             position="line 1", field=missing[0],
         )
-    n = len(raw)
+    n = table.n_rows
     data: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
     mapping: dict[str, str] = {}
-    for src in raw.columns:
+    for src, j in raw.items():
         if src in ("Machining_Process", "tool_condition"):
             continue
-        values = _numeric(raw[src], spath, src)
+        values = table.numbers(j, missing=_MISSING)
         prefix, _, suffix = src.partition("_")
         if src in _M1_MAP:
             name, unit = _M1_MAP[src]
@@ -279,7 +260,7 @@ def read_umich(
     cycles = np.arange(n, dtype=np.int64)
     hf = pd.DataFrame(data, index=pd.Index(cycles, name="cycle"))
 
-    phase = raw["Machining_Process"].astype(str).to_numpy()
+    phase = np.asarray(table.text(raw["Machining_Process"]), dtype=object)
     change = np.ones(n, dtype=bool)
     change[1:] = phase[1:] != phase[:-1]
     idx = np.flatnonzero(change)
@@ -295,8 +276,8 @@ def read_umich(
     m = _EXP_RE.search(p.stem)
     exp_no = int(m.group(1)) if m else None
     attrs["experiment"] = exp_no
-    if "tool_condition" in raw.columns:
-        conds = sorted(set(raw["tool_condition"].astype(str)))
+    if "tool_condition" in raw:
+        conds = sorted(set(table.text(raw["tool_condition"])))
         attrs["tool_condition_column"] = conds[0] if len(conds) == 1 else conds
     lab_path = Path(experiments_csv) if experiments_csv is not None else \
         p.parent / "experiments.csv"
@@ -321,21 +302,6 @@ def read_umich(
         attrs=attrs,
     )
     return Recording(hf, events=events, meta=meta)
-
-
-def _numeric(col: pd.Series, path: str, name: str) -> np.ndarray:
-    text = col.astype(str).str.strip()
-    values = pd.to_numeric(text.where(text != "", None), errors="coerce").to_numpy(
-        dtype=np.float64)
-    bad = np.isnan(values) & (text != "").to_numpy() & \
-        ~text.str.lower().isin(["nan", "na"]).to_numpy()
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise FormatError(
-            f"value {text.iloc[i]!r} is not a number", path=path,
-            position=f"line {i + 2}", field=name,
-        )
-    return values
 
 
 def read_umich_dataset(

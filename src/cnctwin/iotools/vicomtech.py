@@ -12,7 +12,6 @@ order, Vb is non-decreasing within every tool).
 
 from __future__ import annotations
 
-import csv
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -20,6 +19,7 @@ from typing import Any
 import pandas as pd
 
 from cnctwin.exceptions import FormatError
+from cnctwin.iotools._csvtable import read_csv_table
 
 __all__ = ["CNC_INTERNAL_SIGNALS", "DYNAMOMETER_SIGNALS", "read_vicomtech"]
 
@@ -69,36 +69,19 @@ def read_vicomtech(path: str | PathLike[str]) -> tuple[pd.DataFrame, dict[str, A
         tool id; the message names the line and the column.
     """
     p = Path(path)
-    try:
-        # only an empty cell is missing: "n/a", "NULL", ... in a number column are errors
-        data = pd.read_csv(p, keep_default_na=False, na_values=[""])
-        lines = _data_lines(p, len(data.columns))
-    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError,
-            UnicodeDecodeError) as exc:
-        raise FormatError(f"cannot read the Vicomtech CSV: {exc}", path=str(p)) from exc
-    missing = [c for c in _REQUIRED if c not in data.columns]
+    if not p.is_file():
+        raise FormatError("cannot read the Vicomtech CSV: file not found", path=str(p))
+    table = read_csv_table(p, path=str(p))
+    missing = [c for c in _REQUIRED if c not in table.header]
     if missing:
         raise FormatError(
             f"not the Vicomtech tool-wear table: missing columns {missing}", path=str(p),
             field=missing[0],
         )
-    if len(lines) != len(data):  # pragma: no cover - csv and pandas disagree on the rows
-        raise FormatError(f"{len(data)} rows read by pandas but {len(lines)} CSV data lines",
-                          path=str(p))
-    vb = pd.to_numeric(data["Vb"], errors="coerce")
-    bad = vb.isna() & data["Vb"].notna()
-    if bad.any():
-        row = int(bad.to_numpy().nonzero()[0][0])
-        raise FormatError("Vb is not numeric", path=str(p), position=f"line {lines[row]}",
-                          field="Vb")
-    for col in data.columns:  # every column is a number in the source
-        if not pd.api.types.is_numeric_dtype(data[col]):
-            num = pd.to_numeric(data[col], errors="coerce")
-            text = (num.isna() & data[col].notna()).to_numpy().nonzero()[0]
-            if text.size:
-                row = int(text[0])
-                raise FormatError(f"value {data[col].iloc[row]!r} is not a number",
-                                  path=str(p), position=f"line {lines[row]}", field=str(col))
+    # every column is a number in the source; only an empty cell is missing ("n/a", "NULL"
+    # ... are errors naming line and column)
+    data = pd.DataFrame({h: table.integers_or_numbers(j) for j, h in enumerate(table.header)})
+    lines = table.lines
     no_tool = data["tool"].isna().to_numpy().nonzero()[0]
     if no_tool.size:
         raise FormatError("row has no tool id", path=str(p),
@@ -117,25 +100,3 @@ def read_vicomtech(path: str | PathLike[str]) -> tuple[pd.DataFrame, dict[str, A
         "source": str(p),
     }
     return data, meta
-
-
-def _data_lines(path: Path, n_fields: int) -> list[int]:
-    """Line numbers of the data rows; a row with another field count raises FormatError.
-
-    pandas fills a short row (the last row of a cut-off file) with NaN without a word; the
-    stdlib reader sees it.
-    """
-    lines: list[int] = []
-    with path.open(newline="", encoding="utf-8") as fh:
-        reader = csv.reader(fh)
-        next(reader, None)
-        for row in reader:
-            if not row:
-                continue  # pandas skips blank lines too
-            if len(row) != n_fields:
-                raise FormatError(
-                    f"row has {len(row)} fields, the header {n_fields} (file cut off or "
-                    "damaged?)", path=str(path), position=f"line {reader.line_num}",
-                )
-            lines.append(reader.line_num)
-    return lines
