@@ -129,3 +129,22 @@ def test_no_frozen_or_hand_written_copies_in_the_package() -> None:
     hits = [p.name for p in root.rglob("*.py")
             if "def logistic_fit" in p.read_text(encoding="utf-8")]
     assert hits == []
+
+
+def test_one_public_function_per_name() -> None:
+    """Issue 16, point 6: no two modules of the package define a public function of the same
+    name (two ``fit_friction`` and two ``moving_average`` did different things)."""
+    import cnctwin
+
+    root = Path(cnctwin.__file__).parent
+    seen: dict[str, list[str]] = {}
+    for p in root.rglob("*.py"):
+        tree = ast.parse(p.read_text(encoding="utf-8"))
+        for node in tree.body:
+            if isinstance(node, ast.FunctionDef) and not node.name.startswith("_"):
+                seen.setdefault(node.name, []).append(p.relative_to(root).as_posix())
+    # each CLI module's `register` hook; the web package's lazy `create_app` (no FastAPI import)
+    allowed = {"register", "create_app"}
+    twice = {name: where for name, where in seen.items() if len(where) > 1
+             and name not in allowed}
+    assert twice == {}

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -194,23 +195,44 @@ class RecordingMeta:
 
 # ---------------------------------------------------------------------------- meta <-> JSON
 def jsonable(value: Any) -> Any:
-    """``value`` with everything JSON cannot hold made plain (recursively).
+    """``value`` with everything strict JSON cannot hold made plain (recursively).
 
-    Timestamps become ISO 8601 text, numpy scalars and arrays numbers and lists, mapping keys
-    text; anything else unknown its ``str()``.
+    NaN, infinities and missing values (``None``, ``pd.NA``, ``pd.NaT``) become ``None``
+    (JSON ``null``; a bare ``NaN`` is not JSON), numpy scalars and arrays Python numbers and
+    lists, timestamps ISO 8601 text, mapping keys text; anything else its ``str()``.
+
+    Parameters
+    ----------
+    value : object
+        Any value.
+
+    Returns
+    -------
+    object
+        ``None``, ``bool``, ``int``, ``float``, ``str``, ``list`` or ``dict``.
+
+    Examples
+    --------
+    >>> jsonable({1: np.float64("nan"), "t": [np.int64(2), True]})
+    {'1': None, 't': [2, True]}
     """
+    if value is None or value is pd.NA or value is pd.NaT:
+        return None
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    if isinstance(value, int | np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        f = float(value)
+        return f if math.isfinite(f) else None
+    if isinstance(value, str):
+        return value
     if isinstance(value, dict):
         return {str(k): jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
+    if isinstance(value, list | tuple | np.ndarray):
         return [jsonable(v) for v in value]
-    if value is None or isinstance(value, bool | int | float | str):
-        return value
     if isinstance(value, pd.Timestamp):
         return value.isoformat()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return jsonable(value.tolist())
     return str(value)
 
 

@@ -7,7 +7,7 @@ import pytest
 
 from cnctwin.recording import Recording
 from cnctwin.servo import check_relations
-from cnctwin.servo._common import moving_average, quantum
+from cnctwin.servo._common import jerk_filter_average, quantum
 
 from ._refloop import RefLoop, run, standard_des
 
@@ -60,8 +60,9 @@ def test_quantum_and_moving_average() -> None:
     assert quantum(np.random.default_rng(0).normal(size=1000)) == 0.0
     # integer window = mean of the last W samples; fractional: weight f on sample k-m
     ramp = np.arange(100.0)
-    assert moving_average(ramp, 6.5)[50] == pytest.approx((sum(range(45, 51)) + 0.5 * 44) / 6.5)
-    assert moving_average(ramp, 4.0)[50] == pytest.approx(np.mean(ramp[47:51]))
+    expected = (sum(range(45, 51)) + 0.5 * 44) / 6.5
+    assert jerk_filter_average(ramp, 6.5)[50] == pytest.approx(expected)
+    assert jerk_filter_average(ramp, 4.0)[50] == pytest.approx(np.mean(ramp[47:51]))
 
 
 def test_missing_axis_signals() -> None:

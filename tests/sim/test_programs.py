@@ -18,14 +18,14 @@ from cnctwin.sim.gcode import parse_program
 from cnctwin.sim.interpolator import AxisLimits, SpindleLimits, interpolate, interpolate_chunks
 from cnctwin.sim.programs import (
     AIR_CUT_SPEEDS_RPM,
-    air_cut_sweep,
+    air_cut_sweep_program,
     circle_path,
     drilling_validation_program,
     hole_pattern,
     hole_positions,
     square_path,
     tapping_program,
-    warm_up,
+    warm_up_program,
 )
 
 LIMITS = {
@@ -73,7 +73,8 @@ def test_all_programs_parse() -> None:
         hole_pattern(12), hole_pattern(7, cycle="CYCLE83"), hole_pattern(7, cycle="G81"),
         hole_pattern(7, cycle="G83"), drilling_validation_program(2400, 0.16, 10, n_holes=2),
         drilling_validation_program(3200, 0.4, 10, cycle="G81"), square_path(40.0),
-        circle_path(20.0), air_cut_sweep(), warm_up(5000, minutes=1), tapping_program(),
+        circle_path(20.0), air_cut_sweep_program(), warm_up_program(5000, minutes=1),
+        tapping_program(),
         tapping_program(2, cycle="G84"),
     ]  # fmt: skip
     for text in texts:
@@ -159,18 +160,19 @@ def test_square_and_circle_feed_from_feed_per_tooth() -> None:
 
 def test_air_cut_sweep_speeds() -> None:
     assert len(AIR_CUT_SPEEDS_RPM) == 126 and max(AIR_CUT_SPEEDS_RPM) == 18000.0
-    tr = interpolate(parse_program(air_cut_sweep(AIR_CUT_SPEEDS_RPM[-5:], dwell_s=1.0)),
+    tr = interpolate(parse_program(air_cut_sweep_program(AIR_CUT_SPEEDS_RPM[-5:], dwell_s=1.0)),
                      limits=LIMITS, spindle=SPINDLE)  # fmt: skip
     sp = tr.spindle_speed_cmd_rpm
     for n in AIR_CUT_SPEEDS_RPM[-5:]:
         at = np.isclose(sp, n)
         assert at.sum() * T >= 1.0  # dwell at each speed after reaching it
     with pytest.raises(ConfigError):
-        air_cut_sweep([1000, 30000], max_speed_rpm=20000)
+        air_cut_sweep_program([1000, 30000], max_speed_rpm=20000)
 
 
 def test_warm_up_duration() -> None:
-    tr = interpolate(parse_program(warm_up(5000, minutes=0.5)), limits=LIMITS, spindle=SPINDLE)
+    tr = interpolate(parse_program(warm_up_program(5000, minutes=0.5)), limits=LIMITS,
+                     spindle=SPINDLE)
     # 5000/4000 s up + 30 s + 5000/4000 s down
     assert tr.duration_s == pytest.approx(1.25 + 30.0 + 1.25, abs=T)
 

@@ -24,7 +24,7 @@ __all__ = [
     "delay",
     "derivative",
     "detect_velocity_unit",
-    "moving_average",
+    "jerk_filter_average",
     "moving_axes",
     "pt1",
     "pt2",
@@ -371,8 +371,12 @@ def detect_velocity_unit(
 
 
 # ---------------------------------------------------------------------------- filters
-def moving_average(x: FloatArray, window: float) -> FloatArray:
-    """Causal moving average over ``window`` samples, fractional windows allowed.
+def jerk_filter_average(x: FloatArray, window: float) -> FloatArray:
+    """The control's jerk filter of type 2 (MD32402 = 2): a causal mean over ``window``
+    samples, fractional windows allowed.
+
+    A model of the drive's setpoint filter, not a trend smoother (that is
+    :func:`cnctwin.usecases.wear.moving_average`, NaN-aware and centered).
 
     ``y[k] = (sum_{j=0}^{m-1} x[k-j] + f x[k-m]) / W`` with ``m = floor(W)``, ``f = W - m``:
     the mean of the last ``W`` samples for integer ``W`` (MD32402 type 2 with

@@ -1,7 +1,7 @@
 """Identification of an axis' cascade position loop from production HF data.
 
 Pure fitting functions first (:func:`fit_setpoint_chain`, :func:`fit_speed_loop`,
-:func:`fit_position_controller`, :func:`fit_friction`), then the orchestrator
+:func:`fit_position_controller`, :func:`fit_axis_friction`), then the orchestrator
 :func:`identify_axis`, which uses whatever signals a recording has and lists what it could not
 identify and why (``AxisIdentification.not_identified``).
 
@@ -38,7 +38,7 @@ from cnctwin.servo._common import (
     derivative,
     detect_velocity_unit,
     informative_segments,
-    moving_average,
+    jerk_filter_average,
     pt1,
     pt2,
     quantum,
@@ -47,15 +47,15 @@ from cnctwin.servo._common import (
 __all__ = [
     "JERK_FILTER_TYPES",
     "KV_PER_S_PER_M_MIN_MM",
+    "AxisFrictionFit",
     "AxisIdentification",
     "Estimate",
-    "FrictionFit",
     "PositionControllerFit",
     "SetpointChainFit",
     "SpeedLoopFit",
     "apply_setpoint_chain",
     "constant_velocity_runs",
-    "fit_friction",
+    "fit_axis_friction",
     "fit_position_controller",
     "fit_setpoint_chain",
     "fit_speed_loop",
@@ -180,9 +180,9 @@ def _jerk(x: FloatArray, jerk_type: str, p: FloatArray) -> FloatArray:
     if jerk_type == "none":
         return x
     if jerk_type == "moving_average":
-        return moving_average(x, max(p[0], 0.0))
+        return jerk_filter_average(x, max(p[0], 0.0))
     if jerk_type == "double_moving_average":
-        return moving_average(moving_average(x, max(p[0], 0.0)), max(p[1], 0.0))
+        return jerk_filter_average(jerk_filter_average(x, max(p[0], 0.0)), max(p[1], 0.0))
     if jerk_type == "pt2":
         return pt2(x, max(p[0], 0.0), min(max(p[1], 0.05), 5.0))
     raise IdentificationError(f"unknown jerk filter {jerk_type!r}; use one of {JERK_FILTER_TYPES}")
@@ -512,7 +512,7 @@ def fit_speed_loop(
             if s.stop - s.start < 3:
                 continue
             # the backward difference is the mean over [k-1, k]: a MA of one cycle
-            out[s] = moving_average(pt1(delay(u[s], max(p[0], 0.0)), max(p[1], 0.0)), 1.0)
+            out[s] = jerk_filter_average(pt1(delay(u[s], max(p[0], 0.0)), max(p[1], 0.0)), 1.0)
         return out
 
     def cost_g(p: FloatArray) -> tuple[float, float]:
@@ -658,7 +658,7 @@ def fit_position_controller(
 
 # ---------------------------------------------------------------------------- friction
 @dataclass(frozen=True)
-class FrictionFit:
+class AxisFrictionFit:
     """``tau = Fc sign(v) + b v (+ offset)`` from constant-velocity runs.
 
     Attributes
@@ -720,11 +720,14 @@ def constant_velocity_runs(
     return runs
 
 
-def fit_friction(
+def fit_axis_friction(
     v_per_s: FloatArray, effort: FloatArray, runs: list[slice], *, signal: str, unit: str,
     n_bootstrap: int = 200, seed: int = 0,
-) -> FrictionFit:
-    """Fit Coulomb + viscous friction to run means of CURRENT or TORQUE.
+) -> AxisFrictionFit:
+    """Fit Coulomb + viscous friction of a feed axis to run means of CURRENT or TORQUE.
+
+    The spindle's air-cut line (thesis Eq. 4.2) is :func:`cnctwin.spindle.fit_friction`; this is
+    the axis law with both directions and a weight offset.
 
     Parameters
     ----------
@@ -773,7 +776,7 @@ def fit_friction(
         cb, *_ = np.linalg.lstsq(design(vm[sel]), tm[sel], rcond=None)
         boots.append(cb)
     se = np.asarray(boots).std(axis=0, ddof=1) if len(boots) > 2 else np.full(p, np.nan)
-    return FrictionFit(
+    return AxisFrictionFit(
         float(coef[0]), float(coef[1]), float(coef[2]) if both else 0.0, float(se[0]),
         float(se[1]), float(se[2]) if both else float("nan"), int(vm.size), signal, unit,
     )
@@ -899,7 +902,7 @@ def identify_axis(
       Without CMD_SPEED and with FFW off: ``v = Kv e`` on constant-velocity runs.
     * Jerk filter, delay and PT1: :func:`fit_setpoint_chain` on DES_POS -> CTRL_POS.
     * Speed loop: :func:`fit_speed_loop` on CMD_SPEED -> d(ENC_POS)/dt.
-    * Friction: :func:`fit_friction` on CURRENT and TORQUE.
+    * Friction: :func:`fit_axis_friction` on CURRENT and TORQUE.
     """
     d = axis_data(recording, axis)
     for code in ("DES_POS", "ENC_POS"):
@@ -1241,8 +1244,9 @@ def identify_axis(
             NI[f"coulomb_{code.lower()}"] = f"{code}|{axis} is not recorded"
             continue
         try:
-            ff = fit_friction(v_act_c, sig[code], runs, signal=code, unit=d.units.get(code, ""),
-                              n_bootstrap=n_bootstrap, seed=seed)
+            ff = fit_axis_friction(v_act_c, sig[code], runs, signal=code,
+                                   unit=d.units.get(code, ""), n_bootstrap=n_bootstrap,
+                                   seed=seed)
         except IdentificationError as exc:
             NI[f"coulomb_{code.lower()}"] = str(exc)
             continue

@@ -10,10 +10,10 @@ Every function returns program text that :func:`cnctwin.sim.gcode.parse_program`
   calibration hole 2400 rpm 0.16 mm/rev).
 * :func:`square_path`, :func:`circle_path`: the milling experiment of thesis Sect. 3.1.2
   (Al7050-T7451, 16 mm two-flute carbide end mill, 0.5 mm axial depth, 0.167 mm/tooth).
-* :func:`air_cut_sweep`: the spindle run at 126 speeds up to 18000 rpm (thesis Sect. 3.2.2).
-* :func:`warm_up`: constant-speed run (thesis Sect. 4.2: 5000 and 7000 rpm for > 20 min).
+* :func:`air_cut_sweep_program`: the spindle run at 126 speeds up to 18000 rpm (thesis Sect. 3.2.2).
+* :func:`warm_up_program`: constant-speed run (thesis Sect. 4.2: 5000 and 7000 rpm for > 20 min).
 * :func:`tapping_program`: rigid tapping (thesis Sect. 5.4), M8 x 1.25 by default.
-* :func:`axis_test`: each feed axis back and forth in air at several feeds, for the
+* :func:`axis_test_program`: each feed axis back and forth in air at several feeds, for the
   identification of its position loop and friction (``cnctwin calibrate axes``).
 
 Values the thesis does not give are marked as assumptions in the parameter descriptions.
@@ -31,15 +31,15 @@ from cnctwin.sim.gcode import ISO_COARSE_PITCH_MM
 
 __all__ = [
     "AIR_CUT_SPEEDS_RPM",
-    "air_cut_sweep",
-    "axis_test",
+    "air_cut_sweep_program",
+    "axis_test_program",
     "circle_path",
     "drilling_validation_program",
     "hole_pattern",
     "hole_positions",
     "square_path",
     "tapping_program",
-    "warm_up",
+    "warm_up_program",
 ]
 
 AIR_CUT_SPEEDS_RPM: tuple[float, ...] = tuple(
@@ -378,7 +378,7 @@ def circle_path(
     ]) + "\n"  # fmt: skip
 
 
-def air_cut_sweep(
+def air_cut_sweep_program(
     speeds_rpm: Sequence[float] = AIR_CUT_SPEEDS_RPM,
     *,
     dwell_s: float = 5.0,
@@ -413,7 +413,7 @@ def air_cut_sweep(
     return "\n".join(lines) + "\n"
 
 
-def axis_test(
+def axis_test_program(
     axes: Sequence[str] = ("X1", "Y1", "Z1"),
     *,
     stroke_mm: float = 60.0,
@@ -461,7 +461,7 @@ def axis_test(
     return "\n".join(lines) + "\n"
 
 
-def warm_up(speed_rpm: float, *, minutes: float) -> str:
+def warm_up_program(speed_rpm: float, *, minutes: float) -> str:
     """Run the spindle at constant speed (thesis Sect. 4.2: > 20 min at 5000 and 7000 rpm).
 
     Parameters

@@ -74,15 +74,15 @@ from cnctwin.sim.gcode import Program, parse_program
 from cnctwin.sim.machine import Machine
 from cnctwin.sim.programs import (
     AIR_CUT_SPEEDS_RPM,
+    air_cut_sweep_program,
+    axis_test_program,
     circle_path,
     drilling_validation_program,
     hole_pattern,
     square_path,
     tapping_program,
+    warm_up_program,
 )
-from cnctwin.sim.programs import air_cut_sweep as air_cut_program
-from cnctwin.sim.programs import axis_test as axis_test_program
-from cnctwin.sim.programs import warm_up as warm_up_program
 from cnctwin.sim.recorder import Capture4AnalysisSink, ParquetChunkSink, RecordingSink
 from cnctwin.sim.sensors import (
     DYNAMOMETER_CSV_HEADER,
@@ -1028,7 +1028,7 @@ def air_cut_sweep(
 ) -> ScenarioResult:
     """Air cut at ``n_speeds`` constant spindle speeds up to 18000 rpm (thesis §3.2.2, Fig. 3.8).
 
-    Program :func:`cnctwin.sim.programs.air_cut_sweep` (``S.. M3`` then ``G4 F dwell_s`` per
+    Program :func:`cnctwin.sim.programs.air_cut_sweep_program` (``S.. M3`` then ``G4 F dwell_s`` per
     speed; the NC waits for the speed ramp). Default speeds
     :data:`~cnctwin.sim.programs.AIR_CUT_SPEEDS_RPM`; otherwise ``n_speeds`` equally spaced from
     ``min_speed_rpm`` (default ``max_speed_rpm / n_speeds``).
@@ -1047,7 +1047,7 @@ def air_cut_sweep(
     else:
         lo = min_speed_rpm if min_speed_rpm is not None else max_speed_rpm / n_speeds
         speeds = np.round(np.linspace(lo, max_speed_rpm, n_speeds), 0)
-    text = air_cut_program([float(s) for s in speeds], dwell_s=dwell_s)
+    text = air_cut_sweep_program([float(s) for s in speeds], dwell_s=dwell_s)
     prog = parse_program(text)
     res = ScenarioResult("air_cut_sweep", truth=_base_truth("air_cut_sweep", seed, overrides, cfg))
     _write_program(o, "air_cut_sweep.mpf", text, res.paths)
@@ -1108,10 +1108,10 @@ def warm_up(
 ) -> ScenarioResult:
     """Spindle turning ``minutes`` at each speed from a cold start (thesis §4.2, Fig. 4.4).
 
-    One recording per speed (program :func:`cnctwin.sim.programs.warm_up`); the motor warms up
-    and the current falls. Truth ``runs``: per minute the rotor and stator temperature, Kt and
-    the friction torque. Each run is simulated in memory (it needs the per-cycle drive truth;
-    ~1.5 GB peak for 25 min) and then written.
+    One recording per speed (program :func:`cnctwin.sim.programs.warm_up_program`); the motor
+    warms up and the current falls. Truth ``runs``: per minute the rotor and stator
+    temperature, Kt and the friction torque. Each run is simulated in memory (it needs the
+    per-cycle drive truth; ~1.5 GB peak for 25 min) and then written.
     """
     cfg = ScenarioConfig.build(overrides, machine=machine)
     o = _prepare(out)
@@ -1588,7 +1588,8 @@ def axis_test(
     chunk_cycles: int = 50_000,
     progress: ProgressFn | None = None,
 ) -> ScenarioResult:
-    """Feed axes back and forth in air at several feeds (:func:`~cnctwin.sim.programs.axis_test`).
+    """Feed axes back and forth in air at several feeds
+    (:func:`~cnctwin.sim.programs.axis_test_program`).
 
     The calibration program for ``cnctwin calibrate axes``: constant-velocity strokes in both
     directions at every feed (friction, steady following error) with jerk-limited starts and
@@ -1607,7 +1608,7 @@ def axis_test(
     randomize_loop : bool, default False
         Draw the X/Y loop parameters with :func:`random_loop_overrides` first.
     axes, stroke_mm, feeds_mm_min
-        As :func:`~cnctwin.sim.programs.axis_test`.
+        As :func:`~cnctwin.sim.programs.axis_test_program`.
 
     Returns
     -------

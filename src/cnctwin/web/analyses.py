@@ -11,7 +11,6 @@ why a view is empty, and turns tables into JSON-ready rows.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -20,7 +19,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from cnctwin.exceptions import CnctwinError, ConfigError
-from cnctwin.recording import Recording, find_gaps
+from cnctwin.recording import Recording, find_gaps, jsonable
 from cnctwin.spindle import SpindleModel
 
 __all__ = [
@@ -35,26 +34,6 @@ __all__ = [
 
 DETECTORS: tuple[str, ...] = ("physics", "envelope", "spectral", "tapping")
 """Detectors the anomaly view offers (:mod:`cnctwin.usecases.anomaly`)."""
-
-
-def jsonable(v: Any) -> Any:
-    """A value JSON can hold: NaN/inf -> None, numpy scalars -> Python, times -> ISO text."""
-    if v is None or v is pd.NA or v is pd.NaT:
-        return None
-    if isinstance(v, float | np.floating):
-        f = float(v)
-        return f if math.isfinite(f) else None
-    if isinstance(v, bool | np.bool_):
-        return bool(v)
-    if isinstance(v, int | np.integer):
-        return int(v)
-    if isinstance(v, pd.Timestamp):
-        return v.isoformat()
-    if isinstance(v, dict):
-        return {str(k): jsonable(x) for k, x in v.items()}
-    if isinstance(v, list | tuple | np.ndarray):
-        return [jsonable(x) for x in v]
-    return v if isinstance(v, str) else str(v)
 
 
 def records(df: pd.DataFrame) -> list[dict[str, Any]]:
