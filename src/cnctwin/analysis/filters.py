@@ -226,7 +226,28 @@ def highpass(
     zero_phase: bool = True,
     axis: int = -1,
 ) -> NDArray[np.float64]:
-    """Butterworth high-pass filter; parameters as in :func:`lowpass`."""
+    """Butterworth high-pass filter; parameters as in :func:`lowpass`.
+
+    Parameters
+    ----------
+    x : array-like
+        Samples, uniformly spaced at ``fs_hz``.
+    cutoff_hz : float
+        -3 dB cutoff of one pass [Hz].
+    fs_hz : float
+        Sample rate [Hz].
+    order : int, default 4
+        Butterworth order.
+    zero_phase : bool, default True
+        Forward-backward (offline, no delay) or causal single pass (streaming-equivalent).
+    axis : int, default -1
+        Time axis.
+
+    Returns
+    -------
+    numpy.ndarray
+        Filtered samples, same shape as ``x`` [unit of x].
+    """
     sos = design_sos("highpass", cutoff_hz, fs_hz=fs_hz, order=order)
     return _apply(sos, x, zero_phase=zero_phase, axis=axis)
 
@@ -245,6 +266,26 @@ def bandpass(
 
     Other parameters as in :func:`lowpass`. Thesis Fig. 4.3a band-passes the stator-frequency
     component of the spindle current.
+
+    Parameters
+    ----------
+    x : array-like
+        Samples, uniformly spaced at ``fs_hz``.
+    low_hz, high_hz : float
+        Band edges [Hz], ``0 < low_hz < high_hz <`` Nyquist.
+    fs_hz : float
+        Sample rate [Hz].
+    order : int, default 4
+        Butterworth order.
+    zero_phase : bool, default True
+        Forward-backward (offline, no delay) or causal single pass (streaming-equivalent).
+    axis : int, default -1
+        Time axis.
+
+    Returns
+    -------
+    numpy.ndarray
+        Filtered samples, same shape as ``x`` [unit of x].
     """
     sos = design_sos("bandpass", (low_hz, high_hz), fs_hz=fs_hz, order=order)
     return _apply(sos, x, zero_phase=zero_phase, axis=axis)
@@ -263,6 +304,26 @@ def bandstop(
     """Butterworth band-stop filter between ``low_hz`` and ``high_hz`` [Hz].
 
     Other parameters as in :func:`lowpass`.
+
+    Parameters
+    ----------
+    x : array-like
+        Samples, uniformly spaced at ``fs_hz``.
+    low_hz, high_hz : float
+        Band edges [Hz], ``0 < low_hz < high_hz <`` Nyquist.
+    fs_hz : float
+        Sample rate [Hz].
+    order : int, default 4
+        Butterworth order.
+    zero_phase : bool, default True
+        Forward-backward (offline, no delay) or causal single pass (streaming-equivalent).
+    axis : int, default -1
+        Time axis.
+
+    Returns
+    -------
+    numpy.ndarray
+        Filtered samples, same shape as ``x`` [unit of x].
     """
     sos = design_sos("bandstop", (low_hz, high_hz), fs_hz=fs_hz, order=order)
     return _apply(sos, x, zero_phase=zero_phase, axis=axis)
@@ -489,6 +550,28 @@ def extract_stator_component(
 
     Parameters as in :func:`remove_stator_component`; returns the line alone [A] (zero mean).
     Raises :class:`~cnctwin.exceptions.ConfigError` if the band touches 0 Hz or Nyquist.
+
+    Parameters
+    ----------
+    current : array-like
+        Spindle current samples at constant speed [A].
+    speed_rpm : float or array-like
+        Spindle speed [rpm]; the median of an array is used (one plateau, one line).
+    poles : int
+        Number of motor poles (see :func:`stator_frequency_hz`).
+    fs_hz : float
+        Sample rate [Hz].
+    bandwidth_hz : float, default 10.0
+        Width of the pass band centred on the folded stator frequency [Hz].
+    order : int, default 2
+        Butterworth order of the band pass.
+    zero_phase : bool, default True
+        Forward-backward filtering.
+
+    Returns
+    -------
+    numpy.ndarray
+        The stator line alone [A] (zero mean).
     """
     x = _as_signal(current, -1)
     _, lo, hi = _stator_band(speed_rpm, poles, fs_hz, bandwidth_hz)

@@ -112,6 +112,13 @@ def spindle_speed_rpm(rec: Recording, spindle: str = "SP1") -> tuple[NDArray[np.
     speed (``SPEED_SMOOTHED``, r0063) held on the HF rows, else an HF actual speed
     ``SPEED_ACT|<spindle>`` in rpm (the KIT merged files).
 
+    Parameters
+    ----------
+    rec : Recording
+        The recording.
+    spindle : str, default 'SP1'
+        Spindle axis name.
+
     Returns
     -------
     speed_rpm : numpy.ndarray

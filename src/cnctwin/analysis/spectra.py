@@ -196,6 +196,24 @@ def dominant_frequency(
 
     Parameters as in :func:`dominant_line`; returns only the (interpolated) frequency.
 
+    Parameters
+    ----------
+    x : array-like
+        Samples, uniformly spaced at ``fs_hz``.
+    fs_hz : float
+        Sample rate [Hz].
+    fmin_hz : float, default 1.0
+        Lowest frequency considered [Hz] (excludes DC and slow drift).
+    fmax_hz : float, optional
+        Highest frequency considered [Hz]; default Nyquist.
+    window : str, default 'hann'
+        Window for the spectrum.
+
+    Returns
+    -------
+    float
+        Frequency of the line [Hz], interpolated between bins.
+
     Examples
     --------
     >>> import numpy as np

@@ -80,6 +80,16 @@ def save_spindle_model(model: SpindleModel, path: str | PathLike[str], *,
 def load_spindle_model(path: str | PathLike[str]) -> SpindleModel:
     """Read a model written by :func:`save_spindle_model` (or a bare parameter mapping).
 
+    Parameters
+    ----------
+    path : str or path-like
+        A JSON or TOML file.
+
+    Returns
+    -------
+    SpindleModel
+        The model.
+
     Raises
     ------
     FormatError

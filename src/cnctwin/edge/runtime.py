@@ -592,6 +592,16 @@ def _iso(t_ns: int) -> str:
 def read_status(state_dir: str | PathLike[str]) -> dict[str, Any]:
     """The last ``status.json`` written by a runtime into ``state_dir``.
 
+    Parameters
+    ----------
+    state_dir : str or path-like
+        The runtime's state directory (``--out``).
+
+    Returns
+    -------
+    dict
+        The status document (counters, latency, state, last results).
+
     Raises
     ------
     FileNotFoundError
@@ -648,5 +658,17 @@ def last_emitted_cycle(results: str | PathLike[str], *, tail_bytes: int = 1 << 2
     The results file is what the runtime really emitted, so after a crash (``kill -9``) this
     is the resume point of a live source: the broker redelivers messages whose
     acknowledgement the crash cut off, and their cycles are skipped, not emitted twice.
+
+    Parameters
+    ----------
+    results : str or path-like
+        The runtime's ``results.jsonl``.
+    tail_bytes : int, default 1048576
+        How much of the end of the file is read [bytes].
+
+    Returns
+    -------
+    int or None
+        The cycle, or None on a first run.
     """
     return last_emitted(results, tail_bytes=tail_bytes).get("torque")

@@ -42,6 +42,19 @@ class MqttUrl:
 def parse_mqtt_url(url: str, *, default_topic: str = "") -> MqttUrl:
     """Split an ``mqtt://`` URL; the path (without the leading ``/``) is the topic.
 
+    Parameters
+    ----------
+    url : str
+        ``mqtt://[user[:password]@]host[:port][/topic]`` (``tcp://`` also accepted; TLS is
+        set by the runtime's ``--tls-ca`` option, not by the URL).
+    default_topic : str, default ''
+        Topic when the URL has no path.
+
+    Returns
+    -------
+    MqttUrl
+        Host, port (default 1883), topic, user name and password (None where absent).
+
     Raises
     ------
     ConfigError
@@ -63,6 +76,18 @@ def session_client_id(machine: str, metadata_topic: str) -> str:
 
     ``cnctwin-edge-<machine>`` (characters outside ``[A-Za-z0-9_-]`` replaced by ``_``, at most
     64 characters); without a machine name, a short hash of the metadata topic.
+
+    Parameters
+    ----------
+    machine : str
+        Machine name.
+    metadata_topic : str
+        The Databus metadata topic (used when ``machine`` is empty).
+
+    Returns
+    -------
+    str
+        The client id.
 
     Examples
     --------

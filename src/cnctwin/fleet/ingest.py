@@ -118,6 +118,16 @@ def find_recordings(paths: Iterable[str | os.PathLike[str]]) -> list[Path]:
     directories are searched for files ending in :data:`RECORDING_SUFFIXES` (``truth.json``
     and hidden files skipped). A file named directly is taken whatever its suffix.
 
+    Parameters
+    ----------
+    paths : iterable of str or path-like
+        Files and directories.
+
+    Returns
+    -------
+    list of pathlib.Path
+        One path per recording, sorted.
+
     Raises
     ------
     ConfigError
@@ -151,7 +161,18 @@ def find_recordings(paths: Iterable[str | os.PathLike[str]]) -> list[Path]:
 
 def content_hash(path: str | os.PathLike[str]) -> str:
     """SHA-256 of a file, or of a recording directory's files (relative names and contents,
-    in name order)."""
+    in name order).
+
+    Parameters
+    ----------
+    path : str or path-like
+        A recording file or directory.
+
+    Returns
+    -------
+    str
+        Hex digest.
+    """
     p = Path(path)
     h = hashlib.sha256()
     files = [p] if p.is_file() else sorted(f for f in p.rglob("*") if f.is_file())

@@ -74,6 +74,11 @@ def partitions(
         The store.
     machines : sequence of str, optional
         Only these machines.
+
+    Returns
+    -------
+    list of Partition
+        Sorted by machine, then day.
     """
     import cnctwin.store
 
@@ -128,6 +133,16 @@ def holes_partition(
     part: Partition, *, store_url: str, machine_files: Mapping[str, str] | None = None
 ) -> pd.DataFrame:
     """Per-hole records of one partition (:func:`cnctwin.usecases.holes.hole_record`).
+
+    Parameters
+    ----------
+    part : Partition
+        One (machine, day) of the store (:func:`partitions`).
+    store_url : str
+        The store (a directory, ``duckdb:///path`` or ``postgresql://...``).
+    machine_files : mapping, optional
+        Machine name -> machine file path; a machine without one is evaluated with the
+        thesis machine's spindle model.
 
     Returns
     -------
@@ -184,6 +199,20 @@ def health_partition(
     (:func:`cnctwin.spindle.air_cut_statistics`) with its ``speed_rpm``; per tool:
     ``torque_per_hole_nm`` (mean cutting torque of the holes). Estimates of the day's cycles
     are averaged (:func:`_combine`).
+
+    Parameters
+    ----------
+    part : Partition
+        One (machine, day) of the store (:func:`partitions`).
+    store_url : str
+        The store (a directory, ``duckdb:///path`` or ``postgresql://...``).
+    machine_files : mapping, optional
+        Machine name -> machine file path; a machine without one is evaluated with the
+        thesis machine's spindle model.
+    axes : sequence of str, default ('X1', 'Y1', 'Z1')
+        Feed axes to identify.
+    spindle : str, default 'SP1'
+        Spindle axis name.
 
     Returns
     -------
@@ -274,6 +303,18 @@ def quality_partition(part: Partition, *, store_url: str) -> pd.DataFrame:
     ``coverage`` (recorded / spanned cycles), ``missing_cycles`` (counter gaps), ``n_gaps``,
     ``jitter_ms`` (std of the time step minus the cycle time), ``nan_fraction`` (of the HF
     values), ``partial`` (the reader flagged the recording partial), ``issues``.
+
+    Parameters
+    ----------
+    part : Partition
+        One (machine, day) of the store (:func:`partitions`).
+    store_url : str
+        The store (a directory, ``duckdb:///path`` or ``postgresql://...``).
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per recording (columns above).
     """
     recs, issues = _load(store_url, part)
     rows = []
@@ -314,6 +355,21 @@ def compare_partition(
     Columns ``machine``, ``day``, ``recording_id``, ``program``, ``cycle_time_s`` (recorded
     program duration), ``n_holes``, ``torque_per_hole_nm``, ``following_error_rms_mm`` and
     ``following_error_max_mm`` (CONT_DEV over the feed axes), ``issues``.
+
+    Parameters
+    ----------
+    part : Partition
+        One (machine, day) of the store (:func:`partitions`).
+    store_url : str
+        The store (a directory, ``duckdb:///path`` or ``postgresql://...``).
+    machine_files : mapping, optional
+        Machine name -> machine file path; a machine without one is evaluated with the
+        thesis machine's spindle model.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per recording (columns above).
     """
     from cnctwin.usecases.holes import hole_record
 
@@ -348,6 +404,19 @@ def run_job(
 ) -> pd.DataFrame:
     """``fn`` over every partition, on the cluster or (``client=None``) in this process.
 
+    Parameters
+    ----------
+    fn : callable
+        A partition job (e.g. :func:`health_partition`), called as ``fn(part, **kwargs)``.
+    parts : sequence of Partition
+        The partitions.
+    client : distributed.Client or None
+        The cluster (:func:`cnctwin.fleet.cluster.fleet_client`), or None to run here.
+    progress : callable, optional
+        Called with (done, total) after each partition.
+    **kwargs
+        Passed to ``fn``.
+
     Returns
     -------
     pandas.DataFrame
@@ -369,7 +438,18 @@ def run_job(
 
 
 def machine_files_in(directory: str | Path | None) -> dict[str, str]:
-    """Machine name -> machine file path for every ``<name>.toml`` in a directory."""
+    """Machine name -> machine file path for every ``<name>.toml`` in a directory.
+
+    Parameters
+    ----------
+    directory : str or path, optional
+        Folder of machine files (``<machine name>.toml``); None gives an empty mapping.
+
+    Returns
+    -------
+    dict
+        Machine name -> path.
+    """
     if directory is None:
         return {}
     d = Path(directory)

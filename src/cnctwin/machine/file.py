@@ -624,7 +624,9 @@ def save_machine(machine_file: MachineFile, path: str | PathLike[str]) -> Path:
     Parameters
     ----------
     machine_file : MachineFile
+        The description to write (validated before anything is written).
     path : str or path-like
+        Target file (``.toml``); its folder must exist.
 
     Returns
     -------

@@ -465,8 +465,14 @@ def moving_axes(rec: Recording, *, min_travel: float = 0.05) -> list[str]:
     Parameters
     ----------
     rec : Recording
+        A recording (trace or edge recording).
     min_travel : float, default 0.05
         Smallest setpoint travel that counts as moving [mm or deg].
+
+    Returns
+    -------
+    list of str
+        Axis names, in the recording's column order.
     """
     out = []
     for ax in rec.axes:

@@ -218,6 +218,15 @@ def prediction_residual(
     Each contiguous run is predicted from its own start (actual position taken from the
     recording at the run start).
 
+    Parameters
+    ----------
+    model : AxisLoopModel
+        The identified loop (:meth:`AxisLoopModel.from_identification`).
+    rec : Recording
+        A recording with ``DES_POS|<axis>`` and ``ENC_POS|<axis>``.
+    axis : str
+        Axis name.
+
     Returns
     -------
     rms : float

@@ -674,6 +674,12 @@ def tapping_load(
     hardness_factor : array-like, default 1
         Multiplier on kc.
 
+    Returns
+    -------
+    CuttingLoad
+        Spindle torque [Nm] (its sign reverses on extraction), thrust [N] and engagement
+        per sample.
+
     Notes
     -----
     Md = kc1.1 P^2 D / 8000 [Nm] (tap-maker rule with kc in N/mm^2, P and D in mm); the chamfer

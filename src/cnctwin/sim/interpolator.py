@@ -1239,6 +1239,33 @@ def interpolate(
 ) -> Trajectory:
     """Interpolate a whole program (see :func:`interpolate_chunks` for the parameters).
 
+    Parameters
+    ----------
+    program : Program
+        Parsed part program (:func:`cnctwin.sim.gcode.parse_program`).
+    limits : mapping
+        Axis name -> :class:`AxisLimits` for every axis in ``axes``.
+    spindle : SpindleLimits
+        Spindle limits.
+    cycle_time_s : float, default 0.002
+        Position-control (fine interpolation) cycle [s].
+    lookahead_blocks : int, default 16
+        Look-ahead depth: a junction velocity must allow a stop within this many segments.
+    axes : sequence of str
+        Interpolated axes, in output order.
+    start_position : mapping, optional
+        Axis name or letter -> position before the first block (default 0).
+    axis_letters : mapping, optional
+        Program axis letter -> axis name (default X, Y, Z, C, B -> X1, Y1, Z1, C1, B1).
+    corner_tolerance_mm : float, default 0.01
+        Path deviation allowed at G64 corners for the junction velocity [mm].
+    curvature_share : float, default 0.5
+        Share of the axis acceleration and jerk reserved for curvature on arcs (0..1).
+    wait_for_spindle : bool, default True
+        Hold the program after spindle commands until the speed set point has ramped.
+    tool_change_s : float, default 0
+        Time of an M6 tool change [s].
+
     Returns
     -------
     Trajectory

@@ -380,6 +380,16 @@ def _write_frame(frame: pd.DataFrame, path: Path, compression: str) -> None:
 def read_parquet_chunks(directory: str | Path) -> Recording:
     """Read a :class:`ParquetChunkSink` directory back into one :class:`Recording`.
 
+    Parameters
+    ----------
+    directory : str or path
+        The sink's output directory (``meta.json``, ``hf_*.parquet``, ``events.parquet``).
+
+    Returns
+    -------
+    Recording
+        All chunks in one recording (float32 columns widened to float64).
+
     Raises
     ------
     ConfigError

@@ -1854,6 +1854,29 @@ def run_scenario(
 
     ``machine`` is the base machine (e.g. from a machine file), ``overrides`` apply on top.
 
+    Parameters
+    ----------
+    name : str
+        Scenario name (``cnctwin simulate --list`` prints them).
+    out : str or path, optional
+        Output folder; None keeps the recordings in memory.
+    seed : int, default 0
+        Random seed (noise, hidden parameters where the scenario draws them).
+    overrides : mapping, optional
+        Dotted machine parameters set on top of ``machine`` (``{"spindle.kt_nm_per_a": 0.9}``).
+    progress : callable, optional
+        Called with (fraction done 0..1, message) on long scenarios.
+    machine : Machine, optional
+        The base machine; default the simulator's machine.
+    **options
+        Scenario options (see the scenario's function).
+
+    Returns
+    -------
+    ScenarioResult
+        Recordings (or their files), the truth of the hidden parameters and the scenario's
+        options.
+
     Raises
     ------
     ConfigError

@@ -123,6 +123,16 @@ def default_recording_id(rec: Recording) -> str:
 
     The same recording read twice from the same file gets the same id, so ingesting it again
     replaces instead of duplicating (``"<machine>-20231222T132341-5558098-1a2b3c4d"``).
+
+    Parameters
+    ----------
+    rec : Recording
+        The recording.
+
+    Returns
+    -------
+    str
+        The id.
     """
     machine = re.sub(r"[^A-Za-z0-9._-]+", "_", rec.meta.machine or "unknown").strip("_.-")
     machine = (machine or "unknown")[:60]

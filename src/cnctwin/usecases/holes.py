@@ -602,6 +602,28 @@ def hole_records(
 
     Hole numbers continue across the recordings and all times count from the first cycle of
     the earliest recording. Each recording also keeps its own rows in ``meta.attrs["holes"]``.
+
+    Parameters
+    ----------
+    recordings : sequence of Recording
+        Recordings of one machine and tool, any order (sorted by their first time).
+    spindle : str, default 'SP1'
+        Spindle axis name.
+    z_axis : str, default 'Z1'
+        Drilling (feed) axis.
+    xy_axes : (str, str), default ('X1', 'Y1')
+        Lateral axes for the hole position and deviations.
+    model : SpindleModel, optional
+        Calibrated spindle model; default the thesis parameter set (noted in the attrs).
+    window_s : float, default 0.6
+        Length of the first window of each cut [s].
+    set_size : int, default 6
+        Holes per set.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per hole (columns of :func:`hole_record`).
     """
     if not recordings:
         raise ConfigError("hole_records needs at least one recording")

@@ -111,6 +111,12 @@ def set_pattern(values: ArrayLike, *, set_size: int = 6) -> SetPattern:
         Per-hole values in drilling order; incomplete trailing sets are ignored.
     set_size : int, default 6
         Holes per set.
+
+    Returns
+    -------
+    SetPattern
+        Per position in the set the mean and spread of value / set mean, and the rise from
+        the first to the last hole.
     """
     x = np.asarray(values, dtype=np.float64)
     n_sets = x.size // set_size
@@ -293,6 +299,12 @@ def forecast_remaining_life(
         Residual-bootstrap draws for the interval.
     seed : int, default 0
         Seed of the bootstrap.
+
+    Returns
+    -------
+    LifeForecast
+        Index at which the trend reaches ``limit_um`` (``inf`` if it never does), the remaining
+        holes and their 90 % bootstrap interval.
     """
     x = np.asarray(index, dtype=np.float64)
     y = np.asarray(wear_um, dtype=np.float64)
@@ -386,6 +398,12 @@ def leave_one_group_out(
         Column names.
     alpha : float, default 100
         Ridge penalty on standardized features.
+
+    Returns
+    -------
+    LogoResult
+        Per held-out group the errors of the ridge model and of the two baselines, and their
+        means [µm].
     """
     missing = [c for c in (*features, target, group, usage) if c not in data.columns]
     if missing:

@@ -34,7 +34,18 @@ __all__ = [
 
 
 def create_app(**kwargs: Any) -> Any:
-    """Build the dashboard app; see :func:`cnctwin.web.app.create_app` (imports FastAPI)."""
+    """Build the dashboard app; see :func:`cnctwin.web.app.create_app` (imports FastAPI).
+
+    Parameters
+    ----------
+    **kwargs
+        Options of :func:`cnctwin.web.app.create_app`.
+
+    Returns
+    -------
+    fastapi.FastAPI
+        The application.
+    """
     from cnctwin.web.app import create_app as _create
 
     return _create(**kwargs)

@@ -57,6 +57,18 @@ def bucket_starts(n: int, n_buckets: int) -> NDArray[np.int64]:
     """Start index of each of ``n_buckets`` near-equal buckets of ``n`` samples (and ``n``).
 
     Bucket ``i`` holds samples ``starts[i] .. starts[i+1]-1``; sizes differ by at most one.
+
+    Parameters
+    ----------
+    n : int
+        Number of samples.
+    n_buckets : int
+        Number of buckets (at most ``n``).
+
+    Returns
+    -------
+    numpy.ndarray of int64
+        ``n_buckets + 1`` indices, the last one ``n``.
     """
     if n_buckets < 1:
         raise ConfigError(f"n_buckets must be at least 1, not {n_buckets}")

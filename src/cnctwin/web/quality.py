@@ -154,7 +154,18 @@ def signal_quality(meta: RecordingMeta, *, n_cycles: int, first_cycle: int | Non
 
 
 def signal_quality_of(rec: Recording) -> SignalQuality:
-    """:func:`signal_quality` of a loaded recording."""
+    """:func:`signal_quality` of a loaded recording.
+
+    Parameters
+    ----------
+    rec : Recording
+        The recording.
+
+    Returns
+    -------
+    SignalQuality
+        As :func:`signal_quality`.
+    """
     c = rec.cycles
     return signal_quality(rec.meta, n_cycles=rec.n_cycles,
                           first_cycle=int(c[0]) if c.size else None,
