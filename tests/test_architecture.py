@@ -148,3 +148,26 @@ def test_one_public_function_per_name() -> None:
     twice = {name: where for name, where in seen.items() if len(where) > 1
              and name not in allowed}
     assert twice == {}
+
+
+def test_edge_import_does_not_load_plotting_or_cluster_libraries() -> None:
+    """Footprint at the edge (issue 16, point 4): the runtime does not load matplotlib,
+    Dask or FastAPI by being imported (each would add 30-100 MB to every edge process)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, cnctwin.edge, cnctwin.edge.runtime, cnctwin.edge.plant; "
+            "print(sorted(m for m in ('matplotlib', 'distributed', 'fastapi', 'sklearn') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "[]"
+
+
+def test_make_demo_installs_the_package_without_extras() -> None:
+    """`make demo` installs cnctwin and its run-time dependencies only (no test tools, no
+    extras); `make test` adds them (issue 16, point 4; sizes in BENCHMARKS.md)."""
+    text = (Path(__file__).parents[1] / "Makefile").read_text(encoding="utf-8")
+    demo_rule = text.split("\n$(DEMO_STAMP):", 1)[1].split("\n\n", 1)[0]
+    assert "pip install --quiet -e .\n" in demo_rule + "\n"
+    assert "\ndemo: $(DEMO_STAMP)\n" in text

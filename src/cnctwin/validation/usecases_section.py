@@ -11,7 +11,9 @@ tap (Fig. 5.10) and the backtest of every detector.
 
 from __future__ import annotations
 
+import tempfile
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -59,6 +61,7 @@ def plot_wear_estimate(
 
 
 def _wear_part(ctx: DemoContext, sec: Any) -> None:
+    from cnctwin.iotools import read_recording, read_thermal_camera_csv
     from cnctwin.sim.scenarios import tool_wear_run
     from cnctwin.usecases.figures import (
         plot_deviation_paths,
@@ -83,13 +86,17 @@ def _wear_part(ctx: DemoContext, sec: Any) -> None:
         prog.last = frac  # type: ignore[attr-defined]
 
     prog.last = 0.0  # type: ignore[attr-defined]
-    res = tool_wear_run(n_holes=n, seed=ctx.seed, overrides=ov, dynamometer=False,
-                        progress=prog)
-    rec = res.recordings[0]
+    # streamed to a temporary Parquet chunk directory and read back as a user's recording:
+    # the in-memory run held ~1.1 GB more at its peak (BENCHMARKS.md, "make demo footprint")
+    with tempfile.TemporaryDirectory(prefix="cnctwin-wear-") as tmp:
+        res = tool_wear_run(tmp, n_holes=n, seed=ctx.seed, overrides=ov, dynamometer=False,
+                            progress=prog, fmt="parquet")
+        rec = read_recording(res.recording_paths[0])
+        cam = read_thermal_camera_csv(Path(tmp) / "thermal_camera.csv")
+    rec.external["thermal_camera"] = cam
     ctx.timings["use cases: wear run simulation"] = time.perf_counter() - t0
     holes = hole_record(rec, store=False)
     truth = pd.DataFrame(res.truth["holes"])
-    cam = rec.external["thermal_camera"]
     v = validate_wear(holes, truth, camera=cam, n_measured=5)
     sec.text(
         f"Tool-wear run of thesis §5.1 (AISI 1045, 20 mm holes, 2400 rpm, 400 mm/min, sets of 6 "
