@@ -899,6 +899,38 @@ class SpindleModel:
     flux_exponent: float = 1.0
     kt_valid_speed_rpm: tuple[float, float] | None = None
 
+    def describe(self) -> str:
+        """The parameters in words with units, as pages and reports show them.
+
+        Returns
+        -------
+        str
+            E.g. ``"Kt 1.01 Nm/A, B 8.3e-05 Nm/rpm, tau_f 0.34 Nm, J 0.0045 kg m^2"``, with
+            the temperature and field-weakening terms where they are set.
+
+        Examples
+        --------
+        >>> SpindleModel(kt_nm_per_a=1.01, b_nm_per_rpm=8.3e-5, tau_f_nm=0.34,
+        ...              j_kgm2=0.0045).describe()
+        'Kt 1.01 Nm/A, B 8.3e-05 Nm/rpm, tau_f 0.34 Nm, J 0.0045 kg m^2'
+        """
+        parts = [f"Kt {self.kt_nm_per_a:.4g} Nm/A", f"B {self.b_nm_per_rpm:.4g} Nm/rpm",
+                 f"tau_f {self.tau_f_nm:.4g} Nm", f"J {self.j_kgm2:.4g} kg m^2"]
+        if self.kt_temp_coeff_per_k or self.b_temp_coeff_per_k or self.tau_f_temp_coeff_per_k:
+            parts.append(f"temperature coefficients Kt {self.kt_temp_coeff_per_k:.3g}, "
+                         f"B {self.b_temp_coeff_per_k:.3g}, tau_f "
+                         f"{self.tau_f_temp_coeff_per_k:.3g} 1/K from "
+                         f"{self.reference_temperature_c:.4g} °C"
+                         if self.reference_temperature_c is not None else
+                         f"temperature coefficient Kt {self.kt_temp_coeff_per_k:.3g} 1/K")
+        if self.flux_base_speed_rpm > 0:
+            parts.append(f"field weakening above {self.flux_base_speed_rpm:.0f} rpm "
+                         f"(exponent {self.flux_exponent:.3g})")
+        if self.kt_valid_speed_rpm is not None:
+            lo, hi = self.kt_valid_speed_rpm
+            parts.append(f"calibrated {lo:.0f}-{hi:.0f} rpm")
+        return ", ".join(parts)
+
     def flux_factor(self, speed_rpm: ArrayLike) -> NDArray[np.float64]:
         """``(n_b / |n|)^exponent`` above the base speed, 1 below (and without a law) [-]."""
         n = np.abs(np.asarray(speed_rpm, dtype=np.float64))

@@ -149,7 +149,7 @@ def test_model_is_used(wear6) -> None:  # type: ignore[no-untyped-def]
     # Kt 10 % higher: the torque rises by 0.104 I (I about 4.4 A in the cut)
     d = h["torque_mean_nm"] - base["torque_mean_nm"]
     np.testing.assert_allclose(d, 0.104 * base["current_mean_a"], rtol=1e-6)
-    assert "SpindleModel" in h.attrs["spindle_model"]
+    assert h.attrs["spindle_model"].startswith("Kt 1.144 Nm/A, B 8.42e-05 Nm/rpm")
 
 
 def test_hole_records_continue_numbering(wear6) -> None:  # type: ignore[no-untyped-def]

@@ -86,3 +86,15 @@ def model_client(wear12: dict[str, Any], model_file: Path) -> Iterator[Any]:
     app = create_app(recordings=[wear12["path"]], model=model_file)
     with TestClient(app) as c:
         yield c
+
+
+@pytest.fixture(scope="session")
+def live_dir(wear12: dict[str, Any], model_file: Path,
+             tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The state directory of a finished `cnctwin edge run` replay of the wear run."""
+    from cnctwin.cli import main
+
+    live = tmp_path_factory.mktemp("live")
+    assert main(["edge", "run", "--source", str(wear12["path"]), "--model", str(model_file),
+                 "--out", str(live), "--quiet", "--learn-s", "2"]) == 0
+    return live

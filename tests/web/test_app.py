@@ -179,8 +179,12 @@ def test_trends(client: Any, wear12_rec: Recording) -> None:
     np.testing.assert_allclose(t["relative_increase"],
                                relative_increase(torque, baseline=12, set_size=6), rtol=1e-12)
     assert t["set_pattern"]["n_sets"] == 2
-    # no camera channel in a Capture4Analysis file: said, not invented
-    assert t["temperature"] is None and any("thermal-camera" in n for n in t["notes"])
+    # the camera readings the simulator writes beside the recording (thermal_camera.csv) are
+    # found and calibrate the soft sensor (issue 16, point 3); camera noise 4 °C (simulator
+    # ThermalCamera), so a fit of 12 readings within 8 °C RMS
+    temp = t["temperature"]
+    assert temp is not None and temp["n_points"] == 12 and temp["rmse_c"] < 8.0
+    assert all(np.isfinite(temp["predicted_c"]))
     assert len(t["quality"]) == 12
 
 
@@ -257,3 +261,19 @@ def test_missing_store_says_what_to_do(tmp_path: Path) -> None:
 
     with pytest.raises(StoreError, match="cnctwin ingest"):
         create_app(store_url=str(tmp_path / "nope"))
+
+
+def test_no_camera_beside_a_recording_is_said(tmp_path: Path, wear12: dict[str, Any],
+                                               model_file: Path) -> None:
+    """A recording without camera readings beside it: said, not invented."""
+    import shutil
+
+    from fastapi.testclient import TestClient
+
+    from cnctwin.web import create_app
+
+    alone = tmp_path / "alone.json"
+    shutil.copy(wear12["path"], alone)
+    with TestClient(create_app(recordings=[alone], model=model_file)) as c:
+        t = c.get("/api/recordings/file:0/trends").json()
+    assert t["temperature"] is None and any("thermal-camera" in n for n in t["notes"])

@@ -22,18 +22,6 @@ from tests._services import free_port, require_tool
 pytestmark = pytest.mark.browser
 
 
-@pytest.fixture(scope="module")
-def live_dir(wear12: dict[str, Any], model_file: Path,
-             tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The state directory of a finished `cnctwin edge run` replay of the wear run."""
-    from cnctwin.cli import main
-
-    live = tmp_path_factory.mktemp("live")
-    assert main(["edge", "run", "--source", str(wear12["path"]), "--model", str(model_file),
-                 "--out", str(live), "--quiet", "--learn-s", "2"]) == 0
-    return live
-
-
 @contextlib.contextmanager
 def _serve(args: list[str], log_path: Path) -> Iterator[str]:
     """`cnctwin web ARGS --port P` as a process; yields its URL once /healthz answers."""
@@ -158,3 +146,84 @@ def test_live_page_starts_a_new_view_for_a_new_run(wear12: dict[str, Any], model
     points = int(re.search(r'id="live-plot"[^>]*data-points="(\d+)"', dom)  # type: ignore[union-attr]
                  .group(1))
     assert 0 < points <= min(n_points_one_run, 30 * 500 + 1)  # one run, last 30 s window
+
+
+def _screenshot(url: str, tmp_path: Path, name: str) -> Path:
+    """A PNG of the page as headless Chromium draws it (kept with the test's files; copied to
+    $CNCTWIN_SCREENSHOTS when that names a folder, to look at them)."""
+    chromium = require_tool("chromium", install="apt-get install chromium "
+                            "(scripts/ensure-services.sh does it as root)")
+    png = tmp_path / f"{name}.png"
+    cmd = [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+           "--no-first-run", "--disable-background-networking", "--disable-component-update",
+           "--disable-sync", "--hide-scrollbars", f"--user-data-dir={tmp_path / 'profile-png'}",
+           "--virtual-time-budget=20000", "--window-size=1400,1000", f"--screenshot={png}", url]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=90,
+                         env={**os.environ, "HOME": str(tmp_path)})
+    assert res.returncode == 0 and png.exists(), res.stderr[-2000:]
+    keep = os.environ.get("CNCTWIN_SCREENSHOTS")
+    if keep:
+        Path(keep).mkdir(parents=True, exist_ok=True)
+        (Path(keep) / png.name).write_bytes(png.read_bytes())
+    return png
+
+
+def _visible_text(dom: str) -> str:
+    """The page's text without scripts and without the reader's notes (prose that may name
+    NaN, e.g. "0 non-numeric kept as text only (value NaN)")."""
+    dom = re.sub(r"<script.*?</script>|<style.*?</style>|<details>.*?</details>", " ", dom,
+                 flags=re.S)
+    return re.sub(r"<[^>]+>", " ", dom)
+
+
+_REPRS = re.compile(r"\bNone\b|\bnan\b|\bNaN\b|\{'|<cnctwin\.|Timestamp\(|array\(|dtype")
+
+
+@pytest.fixture(scope="module")
+def plant_server(live_dir: Path, wear12: dict[str, Any], model_file: Path,
+                 tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """Two machines: the finished edge run and one whose runtime went silent."""
+    silent = tmp_path_factory.mktemp("plant") / "M2-silent"
+    silent.mkdir()
+    (silent / "status.json").write_text(json.dumps({
+        "machine": "DMU-2", "state": "running", "updated": "2026-01-01T00:00:00Z",
+        "cycles": 5, "holes": 0, "alarms": 0}))
+    with _serve(["--live", str(live_dir), "--live", str(silent), "--recording",
+                 str(wear12["path"]), "--model", str(model_file)],
+                tmp_path_factory.mktemp("srv-plant") / "server.log") as url:
+        yield url
+
+
+def test_plant_page_in_the_browser(plant_server: str, tmp_path: Path) -> None:
+    """Issue 16, point 3: status per machine at a glance, checked as Chromium draws it."""
+    dom = _dump_dom(plant_server + "/plant", tmp_path)
+    tiles = dict((m, st) for st, m in re.findall(
+        r'class="tile state-(\w+)" data-machine="([^"]+)"', dom))
+    assert sorted(tiles.values()) == ["finished", "stale"] and tiles["M2-silent"] == "stale"
+    text = _visible_text(dom)
+    assert "no status for" in text  # the stale machine says why
+    assert not _REPRS.search(text), _REPRS.search(text)
+    png = _screenshot(plant_server + "/plant", tmp_path, "plant")
+    import matplotlib.image as mpimg
+    import numpy as np
+
+    img = mpimg.imread(png)[..., :3]
+    assert img.shape[0] >= 900 and img.shape[1] >= 1300
+    # the stale tile's orange border (#b25e00) is drawn: the colours carry the state
+    orange = np.all(np.abs(img - np.array([0xB2, 0x5E, 0x00]) / 255) < 0.06, axis=-1)
+    assert orange.sum() > 200
+
+
+def test_pages_show_no_python_reprs_and_a_time_range(plant_server: str, tmp_path: Path) -> None:
+    """No None/nan/dict reprs on any page; a recording page opened with a time range draws
+    that range at full resolution and shows it in the range picker."""
+    # (the live page with a limit: its event stream then ends and the page finishes loading)
+    for path in ("/", "/live?limit=20", "/recordings/file:0"):
+        text = _visible_text(_dump_dom(plant_server + path, tmp_path))
+        assert not _REPRS.search(text), (path, _REPRS.search(text))
+    dom = _dump_dom(plant_server + "/recordings/file:0?start_s=10&end_s=12", tmp_path)
+    info = re.search(r'id="plot-info"[^>]*>([^<]*)<', dom).group(1)  # type: ignore[union-attr]
+    assert "(full resolution)" in info  # 2 s = 1000 samples fit the plot width
+    assert re.search(r'id="range-start"[^>]*value="10.000"', dom)
+    assert re.search(r'id="range-end"[^>]*value="12.000"', dom)
+    _screenshot(plant_server + "/recordings/file:0?start_s=10&end_s=12", tmp_path, "recording")

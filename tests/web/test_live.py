@@ -10,19 +10,14 @@ from typing import Any
 
 import pytest
 
-from cnctwin.cli import main
 from cnctwin.exceptions import ConfigError
 from cnctwin.web.live import LiveSource, sse_event, tail_lines
 
 
 @pytest.fixture(scope="module")
-def edge_out(wear12: dict[str, Any], model_file: Path,
-             tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """State directory of `cnctwin edge run` replaying the 12-hole wear run."""
-    out = tmp_path_factory.mktemp("edge")
-    assert main(["edge", "run", "--source", str(wear12["path"]), "--model", str(model_file),
-                 "--out", str(out), "--quiet", "--learn-s", "2"]) == 0
-    return out
+def edge_out(live_dir: Path) -> Path:
+    """State directory of `cnctwin edge run` replaying the 12-hole wear run (conftest)."""
+    return live_dir
 
 
 def _events(text: str) -> list[tuple[str, str, str]]:

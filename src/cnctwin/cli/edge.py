@@ -199,7 +199,18 @@ def _machine_parser() -> argparse.ArgumentParser:
 _NOT_IN_PLANT = {"help"}
 
 
-def _read_plant(path: Path) -> Any:
+def read_plant_file(path: Path) -> Any:
+    """A plant file read and every machine's ``edge run`` options checked.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The plant TOML file.
+
+    Returns
+    -------
+    cnctwin.edge.plant.PlantFile
+    """
     from cnctwin.edge.plant import read_plant
 
     parser = _machine_parser()
@@ -248,7 +259,7 @@ def _plant_worker(plant_path: str, names: list[str], report_queue: Any) -> None:
     stop = threading.Event()
     worker_signals(stop)
     report_queue.put(("", "ready", os.getpid()))  # a stop now drains instead of killing
-    plant = _read_plant(Path(plant_path))
+    plant = read_plant_file(Path(plant_path))
     builders = []
     for name in names:
         ns = _machine_args(plant.path, plant.machine(name))
@@ -303,7 +314,7 @@ def _run_plant(args: argparse.Namespace) -> int:
                           "[[machine]] table)")
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers {args.workers}: give 1 or more")
-    plant = _read_plant(args.config)
+    plant = read_plant_file(args.config)
     runner = PlantRunner(plant, _plant_worker, workers=args.workers)
     main_thread = threading.current_thread() is threading.main_thread()
     old = signal.signal(signal.SIGTERM, lambda *a: runner.stop()) if main_thread else None
@@ -641,7 +652,7 @@ def _status(args: argparse.Namespace) -> int:
     from cnctwin.edge import read_status
 
     if args.config is not None:
-        plant = _read_plant(args.config)
+        plant = read_plant_file(args.config)
         if args.json:
             out: dict[str, Any] = {}
             for m in plant.machines:

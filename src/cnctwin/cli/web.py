@@ -31,8 +31,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--machine", type=Path, metavar="FILE",
                    help="machine file (cnctwin calibrate): its calibrated spindle for the "
                    "cutting torque and the twin comparison of every recording")
-    p.add_argument("--live", type=Path, metavar="DIR",
-                   help="--out directory of `cnctwin edge run` to follow on the live page")
+    p.add_argument("--live", type=Path, action="append", default=[], metavar="DIR",
+                   help="--out directory of `cnctwin edge run` to follow (repeatable: the "
+                   "plant page /plant shows a status tile per machine)")
+    p.add_argument("--plant", type=Path, metavar="FILE",
+                   help="plant file of `cnctwin edge run --config`: follow every machine's "
+                   "state directory (plant page /plant, live page per machine)")
     p.add_argument("--fleet", type=Path, metavar="DIR",
                    help="result directory of `cnctwin fleet ... --out DIR`: the fleet page "
                    "(/fleet) ranks its machines by alarms, wear, drift and data quality")
@@ -50,10 +54,23 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def _cmd_web(args: argparse.Namespace) -> int:
-    if args.store is None and not args.recording and args.live is None and args.fleet is None:
+    lives: dict[str, Path] = {}
+    for d in args.live:
+        label = d.name or str(d)
+        while label in lives:  # two state directories of one name in different folders
+            label += "'"
+        lives[label] = d
+    if args.plant is not None:
+        from cnctwin.cli.edge import read_plant_file
+
+        for m in read_plant_file(args.plant).machines:
+            lives[m.name] = m.out
+            m.out.mkdir(parents=True, exist_ok=True)  # the runtime may start after the page
+    if args.store is None and not args.recording and not lives and args.fleet is None:
         raise ConfigError("give --store PATH_OR_URL and/or --recording PATH (a file or a "
                           "directory of recordings) and/or --live DIR (`cnctwin edge run "
-                          "--out DIR`); `cnctwin ingest FILE --store PATH` fills a store")
+                          "--out DIR`) or --plant plant.toml; `cnctwin ingest FILE --store "
+                          "PATH` fills a store")
     if args.store is not None and "://" not in args.store and not Path(args.store).exists():
         raise ConfigError(f"store path {args.store} does not exist; create it with `cnctwin "
                           f"ingest FILE... --store {args.store}` or check the path")
@@ -80,7 +97,7 @@ def _cmd_web(args: argparse.Namespace) -> int:
 
         machine = load_machine(args.machine)
     app = create_app(store_url=args.store, recordings=args.recording, model=args.model,
-                     machine=machine, live=args.live, fleet=args.fleet, salvage=args.salvage,
+                     machine=machine, live=lives or None, fleet=args.fleet, salvage=args.salvage,
                      token=token)
     print(f"cnctwin web: serving on http://{args.host}:{args.port}/ (Ctrl-C stops)", flush=True)
     uvicorn.run(app, host=args.host, port=args.port, log_level="warning")

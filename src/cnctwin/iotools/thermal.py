@@ -38,7 +38,7 @@ from cnctwin.iotools._csvtable import read_csv_table
 from cnctwin.iotools._text import read_utf8_text
 from cnctwin.recording import ExternalChannel
 
-__all__ = ["read_thermal_camera_csv"]
+__all__ = ["THERMAL_CAMERA_FILE", "find_thermal_camera", "read_thermal_camera_csv"]
 
 _UNIT_RE = re.compile(r"^\s*(?P<name>.*?)\s*[\[(](?P<unit>[^\])]*)[\])]\s*$")
 _TEMP_UNITS = {"°c": "c", "c": "c", "degc": "c", "deg c": "c", "celsius": "c", "k": "k",
@@ -214,3 +214,31 @@ def read_thermal_camera_csv(
         index = pd.Index(hole, name="hole")
     data = pd.DataFrame(out, index=index)
     return ExternalChannel(name=name, data=data, units=out_units, fs_hz=None, source=spath)
+
+
+THERMAL_CAMERA_FILE = "thermal_camera.csv"
+"""File name of the camera readings beside a recording (what the simulator writes)."""
+
+
+def find_thermal_camera(recording_path: str | PathLike[str]) -> Path | None:
+    """The thermal-camera file that belongs to a recording, if one lies beside it.
+
+    Parameters
+    ----------
+    recording_path : str or path-like
+        A recording file, or a recording directory (the Parquet layouts).
+
+    Returns
+    -------
+    pathlib.Path or None
+        ``thermal_camera.csv`` in the recording file's folder, or inside or beside a
+        recording directory (``cnctwin simulate tool_wear_run --out DIR`` writes it there);
+        None when there is none.
+    """
+    p = Path(recording_path)
+    folders = [p, p.parent] if p.is_dir() else [p.parent]
+    for folder in folders:
+        cand = folder / THERMAL_CAMERA_FILE
+        if cand.is_file():
+            return cand
+    return None

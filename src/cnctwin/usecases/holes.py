@@ -417,7 +417,7 @@ def hole_record(
         model = SpindleModel.from_parameters("thesis_spinner_840dsl")
         model_note = "thesis_spinner_840dsl (default, not calibrated to this machine)"
     else:
-        model_note = repr(model)
+        model_note = model.describe()
     with np.errstate(invalid="ignore"):
         torque = model.cutting_torque(current, speed, fs_hz=fs)
     zl = _zload(rec, z_axis)

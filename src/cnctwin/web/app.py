@@ -25,7 +25,7 @@ import contextlib
 import itertools
 import os
 import threading
-from collections.abc import AsyncIterator, Sequence
+from collections.abc import AsyncIterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,6 +42,7 @@ from cnctwin.spindle import SpindleModel
 from cnctwin.web import analyses, pages
 from cnctwin.web.decimate import envelope_decimate
 from cnctwin.web.live import LiveSource
+from cnctwin.web.plant import PlantStatusOptions, plant_state
 from cnctwin.web.sources import Catalog, Entry
 
 __all__ = ["DERIVED_TORQUE", "Dashboard", "create_app", "plot_payload"]
@@ -126,10 +127,26 @@ class Dashboard:
     model: SpindleModel | None = None
     model_source: str = ""
     machine_file: MachineFile | None = None
-    live: LiveSource | None = None
+    lives: dict[str, LiveSource] = field(default_factory=dict)
     title: str = "cnctwin"
     _lock: threading.RLock = field(default_factory=threading.RLock)
     _cache: dict[tuple[str, ...], Any] = field(default_factory=dict)
+
+    @property
+    def live(self) -> LiveSource | None:
+        """The first live source (the live page's default machine), or None."""
+        return next(iter(self.lives.values()), None)
+
+    def live_source(self, machine: str | None) -> LiveSource:
+        """The live source of ``machine`` (its label), or the first one when None."""
+        if not self.lives:
+            raise ConfigError("no live source: start the dashboard with --live DIR (the --out "
+                              "directory of `cnctwin edge run`) or --plant plant.toml")
+        if machine is None:
+            return next(iter(self.lives.values()))
+        if machine not in self.lives:
+            raise ConfigError(f"no live machine {machine!r}; known: {', '.join(self.lives)}")
+        return self.lives[machine]
 
     # ------------------------------------------------------------------ helpers
     def _cached(self, key: tuple[str, ...], make: Any) -> Any:
@@ -350,13 +367,31 @@ def _add_token_auth(app: Any, token: str, title: str) -> None:
     app.post("/login", include_in_schema=False)(_login)
 
 
+def _live_sources(live: Any) -> dict[str, LiveSource]:
+    """Label -> live source from one directory, a list of them or a mapping."""
+    if live is None:
+        return {}
+    if isinstance(live, Mapping):
+        return {str(k): LiveSource(v) for k, v in live.items()}
+    items = [live] if isinstance(live, str | os.PathLike) else list(live)
+    out: dict[str, LiveSource] = {}
+    for item in items:
+        src = LiveSource(item)
+        label = src.directory.name or str(src.directory)
+        while label in out:  # two state directories of one name in different folders
+            label = f"{label}'"
+        out[label] = src
+    return out
+
+
 def create_app(
     *,
     store_url: str | None = None,
     recordings: Sequence[str | os.PathLike[str]] = (),
     model: SpindleModel | str | os.PathLike[str] | None = None,
     machine: MachineFile | str | os.PathLike[str] | None = None,
-    live: str | os.PathLike[str] | None = None,
+    live: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]
+    | Mapping[str, str | os.PathLike[str]] | None = None,
     fleet: str | os.PathLike[str] | None = None,
     title: str = "cnctwin",
     cache_size: int = 4,
@@ -380,9 +415,11 @@ def create_app(
         The machine file (``cnctwin calibrate``): its calibrated spindle is the torque model
         where ``model`` is not given, and every recording gets a comparison with the twin
         (``/recordings/ID/compare``, ``/api/recordings/ID/compare``).
-    live : path-like, optional
+    live : path-like, sequence of path-like or mapping, optional
         ``--out`` directory of a ``cnctwin edge run`` (or its ``results.jsonl``) to follow
-        on the live page.
+        on the live page; several (a plant: label -> directory, or a list labelled by the
+        directory names) give the plant page ``/plant`` (``GET /api/plant``): a status per
+        machine (running, cutting, alarm, stale) with its latest torque, hole and alarm.
     fleet : path-like, optional
         Result directory of the fleet jobs (``cnctwin fleet ... --out DIR``): the fleet page
         ``/fleet`` and ``GET /api/fleet`` rank its machines by alarms, wear, drift and data
@@ -418,7 +455,8 @@ def create_app(
         from cnctwin.fleet.summary import read_fleet_tables
 
         read_fleet_tables(fleet)  # fails early, naming the directory
-    if store_url is None and not recordings and live is None and fleet is None:
+    lives = _live_sources(live)
+    if store_url is None and not recordings and not lives and fleet is None:
         raise ConfigError("nothing to show: give a store (--store PATH_OR_URL), recording "
                           "files or directories (--recording PATH) and/or an edge run's "
                           "state directory (--live DIR)")
@@ -444,7 +482,7 @@ def create_app(
         catalog=Catalog(store_url=store_url, recordings=recordings, cache_size=cache_size,
                         salvage=salvage),
         model=spindle, model_source=model_source, machine_file=mfile,
-        live=LiveSource(live) if live is not None else None, title=title)
+        lives=lives, title=title)
     plotly_js = _plotly_js()
     JsonResponse = _json_response_class()
     @contextlib.asynccontextmanager
@@ -503,7 +541,23 @@ def create_app(
     def _overview() -> Any:
         return HTMLResponse(pages.overview_page(dash.title, dash.machines(),
                                                 dash.catalog.entries(), live=dash.live is not None,
-                                                store_url=dash.catalog.store_url))
+                                                store_url=dash.catalog.store_url,
+                                                plant=plant_state(dash.lives)))
+
+    @app.get("/plant", response_class=HTMLResponse, include_in_schema=False)
+    def _plant_page() -> Any:
+        return HTMLResponse(pages.plant_page(dash.title, plant_state(dash.lives)))
+
+    @app.get("/plant/tiles", response_class=HTMLResponse, include_in_schema=False)
+    def _plant_tiles() -> Any:
+        return HTMLResponse(pages.plant_tiles(plant_state(dash.lives)))
+
+    @app.get("/api/plant")
+    def api_plant(stale_s: float = 10.0, alarm_hold_s: float = 60.0) -> Any:
+        """Status per machine (running, cutting, alarm, stale, finished, waiting) with its
+        latest torque, hole and alarm, from each edge runtime's state directory."""
+        opt = PlantStatusOptions(stale_s=stale_s, alarm_hold_s=alarm_hold_s)
+        return JsonResponse(plant_state(dash.lives, options=opt))
 
     @app.get("/recordings/{entry_id}", response_class=HTMLResponse, include_in_schema=False)
     def _recording_page(entry_id: str) -> Any:
@@ -550,9 +604,13 @@ def create_app(
                              "tables": tables, "sort": sort, "machines": rows})
 
     @app.get("/live", response_class=HTMLResponse, include_in_schema=False)
-    def _live_page() -> Any:
-        src = dash.live
-        return HTMLResponse(pages.live_page(dash.title, str(src.results) if src else None))
+    def _live_page(machine: str | None = None) -> Any:
+        if not dash.lives:
+            return HTMLResponse(pages.live_page(dash.title, None))
+        src = dash.live_source(machine)
+        label = next(k for k, v in dash.lives.items() if v is src)
+        return HTMLResponse(pages.live_page(dash.title, str(src.results), machine=label,
+                                            machines=list(dash.lives)))
 
     # ------------------------------------------------------------------ API
     @app.get("/api/recordings")
@@ -607,20 +665,15 @@ def create_app(
         return JsonResponse(dash.trends_payload(dash.machine_ids(machine)))
 
     @app.get("/api/live/status")
-    def api_live_status() -> Any:
-        if dash.live is None:
-            raise ConfigError("no live source: start the dashboard with --live DIR (the --out "
-                              "directory of `cnctwin edge run`)")
-        return JsonResponse(dash.live.status())
+    def api_live_status(machine: str | None = None) -> Any:
+        return JsonResponse(dash.live_source(machine).status())
 
     @app.get("/api/live/stream")
     async def api_live_stream(from_start: bool = False, limit: int | None = None,
-                              kinds: str | None = None) -> Any:
-        if dash.live is None:
-            raise ConfigError("no live source: start the dashboard with --live DIR (the --out "
-                              "directory of `cnctwin edge run`)")
+                              kinds: str | None = None, machine: str | None = None) -> Any:
+        live = dash.live_source(machine)
         wanted = {k.strip() for k in kinds.split(",")} if kinds else None
-        gen = dash.live.events(from_start=from_start, limit=limit, kinds=wanted)
+        gen = live.events(from_start=from_start, limit=limit, kinds=wanted)
         return StreamingResponse(gen, media_type="text/event-stream",
                                  headers={"Cache-Control": "no-cache",
                                           "X-Accel-Buffering": "no"})

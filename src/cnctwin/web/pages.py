@@ -17,7 +17,8 @@ from typing import Any
 from cnctwin.signals import parse_column
 from cnctwin.web.sources import Entry
 
-__all__ = ["fleet_page", "live_page", "machine_page", "overview_page", "recording_page"]
+__all__ = ["fleet_page", "live_page", "machine_page", "overview_page", "plant_page",
+           "plant_tiles", "recording_page"]
 
 
 def _e(v: object) -> str:
@@ -53,7 +54,8 @@ def _page(title: str, body: str, *, page: str, config: dict[str, Any] | None = N
 {scripts}<script src="/static/app.js"></script>
 </head><body data-page="{_e(page)}">
 <header><a class="brand" href="/">cnctwin</a>
-<nav><a href="/">fleet</a> <a href="/fleet">fleet results</a> <a href="/live">live</a>
+<nav><a href="/">fleet</a> <a href="/plant">plant</a> <a href="/fleet">fleet results</a>
+<a href="/live">live</a>
 <a href="/api/docs">API</a></nav></header>
 <main>
 {body}
@@ -89,9 +91,70 @@ def _quality_cells(e: Entry) -> str:
             f"<td title=\"{_e(chr(10).join(e.issues))}\">{q.n_issues}</td>")
 
 
+def _clock(v: Any) -> str:
+    """UTC time of day of an ISO time (``08:00:03Z``), '–' without one."""
+    if not v:
+        return "–"
+    text = str(v)
+    return _e(text[11:19] + "Z") if len(text) >= 19 and text[10] == "T" else _e(text)
+
+
+def _tile(m: dict[str, Any]) -> str:
+    label = str(m.get("label") or m.get("machine") or "?")
+    tq, hole, alarm = m.get("torque"), m.get("hole"), m.get("alarm")
+    torque = (f"{_num(tq.get('torque_mean_nm'), '{:.2f}', 'Nm')} mean, "
+              f"{_num(tq.get('torque_max_nm'), '{:.2f}', 'Nm')} peak at "
+              f"{_num(tq.get('speed_rpm'), '{:.0f}', 'rpm')} ({_clock(tq.get('time'))})"
+              if tq else "none yet")
+    hole_txt = (f"#{_e(hole.get('hole'))}: {_num(hole.get('depth_mm'), '{:.2f}', 'mm')}, "
+                f"{_num(hole.get('torque_mean_nm'), '{:.2f}', 'Nm')} "
+                f"({_clock(hole.get('time'))}){' partial' if hole.get('partial') else ''}"
+                if hole else "none yet")
+    alarm_txt = (f"{_e(alarm.get('detector'))}, score {_num(alarm.get('score'), '{:.3g}')} "
+                 f"({_clock(alarm.get('time'))})" if alarm else "none")
+    age = m.get("status_age_s")
+    data_age = m.get("data_age_s")
+    seen = (f"status {_num(age, '{:.0f}', 's')} ago, data {_num(data_age, '{:.1f}', 's')} old"
+            if age is not None else "no status yet")
+    state = str(m.get("state", "waiting"))
+    name = m.get("machine") if m.get("machine") != label else ""
+    return f"""<div class="tile state-{_e(state)}" data-machine="{_e(label)}">
+<div class="tile-head"><a href="/live?machine={_q(label)}">{_e(label)}</a>
+<span class="badge">{_e(state)}</span></div>
+<div class="muted">{_e(name)} {_e(m.get('reason'))}</div>
+<dl class="summary"><dt>torque</dt><dd>{torque}</dd><dt>last hole</dt><dd>{hole_txt}</dd>
+<dt>last alarm</dt><dd>{alarm_txt}</dd><dt>counts</dt><dd>{_e(m.get('holes') or 0)} holes,
+{_e(m.get('alarms') or 0)} alarms</dd><dt>seen</dt><dd>{seen}</dd></dl></div>"""
+
+
+def plant_tiles(rows: Sequence[dict[str, Any]]) -> str:
+    """One status tile per machine (:func:`cnctwin.web.plant.plant_state` rows)."""
+    if not rows:
+        return ('<p class="muted">No edge runtimes: start the dashboard with '
+                "<code>--live DIR</code> (repeatable) or <code>--plant plant.toml</code>.</p>")
+    return "".join(_tile(m) for m in rows)
+
+
+def plant_page(title: str, rows: Sequence[dict[str, Any]]) -> str:
+    """The plant at a glance: a tile per machine, refreshed every 2 s."""
+    counts = {st: sum(1 for m in rows if m.get("state") == st) for st in
+              ("running", "cutting", "alarm", "stale", "finished", "waiting")}
+    summary = ", ".join(f"{n} {st}" for st, n in counts.items() if n) or "no machines"
+    body = f"""
+<h1>{_e(title)}: plant</h1>
+<p class="muted" id="plant-summary">{len(rows)} machines: {_e(summary)}. States: running (data
+flows, no cut), cutting, alarm (an anomaly alarm in the last minute of machine time), stale (no
+status or no data for 10 s), finished, waiting (not started).</p>
+<div id="plant" class="tiles">{plant_tiles(rows)}</div>
+"""
+    return _page(f"{title}: plant", body, page="plant", plotly=False)
+
+
 def overview_page(title: str, machines: Sequence[dict[str, Any]], entries: Sequence[Entry], *,
-                  live: bool, store_url: str | None) -> str:
-    """Fleet and recordings with duration, rate, gaps, jitter, partial flags, last activity."""
+                  live: bool, store_url: str | None,
+                  plant: Sequence[dict[str, Any]] = ()) -> str:
+    """Fleet and recordings with duration, rate, gaps, jitter, partial flags, last activity;
+    the plant's tiles first when edge runtimes are followed."""
     m_rows = "".join(
         f"<tr><td><a href=\"/machines/{_q(m['machine'])}\">{_e(m['machine'])}</a></td>"
         f"<td>{m['n_recordings']}</td><td>{_num(m['duration_s'], '{:.1f}', 's')}</td>"
@@ -111,22 +174,27 @@ def overview_page(title: str, machines: Sequence[dict[str, Any]], entries: Seque
             f"<td>{_num(e.duration_s, '{:.3f}', 's')}</td><td>{e.n_cycles}</td>"
             f"{_quality_cells(e)}</tr>")
     src = f"store {_e(store_url)}" if store_url else "recording files"
-    body = f"""
-<h1>{_e(title)}: fleet</h1>
-<p class="muted">Source: {src}. {len(entries)} recordings.
-{'<a href="/live">Live view</a> of the edge runtime.' if live else ''}</p>
-<h2>Machines</h2>
+    tiles = (f'<h2>Plant now</h2><div id="plant" class="tiles">{plant_tiles(plant)}</div>'
+             if plant else "")
+    machines_html = f"""<h2>Machines</h2>
 <table id="machines"><thead><tr><th>machine</th><th>recordings</th><th>duration</th>
 <th>cycles</th><th>gaps (missing)</th><th>partial</th><th>last activity (UTC)</th></tr></thead>
-<tbody>{m_rows}</tbody></table>
-<h2>Recordings</h2>
+<tbody>{m_rows}</tbody></table>""" if machines else ""
+    recordings_html = f"""<h2>Recordings</h2>
 <p class="muted">Rate: nominal = 1 / cycle time; effective = recorded cycles per second of the
 counter span (gaps lower it). Jitter: scatter of the source's wall-clock stamps about the cycle
 counter. Issues: what the reader repaired (hover for the list).</p>
 <table id="recordings"><thead><tr><th>recording</th><th>machine</th><th>format</th>
 <th>start (UTC)</th><th>end (UTC)</th><th>duration</th><th>cycles</th><th>rate</th>
 <th>effective</th><th>gaps (missing)</th><th>jitter</th><th>partial</th><th>issues</th></tr>
-</thead><tbody>{''.join(r_rows)}</tbody></table>
+</thead><tbody>{''.join(r_rows)}</tbody></table>""" if entries else ""
+    body = f"""
+<h1>{_e(title)}: fleet</h1>
+<p class="muted">Source: {src}. {len(entries)} recordings.
+{'<a href="/live">Live view</a> of the edge runtime.' if live else ''}</p>
+{tiles}
+{machines_html}
+{recordings_html}
 """
     return _page(f"{title}: fleet", body, page="overview", plotly=False)
 
@@ -203,7 +271,13 @@ across gaps the wall clock and the counter differ by {_num(q.clock_step_s, '{:.4
  if twin else ''}
 <section id="signal-section"><h2>Signals</h2>
 <div class="row"><div>{_signal_picker(signals, e.units)}
-<br><button id="plot-btn">plot</button> <button id="reset-btn">full range</button></div>
+<br><button id="plot-btn">plot</button> <button id="reset-btn">full range</button>
+<fieldset id="range-picker"><legend>time range [s from the first cycle]</legend>
+<label>from <input id="range-start" type="number" step="any" min="0"
+ max="{e.duration_s:.3f}" placeholder="0"></label>
+<label>to <input id="range-end" type="number" step="any" min="0"
+ max="{e.duration_s:.3f}" placeholder="{e.duration_s:.3f}"></label>
+<button id="range-btn">show</button></fieldset></div>
 <div class="grow"><div id="plot" class="plot"></div>
 <div id="plot-info" class="muted"></div></div></div>
 <p class="muted">Min/max envelope of each pixel column computed on the server: no peak is lost;
@@ -212,7 +286,7 @@ zoom in (drag) to refetch the range, at full resolution once it fits the plot wi
 {_use_case_sections(calibrated)}
 """
     cfg = {"recording": e.id, "api": f"/api/recordings/{_q(e.id)}",
-           "signals": _default_signals(signals)}
+           "signals": _default_signals(signals), "duration_s": e.duration_s}
     return _page(f"{title}: {e.label}", body, page="recording", config=cfg)
 
 
@@ -268,15 +342,27 @@ order.</p><ul>{rows}</ul>
     return _page(f"{title}: {machine}", body, page="machine", config=cfg)
 
 
-def live_page(title: str, results: str | None) -> str:
-    """Edge-runtime status, rolling cutting torque, holes and alarms as they arrive (SSE)."""
+def live_page(title: str, results: str | None, *, machine: str | None = None,
+              machines: Sequence[str] = ()) -> str:
+    """Edge-runtime status, rolling cutting torque, holes and alarms as they arrive (SSE);
+    a machine picker when several runtimes are followed."""
     if results is None:
         body = ("<h1>Live</h1><p>No live source. Start the dashboard with "
                 "<code>--live DIR</code>, the <code>--out DIR</code> of <code>cnctwin edge "
                 "run</code>.</p>")
         return _page(f"{title}: live", body, page="none", plotly=False)
+    picker = ""
+    if len(machines) > 1:
+        opts = "".join(f'<option value="{_e(m)}"{" selected" if m == machine else ""}>{_e(m)}'
+                       "</option>" for m in machines)
+        picker = (f'<form method="get" action="/live"><label>machine <select name="machine" '
+                  f'onchange="this.form.submit()">{opts}</select></label></form>')
     body = f"""
-<h1>Live <span class="muted">{_e(results)}</span></h1>
+<h1>Live{f": {_e(machine)}" if machine else ""} <span class="muted">{_e(results)}</span></h1>
+{picker}
+<label>window <select id="live-window"><option value="30" selected>last 30 s</option>
+<option value="120">last 2 min</option><option value="600">last 10 min</option>
+<option value="3600">last hour</option></select></label>
 <div id="live-state" class="muted">connecting…</div>
 <dl id="live-status" class="summary"></dl>
 <div id="live-plot" class="plot"></div>
@@ -284,7 +370,8 @@ def live_page(title: str, results: str | None) -> str:
 <table id="live-holes"></table></div></div>
 <div><h2>Alarms and gaps</h2><ul id="live-events"></ul></div></div>
 """
-    return _page(f"{title}: live", body, page="live", config={"results": results})
+    return _page(f"{title}: live", body, page="live",
+                 config={"results": results, "machine": machine})
 
 
 _FLEET_SORTS = (("alarms", "alarms"), ("wear", "wear"), ("drift", "drift"),

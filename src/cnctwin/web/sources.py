@@ -288,8 +288,19 @@ class Catalog:
             self._recs.move_to_end(entry_id)
             return self._recs[entry_id]
         from cnctwin.iotools import read_recording
+        from cnctwin.iotools.thermal import find_thermal_camera, read_thermal_camera_csv
 
-        return self._remember(entry_id, read_recording(path, salvage=self.salvage))
+        rec = read_recording(path, salvage=self.salvage)
+        camera = find_thermal_camera(path) if "thermal_camera" not in rec.external else None
+        if camera is not None:
+            # the simulator (and a user's camera export) writes the readings beside the
+            # recording: the tool-temperature soft sensor calibrates on them
+            try:
+                rec.external["thermal_camera"] = read_thermal_camera_csv(camera)
+                rec.meta.issues.append(f"thermal camera readings from {camera}")
+            except CnctwinError as exc:
+                rec.meta.issues.append(f"thermal camera file {camera} not used: {exc}")
+        return self._remember(entry_id, rec)
 
     def recording(self, entry_id: str) -> Recording:
         """The whole recording (cached)."""

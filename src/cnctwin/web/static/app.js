@@ -36,6 +36,11 @@ const cnctwin = (() => {
     const plot = $("plot"), info = $("plot-info"), sel = $("signals");
     for (const o of sel.options) o.selected = c.signals.includes(o.value);
     let range = null, busy = 0;
+    const given = new URLSearchParams(location.search);  // a shared link: ?start_s=..&end_s=..
+    if (given.has("start_s") && given.has("end_s")) {
+      const a = parseFloat(given.get("start_s")), b = parseFloat(given.get("end_s"));
+      if (Number.isFinite(a) && Number.isFinite(b) && b > a) range = [a, b];
+    }
     async function draw() {
       const names = Array.from(sel.selectedOptions).map((o) => o.value);
       if (!names.length) { info.textContent = "pick one or more signals"; return; }
@@ -58,12 +63,27 @@ const cnctwin = (() => {
           (r.note ? ` – ${r.note}` : "")).join("; ");
       } catch (err) { info.textContent = `error: ${err.message}`; }
     }
+    const showRange = () => {  // the picker shows what is drawn (zoom included)
+      for (const [id, v] of [["range-start", range && range[0]], ["range-end", range && range[1]]]) {
+        const text = range ? Number(v).toFixed(3) : "";
+        $(id).value = text;
+        $(id).setAttribute("value", text);  // also in the page's markup (saved pages, tests)
+      }
+    };
     const hook = () => plot.on && plot.on("plotly_relayout", (ev) => {
-      if (ev["xaxis.range[0]"] !== undefined) { range = [ev["xaxis.range[0]"], ev["xaxis.range[1]"]]; draw(); }
-      else if (ev["xaxis.autorange"]) { range = null; draw(); }
+      if (ev["xaxis.range[0]"] !== undefined) { range = [ev["xaxis.range[0]"], ev["xaxis.range[1]"]]; showRange(); draw(); }
+      else if (ev["xaxis.autorange"]) { range = null; showRange(); draw(); }
     });
     $("plot-btn").onclick = () => draw();
-    $("reset-btn").onclick = () => { range = null; draw(); };
+    $("reset-btn").onclick = () => { range = null; showRange(); draw(); };
+    $("range-btn").onclick = () => {
+      const a = parseFloat($("range-start").value), b = parseFloat($("range-end").value);
+      const lo = Number.isFinite(a) ? a : 0, hi = Number.isFinite(b) ? b : c.duration_s;
+      if (!(hi > lo)) { info.textContent = "the end of the range must come after its start"; return; }
+      range = [lo, hi];
+      draw();
+    };
+    showRange();
     draw().then(hook);
     useCases(c.api);
   }
@@ -121,9 +141,10 @@ const cnctwin = (() => {
   }
 
   // ---------------------------------------------------------------- live
-  function livePage() {
+  function livePage(c) {
     const plot = $("live-plot"), state = $("live-state"), holes = [], events = $("live-events");
-    const WINDOW_S = 30, xs = [], ys = [];
+    const xs = [], ys = [];
+    let WINDOW_S = Number($("live-window").value) || 30;
     let t0 = null, cycleTime = 0.002, pending = false;
     Plotly.newPlot(plot, [{x: [], y: [], type: "scatter", mode: "lines", line: {width: 1}, name: "cutting torque"}],
       {margin: {l: 60, r: 20, t: 30, b: 40}, title: {text: "cutting torque [Nm] (last 30 s)", font: {size: 13}},
@@ -134,9 +155,15 @@ const cnctwin = (() => {
       Plotly.react(plot, [{x: xs.slice(), y: ys.slice(), type: "scatter", mode: "lines", line: {width: 1}}], plot.layout);
       plot.dataset.points = String(xs.length);
     };
+    $("live-window").onchange = (ev) => {
+      WINDOW_S = Number(ev.target.value) || 30;
+      const label = ev.target.selectedOptions[0].textContent;
+      Plotly.relayout(plot, {"title.text": `cutting torque [Nm] (${label})`});
+    };
     const q = new URLSearchParams({from_start: "true"});
     const limit = new URLSearchParams(location.search).get("limit");
     if (limit) q.set("limit", limit);
+    if (c.machine) q.set("machine", c.machine);
     const es = new EventSource(`/api/live/stream?${q}`);
     es.addEventListener("end", () => {
       es.close();
@@ -194,7 +221,16 @@ const cnctwin = (() => {
     const page = document.body.dataset.page, c = cfg();
     if (page === "recording") recordingPage(c);
     else if (page === "machine") useCases(c.api);
-    else if (page === "live") livePage();
+    else if (page === "live") livePage(c);
+    if ($("plant")) setInterval(refreshPlant, 2000);
+  }
+
+  // ---------------------------------------------------------------- plant tiles
+  async function refreshPlant() {
+    try {
+      const r = await fetch("/plant/tiles");
+      if (r.ok) $("plant").innerHTML = await r.text();
+    } catch (err) { /* the next refresh tries again; the tiles say how old their data is */ }
   }
   return {start, getJSON};
 })();
