@@ -33,3 +33,25 @@ def test_missing_store_path(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
 def test_missing_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["web", "--recording", str(tmp_path / "x.json"), "--port", "1"]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_plant_file_and_several_live_directories(tmp_path: Path, wear12: dict,  # type: ignore[type-arg]
+                                                 model_file: Path,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """`cnctwin web --plant plant.toml --live DIR`: every machine of the plant file is
+    followed under its name, the extra directory under its folder name."""
+    import uvicorn
+
+    served = {}
+    monkeypatch.setattr(uvicorn, "run", lambda app, **kw: served.update(app=app, **kw))
+    plant = tmp_path / "plant.toml"
+    plant.write_text(f'out = "state"\n[[machine]]\nname = "mill-1"\nsource = '
+                     f'"{wear12["path"]}"\nmodel = "{model_file}"\n[[machine]]\nname = "mill-2"'
+                     f'\nsource = "{wear12["path"]}"\nmodel = "{model_file}"\n',
+                     encoding="utf-8")
+    extra = tmp_path / "other" / "lathe"
+    extra.mkdir(parents=True)
+    assert main(["web", "--plant", str(plant), "--live", str(extra), "--port", "8999"]) == 0
+    lives = served["app"].state.dashboard.lives
+    assert list(lives) == ["lathe", "mill-1", "mill-2"]
+    assert lives["mill-2"].directory == tmp_path / "state" / "mill-2"
