@@ -16,7 +16,8 @@ from cnctwin.cli.demo import DEMO_SECTIONS, DemoContext
 
 
 @pytest.mark.slow
-def test_demo_quick_writes_report(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_demo_quick_writes_report(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                  capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.chdir(Path(__file__).resolve().parents[1])  # the real C4A file is relative
     seen: list[DemoContext] = []
 
@@ -29,6 +30,10 @@ def test_demo_quick_writes_report(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
         assert main(["demo", "--quick", "--out", str(tmp_path), "--seed", "3"]) == 0
     finally:
         DEMO_SECTIONS.remove(hook)
+    printed = capsys.readouterr().out
+    assert "simulating the air-cut sweep" in printed
+    # progress lines without the source location of the logging call (issue 16, point 2)
+    assert not re.search(r"\b\w+\.py:\d+", printed), printed[:2000]
     report = tmp_path / "report.html"
     text = report.read_text(encoding="utf-8")
     for title in (

@@ -567,7 +567,7 @@ def run_demo(out_dir: str | Path = "out/demo", *, seed: int = 0, quick: bool = F
     from cnctwin.report import Report
 
     t_start = time.perf_counter()
-    con = console or Console(width=max(Console().width, 150))
+    con = console or Console(width=max(Console().width, 150), log_path=False)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rep = Report("cnctwin demo: spindle digital twin of the thesis campaign",
