@@ -50,3 +50,19 @@ def test_nan_repair_is_reported_and_figure_builds() -> None:
     assert len([a for a in fig.axes if a.get_visible()]) == 3  # 2 panels + colorbar
     with pytest.raises(ConfigError):
         correlation_matrix(df[["CURRENT|SP1"]], fs_hz=FS)
+
+
+def test_heatmaps_fit_a_report_page_at_a_readable_size() -> None:
+    """Issue 16, point 3: four 10-signal matrices (the demo's Fig. 3.7 analogue) were drawn
+    in one row ~38 in wide and shrunk to the report's 11 in: 2 pt labels. Now at most two
+    panels per row and the figure no wider than the page, so 8 pt stays 8 pt."""
+    from cnctwin.analysis.correlation import PAGE_WIDTH_IN
+
+    names = [f"SIG{i}|X1" for i in range(10)]
+    m = pd.DataFrame(np.eye(10), index=names, columns=names)
+    fig = plot_correlation_heatmaps({k: m for k in ("raw", "lowpass 10 Hz", "a", "b")})
+    width_in, _ = fig.get_size_inches()
+    assert width_in <= PAGE_WIDTH_IN + 0.5
+    shrink = min(1.0, PAGE_WIDTH_IN / width_in)
+    label_pt = min(t.get_fontsize() for a in fig.axes[:4] for t in a.get_xticklabels())
+    assert label_pt * shrink >= 7.0

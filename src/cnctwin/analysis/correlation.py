@@ -15,7 +15,7 @@ from cnctwin.exceptions import ConfigError
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["correlation_label", "correlation_matrix", "plot_correlation_heatmaps"]
+__all__ = ["PAGE_WIDTH_IN", "correlation_label", "correlation_matrix", "plot_correlation_heatmaps"]
 
 
 def correlation_label(cutoff_hz: float | None) -> str:
@@ -91,6 +91,10 @@ def correlation_matrix(
     return out
 
 
+PAGE_WIDTH_IN = 11.0
+"""Width of a report page's figure area [inch] (1100 px at 100 dpi, the report's width)."""
+
+
 def plot_correlation_heatmaps(
     matrices: Mapping[str, pd.DataFrame],
     *,
@@ -111,11 +115,13 @@ def plot_correlation_heatmaps(
     annotate : bool, default True
         Write the coefficient into each cell.
     ncols : int, optional
-        Panels per row; default all in one row up to 4.
+        Panels per row; default 2 (one if there is one), so the figure fits a report page
+        at its own size and the labels stay readable.
     cmap : str, default 'RdBu_r'
         Colormap, fixed to the range [-1, 1].
     figsize_in : (float, float), optional
-        Figure size [inch].
+        Figure size [inch]; default at most :data:`PAGE_WIDTH_IN` wide, cells 0.25-0.55 in
+        (annotations only where a cell is at least 0.3 in).
 
     Returns
     -------
@@ -128,11 +134,12 @@ def plot_correlation_heatmaps(
     if not keys:
         raise ConfigError("no correlation matrices to plot")
     n = len(keys)
-    ncols = ncols or min(n, 4)
+    ncols = ncols or min(n, 2)
     nrows = int(np.ceil(n / ncols))
     size = max(len(matrices[k]) for k in keys)
-    cell = 0.45 + 0.05 * size
-    figsize = figsize_in or (ncols * (1.5 + size * cell), nrows * (1.2 + size * cell))
+    cell = min(0.55, max(0.25, ((PAGE_WIDTH_IN - 0.8) / ncols - 1.8) / max(size, 1)))
+    figsize = figsize_in or (ncols * (1.8 + size * cell) + 0.8, nrows * (1.6 + size * cell))
+    annotate = annotate and cell >= 0.3
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=figsize, layout="constrained")
@@ -145,17 +152,17 @@ def plot_correlation_heatmaps(
         m = matrices[key]
         im = ax.imshow(m.to_numpy(dtype=float), vmin=-1.0, vmax=1.0, cmap=cmap)
         labels = [str(c) for c in m.columns]
-        ax.set_xticks(range(len(labels)), labels, rotation=60, ha="right", fontsize=7)
-        ax.set_yticks(range(len(labels)), [str(c) for c in m.index], fontsize=7)
+        ax.set_xticks(range(len(labels)), labels, rotation=60, ha="right", fontsize=8)
+        ax.set_yticks(range(len(labels)), [str(c) for c in m.index], fontsize=8)
         title = titles[i] if titles is not None else f"{letters[i % 26]}) {key}"
-        ax.set_title(title, fontsize=9)
+        ax.set_title(title, fontsize=10)
         if annotate:
             vals = m.to_numpy(dtype=float)
             for r in range(vals.shape[0]):
                 for c in range(vals.shape[1]):
                     v = vals[r, c]
-                    txt = "nan" if not np.isfinite(v) else f"{v:.2f}"
-                    ax.text(c, r, txt, ha="center", va="center", fontsize=6,
+                    txt = "–" if not np.isfinite(v) else f"{v:.2f}"
+                    ax.text(c, r, txt, ha="center", va="center", fontsize=7,
                             color="white" if np.isfinite(v) and abs(v) > 0.6 else "black")
     for j in range(n, nrows * ncols):
         axes[j // ncols][j % ncols].set_visible(False)
