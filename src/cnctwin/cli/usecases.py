@@ -215,7 +215,10 @@ def _cmd_wear(args: argparse.Namespace) -> int:
             raise ConfigError(f"--measured holes {bad} are not in the record "
                               f"(holes 0..{int(holes['hole'].max())})")
         idx = holes.reset_index().set_index("hole").loc[list(measured), "index"].to_numpy()
-        est = WearEstimator().fit(inc[idx], list(measured.values()))
+        # with three or more measured holes the offset is fitted too: the run-in wear of a
+        # new tool comes before the baseline sets can show a torque increase
+        est = WearEstimator().fit(inc[idx], list(measured.values()),
+                                  fit_offset=len(measured) >= 3)
         wear = est.predict(inc)
         out["wear_um"] = wear
         summary += [("wear per unit increase", f"{est.slope_um:.4g} ± {est.slope_std_um:.2g} µm"),

@@ -103,7 +103,9 @@ from cnctwin.sim.tool import (
     ToolThermal,
     WearCurve,
     flank_wear_um,
+    free_cooling,
     tool_temperature,
+    tool_temperatures,
 )
 
 __all__ = [
@@ -642,10 +644,16 @@ class DrillingProcess(_Process):
                                       if initial_tool_temperature_c is None
                                       else float(initial_tool_temperature_c))
         self.temperature_c = self.initial_temperature_c
+        self.holder_temperature_c = cfg.tool_thermal.ambient_temperature_c
+        self._holder_at_extraction: dict[int, float] = {}
         self._acc: dict[int, list[float]] = {}
         # chisel-edge skid direction per hole (uniform): own stream, drawn once per new hole
         self._dir_rng = np.random.default_rng(int(self.rng.integers(2**32)))
         self._entry_dir: dict[int, float] = {}
+
+    def holder_at_extraction(self, hole: int) -> float:
+        """Holder temperature when ``hole``'s cut ended [degC] (ambient with one node)."""
+        return self._holder_at_extraction.get(hole, self.cfg.tool_thermal.ambient_temperature_c)
 
     def _entry_directions(self, hole: NDArray[np.int64]) -> NDArray[np.float64]:
         for h in np.unique(hole[hole >= 0]):
@@ -680,8 +688,17 @@ class DrillingProcess(_Process):
                    "hardness_factor": np.broadcast_to(hard, depth.shape)[idx]}
             base = drilling_load(depth[idx], n[idx], feed[idx], rng=None, **sub)
             power[idx] = np.abs(base.torque_nm * n[idx]) * 2.0 * math.pi / 60.0
-        temp = tool_temperature(power, dt_s=dt, thermal=cfg.tool_thermal,
-                                initial_c=self.temperature_c)
+        if cfg.tool_thermal.two_node:
+            temp, holder = tool_temperatures(power, dt_s=dt, thermal=cfg.tool_thermal,
+                                             initial_c=self.temperature_c,
+                                             initial_holder_c=self.holder_temperature_c)
+            self.holder_temperature_c = float(holder[-1])
+            for h in np.unique(hole[(hole >= 0) & (depth > 0.0)]):
+                last = np.flatnonzero((hole == h) & (depth > 0.0))[-1]
+                self._holder_at_extraction[int(h)] = float(holder[last])
+        else:
+            temp = tool_temperature(power, dt_s=dt, thermal=cfg.tool_thermal,
+                                    initial_c=self.temperature_c)
         self.temperature_c = float(temp[-1])
         load = drilling_load(depth, n, feed, rng=self.rng, tool_temperature_c=temp,
                              walk_direction_rad=self.walk_direction_rad,
@@ -1384,10 +1401,13 @@ def tool_wear_run(
     for r in rows:
         r["set"] = (r["hole"] - start_hole) // holes_per_set
         r["position_in_set"] = (r["hole"] - start_hole) % holes_per_set
-        # camera reading delay_s after extraction: the tool cools freely (same lumped model)
-        r["tool_temperature_camera_c"] = th.ambient_temperature_c + (
-            r["tool_temperature_extraction_c"] - th.ambient_temperature_c
-        ) * math.exp(-cfg.camera.delay_s / th.time_constant_s)
+        # camera reading delay_s after extraction: the tool cools freely (the same model:
+        # one node, or the tip with its holder)
+        holder_c = hook.holder_at_extraction(int(r["hole"]))
+        if th.two_node:
+            r["tool_holder_temperature_extraction_c"] = holder_c
+        r["tool_temperature_camera_c"] = free_cooling(
+            r["tool_temperature_extraction_c"], holder_c, cfg.camera.delay_s, th)
     cam = None
     if rows:
         cam = thermal_camera_channel([r["extraction_s"] for r in rows],

@@ -28,7 +28,9 @@ __all__ = [
     "WearCurve",
     "first_order_recursion",
     "flank_wear_um",
+    "free_cooling",
     "tool_temperature",
+    "tool_temperatures",
 ]
 
 
@@ -97,9 +99,17 @@ def flank_wear_um(hole: ArrayLike, *, curve: WearCurve | None = None) -> NDArray
 
 @dataclass(frozen=True)
 class ToolThermal:
-    """Lumped (one-node) tool-tip temperature model.
+    """Tool-tip temperature model: one node (the default), or the tip and its holder.
 
-    C dT/dt = eta P_cut - (T - T_amb) / R
+    One node: ``C dT/dt = eta P_cut - (T - T_amb) / R``. With a holder node
+    (``holder_heat_capacity_j_per_k > 0``) the tip also conducts into the shank and holder,
+    which warm slowly over many holes and cool slowly in the pauses:
+
+    ``C dT/dt = eta P - (T - T_amb) / R - (T - T_h) / R_th``,
+    ``C_h dT_h/dt = (T - T_h) / R_th - (T_h - T_amb) / R_h``.
+
+    The soft sensor of :mod:`cnctwin.usecases.thermal` assumes one node; a simulated tool
+    with a holder node shows it the model error a real tool would (issue 13).
 
     Attributes
     ----------
@@ -109,21 +119,64 @@ class ToolThermal:
     heat_capacity_j_per_k : float
         Heat capacity of the tip region C [J/K]. [E] 3.3 (~16 g carbide)
     resistance_k_per_w : float
-        Thermal resistance to the surroundings R [K/W]; R C ~ 24 s gives a time constant of
-        about 4 hole cycles. [E] 7.3
+        Thermal resistance of the tip to the surroundings R [K/W]; R C ~ 24 s gives a time
+        constant of about 4 hole cycles. [E] 7.3
     ambient_temperature_c : float
         Ambient [degC]. [T] 25 (reflected temperature set in the FLIR software, §5.2)
+    holder_heat_capacity_j_per_k : float
+        Heat capacity C_h of the shank and holder [J/K]; 0 = one node. [E] 40-120 for a
+        shrink-fit holder's steel near the tool (0.1-0.3 kg x 460 J/(kg K)), when used
+    tip_to_holder_k_per_w : float
+        Conduction resistance R_th from the tip into the holder [K/W]. [E] 10
+    holder_to_ambient_k_per_w : float
+        Resistance R_h of the holder to the surroundings [K/W]. [E] 2
     """
 
     heat_fraction: float = 0.10
     heat_capacity_j_per_k: float = 3.3
     resistance_k_per_w: float = 7.3
     ambient_temperature_c: float = 25.0
+    holder_heat_capacity_j_per_k: float = 0.0
+    tip_to_holder_k_per_w: float = 10.0
+    holder_to_ambient_k_per_w: float = 2.0
 
     @property
     def time_constant_s(self) -> float:
-        """R C [s]."""
+        """R C [s] (of the tip alone)."""
         return self.resistance_k_per_w * self.heat_capacity_j_per_k
+
+    @property
+    def two_node(self) -> bool:
+        """True when the holder node is on."""
+        return self.holder_heat_capacity_j_per_k > 0.0
+
+    def state_matrices(self, dt_s: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Exact zero-order-hold discretisation of the two-node model over ``dt_s``.
+
+        Parameters
+        ----------
+        dt_s : float
+            Step [s].
+
+        Returns
+        -------
+        ad : numpy.ndarray
+            2 x 2 state transition of (tip, holder) temperature rises over ambient [-].
+        bd : numpy.ndarray
+            Rise per watt of cutting power held over the step, shape (2,) [K/W].
+        """
+        from scipy.linalg import expm
+
+        c1, c2 = self.heat_capacity_j_per_k, self.holder_heat_capacity_j_per_k
+        g1, g12, g2 = (1.0 / self.resistance_k_per_w, 1.0 / self.tip_to_holder_k_per_w,
+                       1.0 / self.holder_to_ambient_k_per_w)
+        a = np.array([[-(g1 + g12) / c1, g12 / c1], [g12 / c2, -(g12 + g2) / c2]])
+        b = np.array([self.heat_fraction / c1, 0.0])
+        m = np.zeros((3, 3))
+        m[:2, :2] = a * dt_s
+        m[:2, 2] = b * dt_s
+        e = expm(m)
+        return np.ascontiguousarray(e[:2, :2]), np.ascontiguousarray(e[:2, 2])
 
 
 def tool_temperature(
@@ -184,3 +237,85 @@ def first_order_recursion(x: ArrayLike, a: float, *, b0: float = 1.0,
     importing scipy.signal (0.3 s of the simulator's start-up)."""
     return _first_order_kernel(np.ascontiguousarray(x, dtype=np.float64), float(a),
                                float(b0), float(y_prev))
+
+
+@njit(cache=True)
+def _two_node_kernel(p: NDArray[np.float64], ad: NDArray[np.float64], bd: NDArray[np.float64],
+                     y1: float, y2: float) -> tuple[NDArray[np.float64],
+                                                    NDArray[np.float64]]:  # pragma: no cover
+    tip = np.empty(p.size)
+    holder = np.empty(p.size)
+    for i in range(p.size):
+        n1 = ad[0, 0] * y1 + ad[0, 1] * y2 + bd[0] * p[i]
+        n2 = ad[1, 0] * y1 + ad[1, 1] * y2 + bd[1] * p[i]
+        y1, y2 = n1, n2
+        tip[i] = y1
+        holder[i] = y2
+    return tip, holder
+
+
+def tool_temperatures(
+    cutting_power_w: ArrayLike,
+    *,
+    dt_s: float,
+    thermal: ToolThermal | None = None,
+    initial_c: float | None = None,
+    initial_holder_c: float | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Tip and holder temperatures under a sampled cutting power [degC].
+
+    Parameters
+    ----------
+    cutting_power_w : array-like of float
+        Cutting power M_c omega per sample [W] (held over each sample).
+    dt_s : float
+        Sample interval [s].
+    thermal : ToolThermal, optional
+        Model parameters; with one node this is :func:`tool_temperature` (same bits) and the
+        holder stays at ambient.
+    initial_c, initial_holder_c : float, optional
+        Temperatures before the first sample [degC]; default ambient.
+
+    Returns
+    -------
+    tip, holder : numpy.ndarray
+        Temperatures at the end of each sample [degC].
+    """
+    th = thermal if thermal is not None else ToolThermal()
+    amb = th.ambient_temperature_c
+    if not th.two_node:
+        tip = tool_temperature(cutting_power_w, dt_s=dt_s, thermal=th, initial_c=initial_c)
+        return tip, np.full(tip.shape, amb)
+    if dt_s <= 0:
+        raise ConfigError(f"tool_temperatures: dt_s must be > 0, got {dt_s}")
+    p = np.maximum(np.ascontiguousarray(cutting_power_w, dtype=np.float64), 0.0)
+    ad, bd = th.state_matrices(dt_s)
+    y1 = 0.0 if initial_c is None else initial_c - amb
+    y2 = 0.0 if initial_holder_c is None else initial_holder_c - amb
+    tip, holder = _two_node_kernel(p, ad, bd, float(y1), float(y2))
+    return tip + amb, holder + amb
+
+
+def free_cooling(tip_c: float, holder_c: float, seconds: float,
+                 thermal: ToolThermal) -> float:
+    """Tip temperature ``seconds`` after the cut ends (no power) [degC].
+
+    Parameters
+    ----------
+    tip_c, holder_c : float
+        Tip and holder temperatures at the start [degC] (``holder_c`` unused with one node).
+    seconds : float
+        Cooling time [s].
+    thermal : ToolThermal
+        Model parameters.
+
+    Returns
+    -------
+    float
+        ``T_amb + (T - T_amb) exp(-t / RC)`` with one node; the two-node solution otherwise.
+    """
+    amb = thermal.ambient_temperature_c
+    if not thermal.two_node:
+        return amb + (tip_c - amb) * math.exp(-seconds / thermal.time_constant_s)
+    ad, _ = thermal.state_matrices(seconds)
+    return amb + float(ad[0, 0] * (tip_c - amb) + ad[0, 1] * (holder_c - amb))
