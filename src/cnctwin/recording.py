@@ -408,7 +408,17 @@ def unwrap_cycles(
 
 
 def find_gaps(cycles: NDArray[np.int64]) -> list[CounterGap]:
-    """Jumps larger than one in a sorted, unwrapped cycle counter."""
+    """Jumps larger than one in a sorted, unwrapped cycle counter.
+
+    Parameters
+    ----------
+    cycles : numpy.ndarray
+        Unwrapped cycle counter in recording order.
+
+    Returns
+    -------
+    list of CounterGap
+    """
     c = np.asarray(cycles, dtype=np.int64)
     if c.size < 2:
         return []
@@ -492,7 +502,13 @@ def cycles_to_time(
 
 
 def empty_events() -> pd.DataFrame:
-    """An events table with no rows and the column types of :data:`EVENT_COLUMNS`."""
+    """An events table with no rows and the column types of :data:`EVENT_COLUMNS`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        No rows, the :data:`EVENT_COLUMNS`.
+    """
     return pd.DataFrame(
         {
             "cycle": pd.Series(dtype="int64"),
@@ -510,7 +526,13 @@ def empty_events() -> pd.DataFrame:
 
 
 def empty_lf() -> pd.DataFrame:
-    """An LF table with no rows and the column types of :data:`LF_COLUMNS`."""
+    """An LF table with no rows and the column types of :data:`LF_COLUMNS`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        No rows, the :data:`LF_COLUMNS`.
+    """
     return pd.DataFrame(
         {
             "cycle": pd.Series(dtype="int64"),

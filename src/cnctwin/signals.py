@@ -286,12 +286,36 @@ def lookup(name: str) -> SignalSpec:
 
 
 def column(code: str, axis: str) -> str:
-    """Column name ``CODE|AXIS`` of a signal on an axis (``column('CURRENT', 'SP1')``)."""
+    """Column name ``CODE|AXIS`` of a signal on an axis (``column('CURRENT', 'SP1')``).
+
+    Parameters
+    ----------
+    code : str
+        Signal code (``CURRENT``).
+    axis : str
+        Axis name (``SP1``).
+
+    Returns
+    -------
+    str
+        ``CODE|AXIS``.
+    """
     return f"{code}|{axis}"
 
 
 def parse_column(name: str) -> tuple[str, str | None]:
-    """Split ``"CURRENT|SP1"`` into ``("CURRENT", "SP1")``; ``"CYCLE"`` -> ``("CYCLE", None)``."""
+    """Split ``"CURRENT|SP1"`` into ``("CURRENT", "SP1")``; ``"CYCLE"`` -> ``("CYCLE", None)``.
+
+    Parameters
+    ----------
+    name : str
+        Column name (``CURRENT|SP1``, ``time``).
+
+    Returns
+    -------
+    tuple
+        (code, axis or None).
+    """
     if "|" in name:
         code, axis = name.split("|", 1)
         return code, axis
@@ -299,14 +323,36 @@ def parse_column(name: str) -> tuple[str, str | None]:
 
 
 def unit(name: str) -> str:
-    """Unit of a column ``CODE|AXIS`` from the catalog; ``""`` for codes not in the catalog."""
+    """Unit of a column ``CODE|AXIS`` from the catalog; ``""`` for codes not in the catalog.
+
+    Parameters
+    ----------
+    name : str
+        Column name or signal code.
+
+    Returns
+    -------
+    str
+        The catalog unit (``''`` when unknown).
+    """
     code, axis = parse_column(name)
     spec = CATALOG.get(code)
     return spec.unit_for(axis) if spec else ""
 
 
 def glossary_markdown(specs: Iterable[SignalSpec] | None = None) -> str:
-    """The signal glossary as a Markdown page (generated from :data:`CATALOG`)."""
+    """The signal glossary as a Markdown page (generated from :data:`CATALOG`).
+
+    Parameters
+    ----------
+    specs : iterable, optional
+        Signal specs; default the whole catalog.
+
+    Returns
+    -------
+    str
+        A Markdown table.
+    """
     specs = list(CATALOG.values()) if specs is None else list(specs)
     lines = [
         "# Signal glossary",

@@ -338,7 +338,23 @@ def plateau_segments(
     spindle: str = "SP1",
     signal: str = "CURRENT",
 ) -> list[NDArray[np.float64]]:
-    """The raw HF samples of one signal on each plateau, in the order of ``plateaus``."""
+    """The raw HF samples of one signal on each plateau, in the order of ``plateaus``.
+
+    Parameters
+    ----------
+    rec : Recording
+        The recording.
+    plateaus : pandas.DataFrame
+        Plateaus (:func:`find_plateaus`).
+    spindle : str, default 'SP1'
+        Spindle axis name.
+    signal : str, default 'CURRENT'
+        Signal code (``CURRENT``, ``TORQUE``, ...).
+
+    Returns
+    -------
+    list of numpy.ndarray
+    """
     col = f"{signal}|{spindle}"
     x = rec.signal(col).to_numpy(dtype=np.float64)
     cyc = rec.cycles
@@ -351,13 +367,33 @@ def plateau_segments(
 
 
 def air_cut_correlation(stats: pd.DataFrame) -> pd.DataFrame:
-    """Correlation matrix of the per-speed mean values (thesis Fig. 3.9)."""
+    """Correlation matrix of the per-speed mean values (thesis Fig. 3.9).
+
+    Parameters
+    ----------
+    stats : pandas.DataFrame
+        Output of :func:`air_cut_statistics`.
+
+    Returns
+    -------
+    pandas.DataFrame
+    """
     cols = ["speed_rpm", *[c for c in stats.columns if c.endswith(" mean")]]
     return stats[cols].corr()
 
 
 def plot_air_cut_correlation(stats: pd.DataFrame) -> Figure:
-    """Heatmap of :func:`air_cut_correlation` (thesis Fig. 3.9)."""
+    """Heatmap of :func:`air_cut_correlation` (thesis Fig. 3.9).
+
+    Parameters
+    ----------
+    stats : pandas.DataFrame
+        Output of :func:`air_cut_statistics`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     m = air_cut_correlation(stats)
     m.columns = [c.replace(" mean", "") for c in m.columns]
     m.index = [c.replace(" mean", "") for c in m.index]
@@ -816,7 +852,27 @@ def linear_region_from_recording(
     k_sigma: float = 3.0,
     min_points: int = 5,
 ) -> LinearRegion:
-    """:func:`linear_region` on an air-cut sweep recording (statistics and spectra)."""
+    """:func:`linear_region` on an air-cut sweep recording (statistics and spectra).
+
+    Parameters
+    ----------
+    rec : Recording
+        The recording.
+    plateaus : pandas.DataFrame, optional
+        Plateaus (:func:`find_plateaus`); default found in ``rec``.
+    spindle : str, default 'SP1'
+        Spindle axis name.
+    poles : int, optional
+        Motor poles (the stator-line filter); default from the machine description.
+    k_sigma : float, default 3.0
+        Residual threshold in standard deviations for the end of the linear region.
+    min_points : int, default 5
+        Fewest plateaus in the region.
+
+    Returns
+    -------
+    LinearRegion
+    """
     if plateaus is None:
         plateaus = speed_plateaus(rec, spindle=spindle)
     stats = air_cut_statistics(rec, plateaus, spindle=spindle)

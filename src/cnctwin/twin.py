@@ -210,6 +210,10 @@ def has_repeated_speeds(speed_rpm: ArrayLike, energy: ArrayLike, *, rel_tol: flo
         Speeds within this relative distance count as the same.
     min_speeds : int, default 3
         How many repeated speeds are needed.
+
+    Returns
+    -------
+    bool
     """
     n = np.abs(np.asarray(speed_rpm, dtype=np.float64))
     e = np.asarray(energy, dtype=np.float64)
@@ -475,6 +479,18 @@ def friction_energy(rec: Recording, *, spindle: str = "SP1") -> NDArray[np.float
     Proportional to the friction energy turned into heat in the bearings and rotor at
     constant speed (``P = Kt I omega``); the scale (``Kt 2 pi / 60``) cancels in
     :func:`thermal_drift_from_warm_up`.
+
+    Parameters
+    ----------
+    rec : Recording
+        The recording.
+    spindle : str, default 'SP1'
+        Spindle axis name.
+
+    Returns
+    -------
+    numpy.ndarray
+        Per HF row [A rpm s].
     """
     cur = np.abs(rec.signal(f"CURRENT|{spindle}").to_numpy(dtype=np.float64))
     speed, _ = spindle_speed_rpm(rec, spindle)

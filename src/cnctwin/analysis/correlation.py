@@ -19,7 +19,17 @@ __all__ = ["PAGE_WIDTH_IN", "correlation_label", "correlation_matrix", "plot_cor
 
 
 def correlation_label(cutoff_hz: float | None) -> str:
-    """Label of one matrix: ``'raw'`` or ``'lowpass 10 Hz'``."""
+    """Label of one matrix: ``'raw'`` or ``'lowpass 10 Hz'``.
+
+    Parameters
+    ----------
+    cutoff_hz : float, optional
+        Low-pass cutoff [Hz]; None for the raw signals.
+
+    Returns
+    -------
+    str
+    """
     return "raw" if cutoff_hz is None else f"lowpass {cutoff_hz:g} Hz"
 
 

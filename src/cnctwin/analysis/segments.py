@@ -70,7 +70,18 @@ def hysteresis_mask(x: ArrayLike, *, high: float, low: float) -> NDArray[np.bool
 
 
 def runs(mask: ArrayLike) -> NDArray[np.int64]:
-    """Start and end (inclusive) indices of the True runs of a boolean array, shape (n, 2)."""
+    """Start and end (inclusive) indices of the True runs of a boolean array, shape (n, 2).
+
+    Parameters
+    ----------
+    mask : array-like
+        Boolean per sample.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(k, 2)`` start and end (exclusive) of each run of True.
+    """
     m = np.asarray(mask, dtype=bool)
     if m.size == 0:
         return np.empty((0, 2), dtype=np.int64)
@@ -85,6 +96,20 @@ def lf_on_hf(rec: Recording, code: str, axis: str | None) -> pd.Series | None:
 
     LF signal names are matched by catalog code or alias (``IQ_ACT``, ``r0078``,
     ``ActualIq``) with an optional ``|AXIS`` suffix that must equal ``axis`` when present.
+
+    Parameters
+    ----------
+    rec : Recording
+        The recording.
+    code : str
+        Low-frequency signal code.
+    axis : str, optional
+        Axis name, or None for a channel signal.
+
+    Returns
+    -------
+    pandas.Series or None
+        The value held on each HF row; None if not recorded.
     """
     if rec.lf.empty:
         return None

@@ -114,7 +114,9 @@ def plot_error_signals(rec: Recording, axis: str) -> Figure:
     Parameters
     ----------
     rec : Recording
+        A recording with the axis' DES_POS/ENC_POS (and CONT_DEV, CTRL_POS where recorded).
     axis : str
+        Axis name.
 
     Returns
     -------

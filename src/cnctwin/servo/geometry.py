@@ -241,6 +241,13 @@ def contour_error(
 def fit_circle_lsq(x: FloatArray, y: FloatArray) -> tuple[float, float, float]:
     """Least-squares circle (geometric, Gauss-Newton from the algebraic Kasa fit).
 
+    Parameters
+    ----------
+    x : numpy.ndarray
+        X coordinates [mm].
+    y : numpy.ndarray
+        Y coordinates [mm].
+
     Returns
     -------
     (xc, yc, r) : float

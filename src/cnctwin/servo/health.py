@@ -401,6 +401,13 @@ def baseline_parameter(
 def z_score(estimate: Estimate, baseline: BaselineParameter) -> tuple[float, float]:
     """Standardised distance of a window's estimate from the baseline.
 
+    Parameters
+    ----------
+    estimate : Estimate
+        A window's estimate with its standard error.
+    baseline : BaselineParameter
+        The baseline of the parameter.
+
     Returns
     -------
     z : float

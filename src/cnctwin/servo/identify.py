@@ -199,6 +199,28 @@ def apply_setpoint_chain(
 
     Two interpolated delays in series (dead-time adaptation and dead-time balancing, FFW modes
     3/4) are not one delay of their sum: each linear interpolation smooths a little.
+
+    Parameters
+    ----------
+    des : numpy.ndarray
+        DES_POS samples of one contiguous run [unit].
+    jerk_type : str
+        Jerk-filter model (:data:`JERK_FILTER_TYPES`).
+    jerk_cycles : tuple
+        Filter time(s) [cycles] (two for the double moving average, time and damping for PT2).
+    delay_cycles : float
+        First interpolated delay [cycles].
+    pt1_cycles : float
+        First PT1 time constant [cycles].
+    pt1b_cycles : float, default 0.0
+        Second PT1 time constant [cycles].
+    delay2_cycles : float, default 0.0
+        Second interpolated delay [cycles].
+
+    Returns
+    -------
+    numpy.ndarray
+        The filtered setpoint [unit].
     """
     y = _jerk(des, jerk_type, np.asarray(jerk_cycles, dtype=float))
     y = delay(delay(y, max(delay_cycles, 0.0)), max(delay2_cycles, 0.0))
@@ -696,6 +718,23 @@ def constant_velocity_runs(
     A run keeps cycles whose velocity stays within ``rel_tol`` of the run median and is above
     ``min_speed_frac`` of the largest speed; the first quarter of each run (transient) is
     dropped.
+
+    Parameters
+    ----------
+    v_per_s : numpy.ndarray
+        Setpoint velocity [unit/s].
+    segs : list
+        Contiguous segments to search.
+    min_cycles : int, default 40
+        Shortest run kept [cycles].
+    rel_tol : float, default 0.02
+        Allowed deviation from the run median [-].
+    min_speed_frac : float, default 0.02
+        Smallest speed as a share of the largest [-].
+
+    Returns
+    -------
+    list of slice
     """
     vmax = float(np.nanmax(np.abs(v_per_s))) if np.isfinite(v_per_s).any() else 0.0
     if vmax == 0.0:
@@ -743,6 +782,10 @@ def fit_axis_friction(
         Resamples of the bootstrap over runs.
     seed : int, default 0
         Random seed.
+
+    Returns
+    -------
+    AxisFrictionFit
 
     Notes
     -----

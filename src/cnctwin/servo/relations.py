@@ -156,7 +156,20 @@ class RelationReport:
 def residual_stats(
     residual: FloatArray, tolerance: float
 ) -> tuple[float, float, float, int]:
-    """RMS, max |r|, fraction within ``tolerance`` and count of the finite residuals."""
+    """RMS, max |r|, fraction within ``tolerance`` and count of the finite residuals.
+
+    Parameters
+    ----------
+    residual : numpy.ndarray
+        Residual samples.
+    tolerance : float
+        Band counted as within [unit of the residual].
+
+    Returns
+    -------
+    tuple
+        (rms, max |r|, fraction within the tolerance, number of finite samples).
+    """
     r = residual[np.isfinite(residual)]
     if r.size == 0:
         return float("nan"), float("nan"), float("nan"), 0

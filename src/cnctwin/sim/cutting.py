@@ -137,7 +137,17 @@ MATERIALS: dict[str, Material] = {
 
 
 def get_material(material: str | Material) -> Material:
-    """Look up a material by key (or pass a :class:`Material` through)."""
+    """Look up a material by key (or pass a :class:`Material` through).
+
+    Parameters
+    ----------
+    material : str or Material
+        A name in :data:`MATERIALS` or a :class:`Material` (returned as is).
+
+    Returns
+    -------
+    Material
+    """
     if isinstance(material, Material):
         return material
     try:
@@ -150,7 +160,22 @@ def get_material(material: str | Material) -> Material:
 
 
 def kienzle_kc(h_mm: ArrayLike, *, kc1_n_per_mm2: float, mc: float) -> NDArray[np.float64]:
-    """Kienzle specific cutting force kc = kc1.1 h^-mc [N/mm^2] (h clipped at 1 um)."""
+    """Kienzle specific cutting force kc = kc1.1 h^-mc [N/mm^2] (h clipped at 1 um).
+
+    Parameters
+    ----------
+    h_mm : array-like
+        Uncut chip thickness h [mm] (clipped at 1 µm).
+    kc1_n_per_mm2 : float
+        Specific cutting force at h = 1 mm [N/mm²].
+    mc : float
+        Kienzle exponent [-].
+
+    Returns
+    -------
+    numpy.ndarray
+        kc [N/mm²].
+    """
     h = np.maximum(np.asarray(h_mm, dtype=np.float64), 1e-3)
     return np.asarray(kc1_n_per_mm2 * h ** (-mc), dtype=np.float64)
 
@@ -187,6 +212,11 @@ def wear_factor(
         Edge radius r [mm].
     gain : float, default 1
         Calibration of the magnitude (1 = HSS/cast-iron values of the 1977 paper).
+
+    Returns
+    -------
+    numpy.ndarray
+        M(w) / M(0) [-].
     """
     f = np.maximum(np.asarray(feed_mm_per_rev, dtype=np.float64), 1e-3)
     w = np.maximum(np.asarray(wear_um, dtype=np.float64), 0.0) / 1000.0
@@ -274,6 +304,28 @@ def drill_torque_nm(
 ) -> NDArray[np.float64]:
     """Mean drilling torque at full engagement [Nm].
 
+    Parameters
+    ----------
+    feed_mm_per_rev : array-like
+        Feed f [mm/rev].
+    speed_rpm : array-like
+        Spindle speed [rpm] (speed correction of kc).
+    drill : Drill, optional
+        Tool geometry; default :class:`Drill`.
+    material : str or Material, default 'aisi1045'
+        Workpiece material (name in :data:`MATERIALS` or a :class:`Material`).
+    wear_um : array-like, default 0.0
+        Flank wear VB [µm].
+    hardness_factor : array-like, default 1.0
+        Multiplier on kc (a harder batch).
+    model : DrillingModel, optional
+        Drilling model constants; default :class:`DrillingModel`.
+
+    Returns
+    -------
+    numpy.ndarray
+        Mean cutting torque at full engagement [Nm].
+
     Notes
     -----
     Mc = f kc D^2 sin(kappa) / 8000 (ISCAR), kc = kc1.1 h^-mc (v_ref/vc)^z, h = (f/2) sin(kappa)
@@ -303,6 +355,28 @@ def drill_thrust_n(
 ) -> NDArray[np.float64]:
     """Mean drilling thrust (feed force) at full engagement [N].
 
+    Parameters
+    ----------
+    feed_mm_per_rev : array-like
+        Feed f [mm/rev].
+    speed_rpm : array-like
+        Spindle speed [rpm] (speed correction of kc).
+    drill : Drill, optional
+        Tool geometry; default :class:`Drill`.
+    material : str or Material, default 'aisi1045'
+        Workpiece material (name in :data:`MATERIALS` or a :class:`Material`).
+    wear_um : array-like, default 0.0
+        Flank wear VB [µm].
+    hardness_factor : array-like, default 1.0
+        Multiplier on kc (a harder batch).
+    model : DrillingModel, optional
+        Drilling model constants; default :class:`DrillingModel`.
+
+    Returns
+    -------
+    numpy.ndarray
+        Mean thrust at full engagement [N].
+
     Notes
     -----
     Ff = 0.63 (D/2) f kc sin(kappa) kf (ISCAR), same kc as :func:`drill_torque_nm`; the chisel
@@ -323,6 +397,18 @@ def lip_height_difference_um(
     wear_um: ArrayLike, *, model: DrillingModel | None = None
 ) -> NDArray[np.float64]:
     """Effective axial lip-height difference delta of a drill with flank wear VB [um].
+
+    Parameters
+    ----------
+    wear_um : array-like
+        Flank wear VB [µm].
+    model : DrillingModel, optional
+        Drilling model constants (new-drill difference, wear asymmetry, clearance angle).
+
+    Returns
+    -------
+    numpy.ndarray
+        Lip-height difference [µm].
 
     Notes
     -----
@@ -357,6 +443,11 @@ def rotating_force_n(
         Point angle (kappa = point angle / 2).
     model : DrillingModel, optional
         Lip-height difference, wear asymmetry, lip share of the thrust.
+
+    Returns
+    -------
+    numpy.ndarray
+        Force amplitude [N].
 
     Notes
     -----

@@ -176,12 +176,36 @@ Fault = LooseTool | ToolBreakage | Chatter | HardnessChange
 
 
 def fault_to_dict(fault: Fault) -> dict[str, object]:
-    """Plain dict with a ``type`` key (for truth.json)."""
+    """Plain dict with a ``type`` key (for truth.json).
+
+    Parameters
+    ----------
+    fault : Fault
+        A fault object.
+
+    Returns
+    -------
+    dict
+        ``kind`` and the fault's fields (what ``truth.json`` stores).
+    """
     return {"type": type(fault).__name__, **dataclasses.asdict(fault)}
 
 
 def hardness_factor(faults: Sequence[Fault], hole: ArrayLike) -> NDArray[np.float64]:
-    """Product of all :class:`HardnessChange` factors active at ``hole`` (0-based)."""
+    """Product of all :class:`HardnessChange` factors active at ``hole`` (0-based).
+
+    Parameters
+    ----------
+    faults : sequence
+        The faults of a run.
+    hole : array-like
+        Hole numbers (0-based).
+
+    Returns
+    -------
+    numpy.ndarray
+        Factor on kc per hole [-].
+    """
     h = np.asarray(hole, dtype=np.float64)
     out = np.ones(h.shape)
     for f in faults:

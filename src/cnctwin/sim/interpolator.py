@@ -243,6 +243,22 @@ def transition_distance_mm(v_start: float, v_end: float, a: float, j: float) -> 
     """Path length needed to go from ``v_start`` to ``v_end`` [mm] (symmetric S-curve).
 
     Equals ``(v_start + v_end) / 2 * acceleration_time_s(v_end - v_start, a, j)``.
+
+    Parameters
+    ----------
+    v_start : float
+        Start velocity [mm/s].
+    v_end : float
+        End velocity [mm/s].
+    a : float
+        Acceleration limit [mm/s²].
+    j : float
+        Jerk limit [mm/s³].
+
+    Returns
+    -------
+    float
+        Path length [mm].
     """
     return 0.5 * (v_start + v_end) * acceleration_time_s(v_end - v_start, a, j)
 

@@ -1052,6 +1052,43 @@ def air_cut_sweep(
 
     Truth ``steps``: per speed the cycle range of the steady window (the dwell after
     ``settle_s``).
+
+    Parameters
+    ----------
+    out : str or path-like, optional
+        Output folder (recordings, ``truth.json``, sensor files); None keeps everything in memory.
+    seed : int, default 0
+        Random seed of the noise and of every drawn hidden value.
+    overrides : mapping, optional
+        Dotted machine/process parameters set on top of ``machine`` (``{"spindle.kt_nm_per_a":
+        0.9}``).
+    machine : Machine, optional
+        Base machine description; default :meth:`Machine.thesis_default`.
+    n_speeds : int, default 126
+        Number of plateaus (thesis: 126).
+    max_speed_rpm : float, default 18000.0
+        Highest speed [rpm].
+    min_speed_rpm : float, optional
+        Lowest speed [rpm]; default the first step.
+    speeds_rpm : sequence, optional
+        Explicit plateau speeds in order [rpm] (replaces ``n_speeds``/min/max; a speed may repeat).
+    dwell_s : float, default 3.0
+        Time at each speed [s].
+    settle_s : float, default 0.5
+        Time after a speed change before the plateau counts [s].
+    fmt : str, default 'c4a'
+        Recording format: ``'c4a'`` (Capture4Analysis JSON) or ``'parquet'`` (chunk directory).
+    max_file_mb : float, optional
+        Split a Capture4Analysis recording into files of at most this size [MB]; None: one file.
+    chunk_cycles : int, default 50000
+        Cycles simulated and written per chunk (bounds memory).
+    progress : callable, optional
+        Called with (fraction done 0..1, message) while the scenario runs.
+
+    Returns
+    -------
+    ScenarioResult
+        Recordings (or their files), the hidden truth and the scenario's options.
     """
     cfg = ScenarioConfig.build(overrides, machine=machine)
     o = _prepare(out)
@@ -1129,6 +1166,35 @@ def warm_up(
     warms up and the current falls. Truth ``runs``: per minute the rotor and stator
     temperature, Kt and the friction torque. Each run is simulated in memory (it needs the
     per-cycle drive truth; ~1.5 GB peak for 25 min) and then written.
+
+    Parameters
+    ----------
+    out : str or path-like, optional
+        Output folder (recordings, ``truth.json``, sensor files); None keeps everything in memory.
+    seed : int, default 0
+        Random seed of the noise and of every drawn hidden value.
+    overrides : mapping, optional
+        Dotted machine/process parameters set on top of ``machine`` (``{"spindle.kt_nm_per_a":
+        0.9}``).
+    machine : Machine, optional
+        Base machine description; default :meth:`Machine.thesis_default`.
+    speeds_rpm : sequence, default (5000.0, 7000.0)
+        Speeds, one recording each, each from a cold motor [rpm].
+    minutes : float, default 25.0
+        Time at each speed [min].
+    fmt : str, default 'c4a'
+        Recording format: ``'c4a'`` (Capture4Analysis JSON) or ``'parquet'`` (chunk directory).
+    max_file_mb : float, default 200.0
+        Split a Capture4Analysis recording into files of at most this size [MB]; None: one file.
+    chunk_cycles : int, default 50000
+        Cycles simulated and written per chunk (bounds memory).
+    progress : callable, optional
+        Called with (fraction done 0..1, message) while the scenario runs.
+
+    Returns
+    -------
+    ScenarioResult
+        Recordings (or their files), the hidden truth and the scenario's options.
     """
     cfg = ScenarioConfig.build(overrides, machine=machine)
     o = _prepare(out)
@@ -1242,6 +1308,36 @@ def drilling_validation(
     drill), one recording and one dynamometer CSV on its own clock. Truth per cut: the model's
     mean full-engagement torque, the first full-engagement cycle, the last cycle in the
     material, the simulated mean torque and the dynamometer session clock.
+
+    Parameters
+    ----------
+    out : str or path-like, optional
+        Output folder (recordings, ``truth.json``, sensor files); None keeps everything in memory.
+    seed : int, default 0
+        Random seed of the noise and of every drawn hidden value.
+    overrides : mapping, optional
+        Dotted machine/process parameters set on top of ``machine`` (``{"spindle.kt_nm_per_a":
+        0.9}``).
+    machine : Machine, optional
+        Base machine description; default :meth:`Machine.thesis_default`.
+    depth_mm : float, default 20.0
+        Hole depth [mm].
+    cuts : sequence of (str, float, float)
+        (material, speed [rpm], feed [mm/rev]) per cut, in order; default the five cuts of
+        thesis Table 4.1 (steel and cast iron, 2400-3200 rpm).
+    fmt : str, default 'c4a'
+        Recording format: ``'c4a'`` (Capture4Analysis JSON) or ``'parquet'`` (chunk directory).
+    max_file_mb : float, optional
+        Split a Capture4Analysis recording into files of at most this size [MB]; None: one file.
+    chunk_cycles : int, default 50000
+        Cycles simulated and written per chunk (bounds memory).
+    progress : callable, optional
+        Called with (fraction done 0..1, message) while the scenario runs.
+
+    Returns
+    -------
+    ScenarioResult
+        Recordings (or their files), the hidden truth and the scenario's options.
     """
     cfg = ScenarioConfig.build(overrides, machine=machine)
     o = _prepare(out)
@@ -1365,6 +1461,43 @@ def tool_wear_run(
         Tool-tip temperature at the start [degC]; default ambient (cold tool). With
         ``start_hole`` it continues a run simulated in pieces without a cold restart (pass the
         previous piece's ``truth["final_tool_temperature_c"]``).
+
+    out : str or path-like, optional
+        Output folder (recordings, ``truth.json``, sensor files); None keeps everything in memory.
+    seed : int, default 0
+        Random seed of the noise and of every drawn hidden value.
+    overrides : mapping, optional
+        Dotted machine/process parameters set on top of ``machine`` (``{"spindle.kt_nm_per_a":
+        0.9}``).
+    machine : Machine, optional
+        Base machine description; default :meth:`Machine.thesis_default`.
+    n_holes : int, default 2676
+        Holes drilled (thesis: 2676).
+    holes_per_set : int, default 6
+        Holes per set (one workpiece), then a pause.
+    depth_mm : float, default 20.0
+        Hole depth [mm].
+    speed_rpm : float, default 2400.0
+        Spindle speed [rpm].
+    feed_mm_per_min : float, default 400.0
+        Feed [mm/min].
+    cycle : str, default 'CYCLE81'
+        Drilling cycle of the program (``CYCLE81``, ``CYCLE83``).
+    walk_direction_rad : float, default 0.7
+        Direction of the drill's static walk in the X/Y plane [rad].
+    fmt : str, default 'parquet'
+        Recording format: ``'c4a'`` (Capture4Analysis JSON) or ``'parquet'`` (chunk directory).
+    max_file_mb : float, default 500.0
+        Split a Capture4Analysis recording into files of at most this size [MB]; None: one file.
+    chunk_cycles : int, default 50000
+        Cycles simulated and written per chunk (bounds memory).
+    progress : callable, optional
+        Called with (fraction done 0..1, message) while the scenario runs.
+
+    Returns
+    -------
+    ScenarioResult
+        Recordings (or their files), the hidden truth and the scenario's options.
     """
     cfg = ScenarioConfig.build(overrides, machine=machine)
     o = _prepare(out)
@@ -1468,6 +1601,39 @@ def loose_tap(
     :class:`~cnctwin.sim.faults.LooseTool` (override its fields with ``loose_tool.<field>``)
     adds a fluctuating torque (spindle current) and axial force (Z disturbance -> Z ENC_POS)
     while the tap reverses out. Truth per hole: cut and extraction cycle ranges; fault onset.
+
+    Parameters
+    ----------
+    out : str or path-like, optional
+        Output folder (recordings, ``truth.json``, sensor files); None keeps everything in memory.
+    seed : int, default 0
+        Random seed of the noise and of every drawn hidden value.
+    overrides : mapping, optional
+        Dotted machine/process parameters set on top of ``machine`` (``{"spindle.kt_nm_per_a":
+        0.9}``).
+    machine : Machine, optional
+        Base machine description; default :meth:`Machine.thesis_default`.
+    n_holes : int, default 4
+        Tapped holes.
+    loose_from_hole : int, default 2
+        First hole (0-based) whose tap slips in its holder on extraction.
+    depth_mm : float, default 12.0
+        Thread depth [mm].
+    speed_rpm : float, default 400.0
+        Tapping speed [rpm].
+    fmt : str, default 'c4a'
+        Recording format: ``'c4a'`` (Capture4Analysis JSON) or ``'parquet'`` (chunk directory).
+    max_file_mb : float, optional
+        Split a Capture4Analysis recording into files of at most this size [MB]; None: one file.
+    chunk_cycles : int, default 50000
+        Cycles simulated and written per chunk (bounds memory).
+    progress : callable, optional
+        Called with (fraction done 0..1, message) while the scenario runs.
+
+    Returns
+    -------
+    ScenarioResult
+        Recordings (or their files), the hidden truth and the scenario's options.
     """
     ov = dict(overrides or {})
     lt = {k.split(".", 1)[1]: ov.pop(k) for k in list(ov) if k.startswith("loose_tool.")}
@@ -1548,6 +1714,26 @@ def milling_square_circle(
     randomize_loop : bool, default False
         Draw the X/Y loop parameters with :func:`random_loop_overrides` (``seed``) before
         ``overrides``; the drawn values are in ``truth["loop_overrides"]``.
+    side_mm : float, default 40.0
+        Side of the square [mm].
+    radius_mm : float, default 20.0
+        Radius of the circle [mm].
+    speed_rpm : float, default 6000.0
+        Spindle speed [rpm].
+    feed_per_tooth_mm : float, default 0.167
+        Feed per tooth [mm].
+    depth_mm : float, default 0.5
+        Axial depth of cut [mm].
+    faults : sequence or mapping, default ()
+        Faults to inject (:mod:`cnctwin.sim.faults`), objects or their dicts.
+    fmt : str, default 'c4a'
+        Recording format: ``'c4a'`` (Capture4Analysis JSON) or ``'parquet'`` (chunk directory).
+    max_file_mb : float, optional
+        Split a Capture4Analysis recording into files of at most this size [MB]; None: one file.
+    chunk_cycles : int, default 50000
+        Cycles simulated and written per chunk (bounds memory).
+    progress : callable, optional
+        Called with (fraction done 0..1, message) while the scenario runs.
 
     Returns
     -------
@@ -1629,6 +1815,14 @@ def axis_test(
         Draw the X/Y loop parameters with :func:`random_loop_overrides` first.
     axes, stroke_mm, feeds_mm_min
         As :func:`~cnctwin.sim.programs.axis_test_program`.
+    fmt : str, default 'c4a'
+        Recording format: ``'c4a'`` (Capture4Analysis JSON) or ``'parquet'`` (chunk directory).
+    max_file_mb : float, optional
+        Split a Capture4Analysis recording into files of at most this size [MB]; None: one file.
+    chunk_cycles : int, default 50000
+        Cycles simulated and written per chunk (bounds memory).
+    progress : callable, optional
+        Called with (fraction done 0..1, message) while the scenario runs.
 
     Returns
     -------
@@ -1781,6 +1975,14 @@ def part_program(
         UTC time of the first cycle; default the scenarios' common start time.
     first_hole : int, default 0
         Holes the drill has made before this program (its flank wear starts there).
+    fmt : str, default 'c4a'
+        Recording format: ``'c4a'`` (Capture4Analysis JSON) or ``'parquet'`` (chunk directory).
+    max_file_mb : float, optional
+        Split a Capture4Analysis recording into files of at most this size [MB]; None: one file.
+    chunk_cycles : int, default 50000
+        Cycles simulated and written per chunk (bounds memory).
+    progress : callable, optional
+        Called with (fraction done 0..1, message) while the scenario runs.
 
     Returns
     -------

@@ -157,7 +157,22 @@ def dynamometer_channel_from_rows(
 ) -> ExternalChannel:
     """The ``"dynamometer"`` channel of sampled rows (:func:`dynamometer_rows`, one array per
     piece, in time order): columns ``fx_n, fy_n, fz_n`` [N], ``mz_nm`` [N*m] indexed by the own
-    ``time_s``; not aligned."""
+    ``time_s``; not aligned.
+
+    Parameters
+    ----------
+    rows : sequence
+        Sampled rows ``time_s, fx_n, fy_n, fz_n, mz_nm`` (:func:`dynamometer_rows`), one array per
+        piece.
+    fs_hz : float
+        Sample rate [Hz].
+    source : str, default 'cnctwin.sim'
+        Source label of the channel.
+
+    Returns
+    -------
+    ExternalChannel
+    """
     arr = np.concatenate(list(rows)) if len(rows) != 1 else rows[0]
     data = pd.DataFrame(arr[:, 1:], index=pd.Index(arr[:, 0], name="time_s"),
                         columns=list(_COLUMNS))
@@ -183,6 +198,11 @@ def dynamometer_rows(
         True ``fx_n, fy_n, fz_n`` [N] and ``mz_nm`` [Nm] on ``time_s``; ``None`` for zero.
     sensor, rng
         As in :func:`dynamometer_channel`.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(m, 5)`` samples on the dynamometer's own clock.
 
     Notes
     -----
@@ -277,6 +297,11 @@ def thermal_camera_channel(
         Noise source.
     source : str
         Written to ``channel.source``.
+
+    Returns
+    -------
+    ExternalChannel
+        ``hole``, ``temperature_c`` indexed by the camera's ``time_s``.
     """
     c = camera if camera is not None else ThermalCamera()
     g = rng if rng is not None else np.random.default_rng(0)
@@ -309,6 +334,11 @@ def dynamometer_csv_decimals(
         Sample rate [Hz].
     force_noise_n, torque_noise_nm : float, optional
         Noise std of the force [N] and torque [Nm] channels.
+
+    Returns
+    -------
+    tuple of int
+        Decimals of ``time_s, fx_n, fy_n, fz_n, mz_nm``.
     """
     def below(noise: float | None, default: int) -> int:
         if noise is None or not noise > 0.0:
@@ -331,7 +361,22 @@ def dynamometer_csv_rows(
     decimals: tuple[int, int, int, int, int],
 ) -> NDArray[np.uint8]:
     """The data lines of a dynamometer CSV (``time_s`` then ``fx_n, fy_n, fz_n, mz_nm``) as
-    ASCII bytes, for writing to a binary file (:func:`format_csv_fixed` formats them)."""
+    ASCII bytes, for writing to a binary file (:func:`format_csv_fixed` formats them).
+
+    Parameters
+    ----------
+    own_time_s : numpy.ndarray
+        The dynamometer's own time of each sample [s].
+    values : numpy.ndarray
+        ``(m, 4)`` forces [N] and torque [Nm].
+    decimals : tuple
+        Decimals per column (:func:`dynamometer_csv_decimals`).
+
+    Returns
+    -------
+    numpy.ndarray of uint8
+        ASCII bytes of the lines.
+    """
     arr = np.empty((own_time_s.size, 5))
     arr[:, 0] = own_time_s
     arr[:, 1:] = values
@@ -347,6 +392,19 @@ def write_dynamometer_csv(
     Missing lateral-force columns are written as 0. ``decimals`` default:
     :func:`dynamometer_csv_decimals` from the channel's rate (no noise figure: 4 digits for
     forces, 5 for torque); the simulator's DAQ passes its sensor's noise.
+
+    Parameters
+    ----------
+    channel : ExternalChannel
+        The ``dynamometer`` channel.
+    path : str or path-like
+        CSV file to write.
+    decimals : tuple, optional
+        Decimals per column; default :func:`dynamometer_csv_decimals` of the channel.
+
+    Returns
+    -------
+    pathlib.Path
     """
     p = Path(path)
     df = channel.data.reindex(columns=list(_COLUMNS)).fillna(0.0)
@@ -360,7 +418,19 @@ def write_dynamometer_csv(
 
 
 def write_thermal_camera_csv(channel: ExternalChannel, path: str | PathLike[str]) -> Path:
-    """Write ``time_s,hole,temperature_c``."""
+    """Write ``time_s,hole,temperature_c``.
+
+    Parameters
+    ----------
+    channel : ExternalChannel
+        The ``thermal_camera`` channel.
+    path : str or path-like
+        CSV file to write.
+
+    Returns
+    -------
+    pathlib.Path
+    """
     p = Path(path)
     channel.data[["hole", "temperature_c"]].to_csv(
         p, index=True, index_label="time_s", float_format="%.6g"
@@ -478,7 +548,20 @@ def format_csv_fixed(values: ArrayLike, decimals: ArrayLike) -> str:
 
 def format_csv_fixed_bytes(values: ArrayLike, decimals: ArrayLike) -> NDArray[np.uint8]:
     """:func:`format_csv_fixed` as a ``uint8`` array of ASCII bytes (write its ``.data`` to a
-    binary file: no string copies)."""
+    binary file: no string copies).
+
+    Parameters
+    ----------
+    values : array-like
+        ``(m, k)`` values.
+    decimals : array-like
+        Decimals per column.
+
+    Returns
+    -------
+    numpy.ndarray of uint8
+        ASCII bytes of the lines.
+    """
     arr = np.ascontiguousarray(values, dtype=np.float64)
     dec = np.ascontiguousarray(decimals, dtype=np.int64)
     if arr.ndim != 2 or dec.shape != (arr.shape[1],):

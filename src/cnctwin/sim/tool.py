@@ -234,7 +234,24 @@ def first_order_recursion(x: ArrayLike, a: float, *, b0: float = 1.0,
                           y_prev: float = 0.0) -> NDArray[np.float64]:
     """y[k] = b0 x[k] + a y[k-1] from ``y[-1] = y_prev``: ``scipy.signal.lfilter([b0],
     [1, -a], x, zi=[a y_prev])`` with the same arithmetic (same bits), compiled, without
-    importing scipy.signal (0.3 s of the simulator's start-up)."""
+    importing scipy.signal (0.3 s of the simulator's start-up).
+
+    Parameters
+    ----------
+    x : array-like
+        Input samples.
+    a : float
+        Pole (0 < a < 1).
+    b0 : float, default 1.0
+        Input gain.
+    y_prev : float, default 0.0
+        Output before the first sample.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``y``.
+    """
     return _first_order_kernel(np.ascontiguousarray(x, dtype=np.float64), float(a),
                                float(b0), float(y_prev))
 
