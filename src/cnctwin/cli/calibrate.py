@@ -18,7 +18,13 @@ __all__ = ["register"]
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``calibrate spindle`` and ``calibrate axes`` to the command line."""
+    """Add ``calibrate spindle`` and ``calibrate axes`` to the command line.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction[argparse.ArgumentParser]
+        The ``cnctwin`` subcommand parsers; the module adds its commands to them.
+    """
     p = sub.add_parser(
         "calibrate",
         help="calibrate the twin of your machine from its recordings into a machine file",

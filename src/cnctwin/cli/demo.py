@@ -561,6 +561,11 @@ def run_demo(out_dir: str | Path = "out/demo", *, seed: int = 0, quick: bool = F
         Fewer speeds and shorter runs (< 1 min).
     console : rich.console.Console, optional
         Terminal output.
+
+    Returns
+    -------
+    pathlib.Path
+        The written ``report.html``.
     """
     from rich.console import Console
 
@@ -611,7 +616,13 @@ def run_demo(out_dir: str | Path = "out/demo", *, seed: int = 0, quick: bool = F
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``demo`` to the ``cnctwin`` command line."""
+    """Add ``demo`` to the ``cnctwin`` command line.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction[argparse.ArgumentParser]
+        The ``cnctwin`` subcommand parsers; the module adds its commands to them.
+    """
     p = sub.add_parser(
         "demo",
         help="simulate the thesis campaign, calibrate, estimate and write the HTML report",

@@ -29,7 +29,13 @@ __all__ = ["register"]
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``edge run`` and ``edge status`` to ``sub``."""
+    """Add ``edge run`` and ``edge status`` to ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction[argparse.ArgumentParser]
+        The ``cnctwin`` subcommand parsers; the module adds its commands to them.
+    """
     p = sub.add_parser("edge", help="streaming runtime: live Databus/MQTT or a replayed "
                        "recording in, cutting torque, holes and alarms out",
                        description="The edge runtime (docs/edge.md).")

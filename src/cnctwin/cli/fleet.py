@@ -37,7 +37,13 @@ def _cluster_options(p: argparse.ArgumentParser) -> None:
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``fleet`` and its subcommands to ``sub``."""
+    """Add ``fleet`` and its subcommands to ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction[argparse.ArgumentParser]
+        The ``cnctwin`` subcommand parsers; the module adds its commands to them.
+    """
     p = sub.add_parser("fleet", help="fleet analyses over a store, on Dask distributed",
                        description="Run an analysis for every (machine, day) of a store on a "
                        "Dask cluster; results are Parquet tables in --out.")
@@ -110,7 +116,26 @@ def _console() -> Any:
 
 def run_cluster_tasks(args: argparse.Namespace, label: str, fn: Callable[..., Any],
                       items: list[Any], **kwargs: Any) -> list[Any]:
-    """Run ``fn(item, **kwargs)`` over ``items`` on the job's cluster with a progress bar."""
+    """Run ``fn(item, **kwargs)`` over ``items`` on the job's cluster with a progress bar.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed options (``--scheduler``, ``--workers``).
+    label : str
+        Task key and progress-bar label.
+    fn : callable
+        Function run per item.
+    items : list
+        The items.
+    **kwargs
+        Passed to ``fn``.
+
+    Returns
+    -------
+    list
+        ``fn``'s results in item order.
+    """
     from cnctwin.fleet import map_tasks
 
     with _client(args) as client, _progress(label) as progress:

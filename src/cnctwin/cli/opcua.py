@@ -15,7 +15,13 @@ __all__ = ["client_options", "register"]
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``record`` to the ``cnctwin`` command line."""
+    """Add ``record`` to the ``cnctwin`` command line.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction[argparse.ArgumentParser]
+        The ``cnctwin`` subcommand parsers; the module adds its commands to them.
+    """
     p = sub.add_parser(
         "record", help="record the control's OPC UA variables into a recording file",
         description="Subscribe to the variables of a node file on an OPC UA server (SINUMERIK "
@@ -55,7 +61,17 @@ def add_client_options(p: argparse.ArgumentParser, *, password_file: bool = True
 
 
 def client_options(args: argparse.Namespace) -> object:
-    """:class:`~cnctwin.iotools.opcua_client.OpcUaClientOptions` from the options."""
+    """:class:`~cnctwin.iotools.opcua_client.OpcUaClientOptions` from the options.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed options (``--security``, ``--user``, ``--password-file``, certificates).
+
+    Returns
+    -------
+    OpcUaClientOptions
+    """
     from cnctwin.iotools.opcua_client import OpcUaClientOptions
 
     password = None

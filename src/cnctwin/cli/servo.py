@@ -15,7 +15,13 @@ __all__ = ["register"]
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add the ``servo`` subcommand to ``sub``."""
+    """Add the ``servo`` subcommand to ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction[argparse.ArgumentParser]
+        The ``cnctwin`` subcommand parsers; the module adds its commands to them.
+    """
     p = sub.add_parser(
         "servo", help="position-loop identification and signal relations per axis",
         description="Identify Kv, feedforward, jerk filter, delays, speed loop and friction of "

@@ -18,7 +18,13 @@ __all__ = ["register"]
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``simulate`` to the ``cnctwin`` command line."""
+    """Add ``simulate`` to the ``cnctwin`` command line.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction[argparse.ArgumentParser]
+        The ``cnctwin`` subcommand parsers; the module adds its commands to them.
+    """
     from cnctwin.sim.scenarios import SCENARIOS
 
     p = sub.add_parser(

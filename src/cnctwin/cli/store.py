@@ -26,7 +26,13 @@ _CATALOG_SUMMARY = ["recording_id", "machine", "start_time", "end_time", "n_cycl
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``ingest`` and ``query`` to ``sub``."""
+    """Add ``ingest`` and ``query`` to ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction[argparse.ArgumentParser]
+        The ``cnctwin`` subcommand parsers; the module adds its commands to them.
+    """
     p = sub.add_parser(
         "ingest",
         help="store recordings (any readable format) in a DuckDB/Parquet or PostgreSQL store",

@@ -19,7 +19,13 @@ __all__ = ["register"]
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``twin compare`` to the command line."""
+    """Add ``twin compare`` to the command line.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction[argparse.ArgumentParser]
+        The ``cnctwin`` subcommand parsers; the module adds its commands to them.
+    """
     p = sub.add_parser("twin", help="run the calibrated twin beside a recording",
                        description="Run the twin of a machine file beside the machine.")
     tsub = p.add_subparsers(dest="what", metavar="WHAT", required=True)

@@ -33,7 +33,13 @@ _HOLE_SHOW = ("hole", "set", "position_in_set", "start_s", "depth_mm", "current_
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``holes``, ``wear`` and ``anomalies`` to the ``cnctwin`` command line."""
+    """Add ``holes``, ``wear`` and ``anomalies`` to the ``cnctwin`` command line.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction[argparse.ArgumentParser]
+        The ``cnctwin`` subcommand parsers; the module adds its commands to them.
+    """
     p = sub.add_parser("holes", help="per-hole record of drilling recordings",
                        description="One row per drilled hole (thesis chapter 5): segmentation "
                        "from Z motion and NC events, current, torque, energy, deviations.")

@@ -16,7 +16,13 @@ __all__ = ["register"]
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``web`` to the ``cnctwin`` command line."""
+    """Add ``web`` to the ``cnctwin`` command line.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction[argparse.ArgumentParser]
+        The ``cnctwin`` subcommand parsers; the module adds its commands to them.
+    """
     p = sub.add_parser(
         "web", help="serve the dashboard in a browser (fleet, signals, holes, live edge run)",
         description="Serve the web dashboard on HOST:PORT over a cnctwin store and/or recording "

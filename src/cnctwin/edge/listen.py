@@ -45,7 +45,18 @@ def check_bindable(host: str, port: int, *, service: str, option: str) -> None:
 
 def is_loopback(host: str) -> bool:
     """True if every address ``host`` resolves to is a loopback address (``localhost``,
-    ``127.0.0.1``, ``::1``): a server there does not face the network."""
+    ``127.0.0.1``, ``::1``): a server there does not face the network.
+
+    Parameters
+    ----------
+    host : str
+        Host name or address (``127.0.0.1``, ``::1``, ``localhost``).
+
+    Returns
+    -------
+    bool
+        True when only this machine can reach it.
+    """
     if host in ("localhost", ""):
         return True
     try:

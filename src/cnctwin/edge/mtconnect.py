@@ -151,7 +151,18 @@ class DeviceModel:
 
 
 def item_key(name: str) -> str:
-    """The data-item id prefix of an axis or spindle name (``"X1"`` -> ``"x1"``)."""
+    """The data-item id prefix of an axis or spindle name (``"X1"`` -> ``"x1"``).
+
+    Parameters
+    ----------
+    name : str
+        A cnctwin signal or result name.
+
+    Returns
+    -------
+    str
+        The data item id it is published under.
+    """
     return "".join(ch if ch.isalnum() else "_" for ch in name).lower()
 
 
@@ -168,6 +179,10 @@ def machine_tool_device(
         Linear axes (their MTConnect names are the letters: ``X1`` -> ``X``).
     spindle : str, default 'SP1'
         The spindle (a Rotary component named ``C`` in rotary-velocity mode).
+
+    Returns
+    -------
+    DeviceModel
     """
     dev = item_key(machine) or "machine"
     comps: list[Component] = [Component("axes", "Axes"), Component("ctrl", "Controller"),
@@ -316,7 +331,18 @@ class ObservationBuffer:
 
 # ---------------------------------------------------------------------------- documents
 def iso_timestamp(t_ns: int) -> str:
-    """MTConnect/SHDR timestamp of ``t_ns`` [ns since the epoch], UTC, microseconds."""
+    """MTConnect/SHDR timestamp of ``t_ns`` [ns since the epoch], UTC, microseconds.
+
+    Parameters
+    ----------
+    t_ns : int
+        Time [ns since the epoch, UTC].
+
+    Returns
+    -------
+    str
+        ISO 8601 with microseconds and ``Z``.
+    """
     s, ns = divmod(int(t_ns), 1_000_000_000)
     return time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(s)) + f".{ns // 1000:06d}Z"
 
@@ -342,7 +368,22 @@ def _doc(root: ET.Element) -> bytes:
 
 def probe_document(model: DeviceModel, buffer: ObservationBuffer, *,
                    sender: str = "cnctwin") -> bytes:
-    """The ``/probe`` document (MTConnectDevices): the device model."""
+    """The ``/probe`` document (MTConnectDevices): the device model.
+
+    Parameters
+    ----------
+    model : DeviceModel
+        The device model.
+    buffer : ObservationBuffer
+        The agent's observation buffer (for the header).
+    sender : str, default 'cnctwin'
+        Agent host name in the header.
+
+    Returns
+    -------
+    bytes
+        An ``MTConnectDevices`` XML document.
+    """
     root = ET.Element("MTConnectDevices", {"xmlns": NS_DEVICES})
     _header(root, "Header", sender=sender, instance_id=buffer.instance_id,
             buffer_size=buffer.size, extra={"assetBufferSize": "1024", "assetCount": "0"})
@@ -387,7 +428,30 @@ def streams_document(
     model: DeviceModel, observations: Iterable[Observation], *, buffer: ObservationBuffer,
     first_sequence: int, next_sequence: int, last_sequence: int, sender: str = "cnctwin",
 ) -> bytes:
-    """A ``/current`` or ``/sample`` document (MTConnectStreams)."""
+    """A ``/current`` or ``/sample`` document (MTConnectStreams).
+
+    Parameters
+    ----------
+    model : DeviceModel
+        The device model.
+    observations : iterable
+        Observations to include, in sequence order.
+    buffer : ObservationBuffer
+        The agent's observation buffer.
+    first_sequence : int
+        First sequence number the buffer holds.
+    next_sequence : int
+        Sequence number of the next observation.
+    last_sequence : int
+        Last sequence number the buffer holds.
+    sender : str, default 'cnctwin'
+        Agent host name in the header.
+
+    Returns
+    -------
+    bytes
+        An ``MTConnectStreams`` XML document.
+    """
     root = ET.Element("MTConnectStreams", {"xmlns": NS_STREAMS})
     _header(root, "Header", sender=sender, instance_id=buffer.instance_id,
             buffer_size=buffer.size,
@@ -452,7 +516,24 @@ def _observation(box: ET.Element, d: DataItem, o: Observation) -> None:
 
 def error_document(code: str, message: str, *, buffer: ObservationBuffer,
                    sender: str = "cnctwin") -> bytes:
-    """An MTConnectError document (``OUT_OF_RANGE``, ``INVALID_REQUEST``, ...)."""
+    """An MTConnectError document (``OUT_OF_RANGE``, ``INVALID_REQUEST``, ...).
+
+    Parameters
+    ----------
+    code : str
+        MTConnect error code (``INVALID_REQUEST``, ``OUT_OF_RANGE``, ...).
+    message : str
+        What went wrong, for the client.
+    buffer : ObservationBuffer
+        The agent's observation buffer (for the header).
+    sender : str, default 'cnctwin'
+        Agent host name in the header.
+
+    Returns
+    -------
+    bytes
+        An ``MTConnectError`` XML document.
+    """
     root = ET.Element("MTConnectError", {"xmlns": NS_ERROR})
     _header(root, "Header", sender=sender, instance_id=buffer.instance_id,
             buffer_size=buffer.size, extra={}, model_time=False)

@@ -50,7 +50,22 @@ __all__ = ["MTConnectAgent", "MTConnectSink", "ShdrAdapter", "parse_listen_url"]
 
 
 def parse_listen_url(url: str, *, scheme: str, option: str) -> tuple[str, int]:
-    """``scheme://HOST:PORT`` -> (host, port); a clear error naming the option otherwise."""
+    """``scheme://HOST:PORT`` -> (host, port); a clear error naming the option otherwise.
+
+    Parameters
+    ----------
+    url : str
+        ``SCHEME://HOST:PORT``.
+    scheme : str
+        The scheme expected (``http``).
+    option : str
+        Command-line option named in errors.
+
+    Returns
+    -------
+    tuple
+        (host, port).
+    """
     u = urllib.parse.urlsplit(url)
     try:
         port = u.port

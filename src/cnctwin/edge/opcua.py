@@ -76,6 +76,16 @@ def eu_unit_id(code: str) -> int:
 
     >>> eu_unit_id("CEL")
     4408652
+
+    Parameters
+    ----------
+    code : str
+        Unit text of the signal catalog (``A``, ``rpm``, ``Nm``).
+
+    Returns
+    -------
+    int
+        The UNECE unit id of OPC UA EUInformation (-1 when unknown).
     """
     uid = 0
     for ch in code.upper()[:4]:
@@ -134,6 +144,18 @@ def _dt(t_ns: int) -> datetime:
 def hash_password(password: str, *, iterations: int = 200_000) -> str:
     """A users-file entry's hash: ``pbkdf2_sha256$ITERATIONS$SALT$HASH`` (hex).
 
+    Parameters
+    ----------
+    password : str
+        The password.
+    iterations : int, default 200000
+        PBKDF2-SHA256 iterations.
+
+    Returns
+    -------
+    str
+        ``pbkdf2_sha256$iterations$salt$hash`` for the users file.
+
     Examples
     --------
     >>> h = hash_password("secret", iterations=1000)
@@ -149,7 +171,19 @@ def hash_password(password: str, *, iterations: int = 200_000) -> str:
 
 
 def verify_password(password: str, stored: str) -> bool:
-    """Check a password against :func:`hash_password` output (constant time)."""
+    """Check a password against :func:`hash_password` output (constant time).
+
+    Parameters
+    ----------
+    password : str
+        The password given.
+    stored : str
+        The stored hash (:func:`hash_password`).
+
+    Returns
+    -------
+    bool
+    """
     import hashlib
     import hmac
 
@@ -167,6 +201,16 @@ def verify_password(password: str, stored: str) -> bool:
 def read_users(path: str | os.PathLike[str]) -> dict[str, str]:
     """The users file: one ``name:HASH`` line per user (``#`` comments), HASH from
     :func:`hash_password` (``cnctwin edge opcua-user NAME --users FILE`` adds one).
+
+    Parameters
+    ----------
+    path : str or path-like
+        Users file: ``name:hash`` lines (:func:`hash_password`).
+
+    Returns
+    -------
+    dict
+        User name -> stored hash.
 
     Raises
     ------

@@ -32,7 +32,12 @@ _NO_EVENTS = empty_events()  # shared and never modified: building one costs ~3 
 
 
 def no_events() -> pd.DataFrame:
-    """The shared empty event table of chunks without NC events (read it, never modify it)."""
+    """The shared empty event table of chunks without NC events (read it, never modify it).
+
+    Returns
+    -------
+    pandas.DataFrame
+    """
     return _NO_EVENTS
 
 
@@ -138,7 +143,18 @@ class Result:
 
 
 def dumps(message: dict[str, Any]) -> bytes:
-    """One message as compact JSON bytes (orjson; NaN becomes null)."""
+    """One message as compact JSON bytes (orjson; NaN becomes null).
+
+    Parameters
+    ----------
+    message : dict
+        A result message.
+
+    Returns
+    -------
+    bytes
+        Its JSON (orjson; NaN written as null).
+    """
     return orjson.dumps(message, option=orjson.OPT_SERIALIZE_NUMPY)
 
 

@@ -532,6 +532,15 @@ def read_checkpoint(state_dir: Path) -> dict[str, Any] | None:
 
     The file is the runtime's own, written into its state directory; like any pickle it
     must not come from elsewhere.
+
+    Parameters
+    ----------
+    state_dir : path-like
+        The runtime's state directory.
+
+    Returns
+    -------
+    dict or None
     """
     import pickle
 
@@ -622,6 +631,18 @@ def last_emitted(results: str | PathLike[str], *, tail_bytes: int = 1 << 20
 
     Read from the end (``tail_bytes`` of each file); a line a crash cut short is skipped.
     Empty for a first run.
+
+    Parameters
+    ----------
+    results : str or path-like
+        The runtime's ``results.jsonl``.
+    tail_bytes : int, default 1048576
+        How much of the end of the file is read [bytes].
+
+    Returns
+    -------
+    dict
+        Message kind -> last cycle emitted (empty on a first run).
     """
     p = Path(results)
     out: dict[str, int] = {}

@@ -33,6 +33,20 @@ def reconnect_delay_s(failures: int, *, base_s: float, max_s: float) -> float:
     Exponential backoff: ``base_s * 2**(failures - 1)``, at most ``max_s`` (``base_s`` after
     a connection that was up and got lost, ``failures = 0``).
 
+    Parameters
+    ----------
+    failures : int
+        Consecutive failed attempts so far.
+    base_s : float
+        Delay after the first failure [s].
+    max_s : float
+        Largest delay [s].
+
+    Returns
+    -------
+    float
+        ``min(base_s 2^(failures-1), max_s)`` with +-10 % jitter [s].
+
     Examples
     --------
     >>> [reconnect_delay_s(k, base_s=2.0, max_s=60.0) for k in range(7)]

@@ -43,7 +43,18 @@ _AXIS_VARS = (("ENC_POS", "actToolBasePos", "mm"), ("LOAD", "aaLoad", "%"),
 
 
 def node_ids(rec: Recording) -> tuple[dict[str, str], dict[str, str]]:
-    """Column -> node id and text name -> node id of the variables served for ``rec``."""
+    """Column -> node id and text name -> node id of the variables served for ``rec``.
+
+    Parameters
+    ----------
+    rec : Recording
+        The recording.
+
+    Returns
+    -------
+    tuple of dict
+        Column -> NodeId of the HF signals and of the LF signals.
+    """
     numbers = {name: int(n) for n, name in rec.meta.axis_map.items()}
     if not numbers:
         numbers = {}
@@ -64,7 +75,19 @@ def node_ids(rec: Recording) -> tuple[dict[str, str], dict[str, str]]:
 
 
 def write_node_file(rec: Recording, path: str | Path) -> Path:
-    """Write the node file (``cnctwin record --nodes``) for the variables served for ``rec``."""
+    """Write the node file (``cnctwin record --nodes``) for the variables served for ``rec``.
+
+    Parameters
+    ----------
+    rec : Recording
+        The recording.
+    path : str or path-like
+        TOML file to write.
+
+    Returns
+    -------
+    pathlib.Path
+    """
     sig, text = node_ids(rec)
     units = {c: u for code, _, u in _AXIS_VARS for c in sig if c.startswith(code + "|")}
     lines = ["# SINUMERIK-like OPC UA server of cnctwin (cnctwin.edge.sinumerik_opcua)",

@@ -186,7 +186,18 @@ def content_hash(path: str | os.PathLike[str]) -> str:
 
 
 def stored_hashes(store: str | Any) -> frozenset[str]:
-    """The ``source_sha256`` of every recording in the store (a URL or an open store)."""
+    """The ``source_sha256`` of every recording in the store (a URL or an open store).
+
+    Parameters
+    ----------
+    store : str or Any
+        Store URL or an open store.
+
+    Returns
+    -------
+    frozenset of str
+        Content hashes of the files already ingested.
+    """
     import cnctwin.store
 
     if isinstance(store, str):

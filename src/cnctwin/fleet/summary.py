@@ -33,6 +33,16 @@ SORT_KEYS = {
 def read_fleet_tables(directory: str | os.PathLike[str]) -> dict[str, pd.DataFrame]:
     """The fleet tables present in ``directory`` (name -> table).
 
+    Parameters
+    ----------
+    directory : str or path-like
+        Result folder of ``cnctwin fleet ... --out``.
+
+    Returns
+    -------
+    dict
+        Job name -> its table.
+
     Raises
     ------
     ConfigError

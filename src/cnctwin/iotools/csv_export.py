@@ -40,7 +40,17 @@ _CALL = (("HFProbeCounter", "cycle"), ("Channel", "channel"), ("SeekOffset", "se
 
 
 def csv_stem(path: str | PathLike[str]) -> Path:
-    """The trial stem of ``run``, ``run.csv`` or ``run_hfdata.csv`` (-> ``run``)."""
+    """The trial stem of ``run``, ``run.csv`` or ``run_hfdata.csv`` (-> ``run``).
+
+    Parameters
+    ----------
+    path : str or path-like
+        Any file of an export, or its stem.
+
+    Returns
+    -------
+    pathlib.Path
+    """
     p = Path(path)
     name = p.name
     for suffix in ("_hfdata.csv", ".csv"):

@@ -56,7 +56,17 @@ _DEG_S_TO_RPM = 1.0 / 6.0
 
 
 def looks_like_kit_merged(header: str) -> bool:
-    """True for a CSV header of the KIT merged layout (``curr_sp`` and a spindle column)."""
+    """True for a CSV header of the KIT merged layout (``curr_sp`` and a spindle column).
+
+    Parameters
+    ----------
+    header : str
+        The first line of a CSV file.
+
+    Returns
+    -------
+    bool
+    """
     cols = {c.strip() for c in header.split(",")}
     return "curr_sp" in cols and bool(cols & {"v_sp", "pos_sp", "cmd_v_sp"})
 

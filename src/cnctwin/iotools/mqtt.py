@@ -610,6 +610,19 @@ def parse_data_recorder_message(payload: bytes, *, topic: str = "<mqtt>",
     The payload is parsed in memory with
     :func:`cnctwin.iotools.capture4analysis.parse_capture4analysis` (no temporary file); errors
     and ``meta.issues`` name the topic, and ``meta.source_files`` is ``[topic]``.
+
+    Parameters
+    ----------
+    payload : bytes
+        Message payload.
+    topic : str, default '<mqtt>'
+        Topic (named in errors and notes).
+    salvage : bool, default False
+        Keep what an incomplete message holds (flagged partial).
+
+    Returns
+    -------
+    Recording
     """
     from cnctwin.iotools.capture4analysis import parse_capture4analysis
 

@@ -74,6 +74,15 @@ class NodeMap:
 def read_node_map(path: str | os.PathLike[str]) -> NodeMap:
     """Read a node file (module docstring).
 
+    Parameters
+    ----------
+    path : str or path-like
+        Node file (TOML) written by ``cnctwin simulate --serve-opcua`` or by hand.
+
+    Returns
+    -------
+    NodeMap
+
     Raises
     ------
     FormatError
@@ -466,7 +475,29 @@ def record_opcua(
     interval_s: float = 0.1, machine: str = "",
     progress: Callable[[float], None] | None = None,
 ) -> Recording:
-    """Record for ``duration_s`` seconds (:class:`OpcUaRecorder`) and return the recording."""
+    """Record for ``duration_s`` seconds (:class:`OpcUaRecorder`) and return the recording.
+
+    Parameters
+    ----------
+    url : str
+        Server endpoint (``opc.tcp://host:port``).
+    nodes : NodeMap
+        Which node is which signal.
+    duration_s : float
+        Recording time [s].
+    options : OpcUaClientOptions, optional
+        Security, user and certificates; default anonymous without security.
+    interval_s : float, default 0.1
+        Sampling interval asked of the server [s].
+    machine : str, default ''
+        Machine name of the recording.
+    progress : callable, optional
+        Called with the fraction recorded.
+
+    Returns
+    -------
+    Recording
+    """
     rec = OpcUaRecorder(url, nodes, options=options, interval_s=interval_s,
                         machine=machine).start()
     t0 = time.monotonic()

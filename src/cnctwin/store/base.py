@@ -92,7 +92,17 @@ _EVENT_TEXT_COLUMNS = ("kind", "gcode", "ipo_gcode", "path")
 
 
 def to_utc(value: pd.Timestamp | str | None) -> pd.Timestamp | None:
-    """A timestamp as tz-aware UTC; naive input is taken as UTC."""
+    """A timestamp as tz-aware UTC; naive input is taken as UTC.
+
+    Parameters
+    ----------
+    value : pandas.Timestamp or str, optional
+        A time (naive = UTC), its ISO text, or None.
+
+    Returns
+    -------
+    pandas.Timestamp or None
+    """
     if value is None:
         return None
     ts = pd.Timestamp(value)
@@ -164,7 +174,20 @@ def default_recording_id(rec: Recording) -> str:
 
 # ---------------------------------------------------------------------------- meta <-> JSON
 def catalog_row(rec: Recording, recording_id: str) -> dict[str, Any]:
-    """The catalog entry (:data:`CATALOG_COLUMNS`) of ``rec``."""
+    """The catalog entry (:data:`CATALOG_COLUMNS`) of ``rec``.
+
+    Parameters
+    ----------
+    rec : Recording
+        The recording.
+    recording_id : str
+        The recording's id in the store.
+
+    Returns
+    -------
+    dict
+        The catalog entry (:data:`CATALOG_COLUMNS`).
+    """
     n = rec.n_cycles
     t = rec.hf["time"]
     return {
@@ -191,6 +214,16 @@ def external_meta(ch: ExternalChannel) -> dict[str, Any]:
     """The catalog description of an external channel (everything but its data).
 
     ``index`` is the name of the data's index column (``"time_s"`` if unnamed).
+
+    Parameters
+    ----------
+    ch : ExternalChannel
+        The channel.
+
+    Returns
+    -------
+    dict
+        Its description without the data (units, rate, source, clock offset).
     """
     return {
         "index": ch.data.index.name or "time_s", "units": ch.units, "fs_hz": ch.fs_hz,
@@ -200,7 +233,21 @@ def external_meta(ch: ExternalChannel) -> dict[str, Any]:
 
 
 def external_channel(name: str, data: pd.DataFrame, desc: dict[str, Any]) -> ExternalChannel:
-    """Inverse of :func:`external_meta`: the channel from its stored table and description."""
+    """Inverse of :func:`external_meta`: the channel from its stored table and description.
+
+    Parameters
+    ----------
+    name : str
+        Channel name.
+    data : pandas.DataFrame
+        The stored table.
+    desc : dict
+        The stored description (:func:`external_meta`).
+
+    Returns
+    -------
+    ExternalChannel
+    """
     return ExternalChannel(
         name=name, data=data.set_index(desc["index"]), units=dict(desc["units"]),
         fs_hz=desc["fs_hz"], offset_s=float(desc["offset_s"]),
@@ -280,6 +327,16 @@ def normalize_events(events: pd.DataFrame) -> pd.DataFrame:
 
     ``cycle`` int64; channel, offsets, tools, call level nullable ``Int64``; texts ``object``
     with ``None`` for missing. Columns absent in the input are added empty.
+
+    Parameters
+    ----------
+    events : pandas.DataFrame
+        Event table of any reader.
+
+    Returns
+    -------
+    pandas.DataFrame
+        :data:`EVENT_COLUMNS` with the store's dtypes.
     """
     out = pd.DataFrame(index=pd.RangeIndex(len(events)))
     for col in EVENT_COLUMNS:
@@ -295,7 +352,18 @@ def normalize_events(events: pd.DataFrame) -> pd.DataFrame:
 
 
 def normalize_lf(lf: pd.DataFrame) -> pd.DataFrame:
-    """LF values with exactly :data:`LF_COLUMNS` in the canonical dtypes."""
+    """LF values with exactly :data:`LF_COLUMNS` in the canonical dtypes.
+
+    Parameters
+    ----------
+    lf : pandas.DataFrame
+        LF table of any reader.
+
+    Returns
+    -------
+    pandas.DataFrame
+        :data:`LF_COLUMNS` with the store's dtypes.
+    """
     out = pd.DataFrame(index=pd.RangeIndex(len(lf)))
     for col in LF_COLUMNS:
         src = lf[col].reset_index(drop=True) if col in lf.columns else pd.Series(
@@ -457,6 +525,18 @@ def holes_frame(rows: Sequence[Sequence[Any]], columns: Sequence[str]) -> pd.Dat
 
     ``rows`` hold ``recording_id, machine``, the :data:`HOLE_TABLE_COLUMNS` without
     ``start_time``, then ``start_ns`` and ``extra`` (``columns`` names them).
+
+    Parameters
+    ----------
+    rows : sequence
+        Stored rows.
+    columns : sequence
+        Their column names.
+
+    Returns
+    -------
+    pandas.DataFrame
+        A hole table with the hole record's dtypes.
     """
     raw = pd.DataFrame(list(rows), columns=list(columns))
     out = pd.DataFrame({"recording_id": raw["recording_id"].astype(object),

@@ -122,6 +122,19 @@ def hf_table(rec: Recording, recording_id: str, rows: slice | None = None) -> pa
 
     Columns ``recording_id`` (dictionary string), ``cycle`` (int64), ``time``
     (timestamp[ns, UTC]) and the signals (float64, field metadata ``unit``).
+
+    Parameters
+    ----------
+    rec : Recording
+        The recording.
+    recording_id : str
+        The recording's id in the store.
+    rows : slice, optional
+        Rows to take; default all.
+
+    Returns
+    -------
+    pyarrow.Table
     """
     hf = rec.hf if rows is None else rec.hf.iloc[rows]
     n = len(hf)

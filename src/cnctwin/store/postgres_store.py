@@ -195,6 +195,16 @@ def parse_pg_url(url: str) -> tuple[str, str]:
     The schema comes from a ``schema=`` query parameter, else the first entry of a
     ``search_path`` in ``options`` (``options=-csearch_path%3Dname``), else
     :data:`DEFAULT_SCHEMA`. ``schema=`` is removed from the returned URL (libpq rejects it).
+
+    Parameters
+    ----------
+    url : str
+        ``postgresql://user@host:port/db?schema=name``.
+
+    Returns
+    -------
+    tuple
+        (connection URL without the schema, schema name).
     """
     parts = urllib.parse.urlsplit(url)
     query = urllib.parse.parse_qsl(parts.query, keep_blank_values=True)

@@ -874,6 +874,10 @@ def backtest(
         The fault stays once it has started (a loose tool stays loose, a broken drill stays
         broken): alarms after the first onset are never false, and the false-alarm rate is per
         hour of scored time before it.
+
+    Returns
+    -------
+    BacktestResult
     """
     t = np.asarray(time_s, dtype=np.float64)
     if t.size != len(data):

@@ -58,6 +58,10 @@ def plot_hole_means(
         Moving-average window [holes] (thesis Figure 5.3).
     wear_um : array-like, optional
         Estimated or measured wear per hole, drawn on a right axis of the last panel [µm].
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     fig = Figure(figsize=(9, 2.6 * len(columns)), layout="constrained")
     axs = fig.subplots(len(columns), 1, sharex=True, squeeze=False)[:, 0]
@@ -101,6 +105,10 @@ def plot_set_temperature(
         Spindle axis.
     predicted_c : array-like, optional
         Soft-sensor temperature per row of ``holes`` [°C].
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     c0, c1 = int(rec.cycles[0]), int(rec.cycles[-1])
     h = holes.copy()
@@ -154,6 +162,10 @@ def plot_deviation_paths(
         Holes to draw, one panel each (a)-(f); default the first six.
     lateral_scale : float, default 1000
         X and Y are drawn in mm times this factor (1000: µm), Z in mm.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     if view not in _VIEWS:
         raise ConfigError(f"view must be one of {sorted(_VIEWS)}, not {view!r}")
@@ -196,7 +208,29 @@ def plot_anomaly_scores(
     learn_until_s: float | None = None,
     title: str = "",
 ) -> Figure:
-    """Detector score over time with threshold, alarms and true fault onsets."""
+    """Detector score over time with threshold, alarms and true fault onsets.
+
+    Parameters
+    ----------
+    time_s : array-like
+        Sample times [s].
+    scores : array-like
+        Detector score per sample.
+    threshold : float, default 0.0
+        Alarm threshold.
+    alarms_s : sequence, default ()
+        Alarm times [s].
+    fault_onsets_s : sequence, default ()
+        True fault onsets [s] (simulated runs).
+    learn_until_s : float, optional
+        End of the teach-in [s] (shaded).
+    title : str, default ''
+        Figure title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     fig = Figure(figsize=(9, 3), layout="constrained")
     ax = fig.add_subplot()
     ax.plot(np.asarray(time_s), np.asarray(scores), lw=0.6)
@@ -271,6 +305,15 @@ def plot_loose_tap(
         True fault onset to mark [s].
     alarms_s : sequence of float
         Alarms to mark [s].
+
+    z_axis : str, default 'Z1'
+        Tapping (feed) axis.
+    spindle : str, default 'SP1'
+        Spindle axis name.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     t = rec.time_s
     sel = (t >= around_s + span_s[0]) & (t <= around_s + span_s[1])

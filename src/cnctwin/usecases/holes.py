@@ -645,7 +645,18 @@ def hole_records(
 
 
 def holes_path(recording_path: str | PathLike[str]) -> Path:
-    """Where the hole table of a recording file goes: ``<name>.holes.parquet`` beside it."""
+    """Where the hole table of a recording file goes: ``<name>.holes.parquet`` beside it.
+
+    Parameters
+    ----------
+    recording_path : str or path-like
+        The recording file or directory.
+
+    Returns
+    -------
+    pathlib.Path
+        ``<recording>.holes.parquet`` beside it.
+    """
     p = Path(recording_path)
     return p.with_name(p.name.split(".")[0] + ".holes.parquet")
 
@@ -659,6 +670,10 @@ def write_holes(holes: pd.DataFrame, path: str | PathLike[str]) -> Path:
         Output of :func:`hole_record`.
     path : str or path-like
         Target file; use :func:`holes_path` to put it beside the recording.
+
+    Returns
+    -------
+    pathlib.Path
     """
     import json
 
@@ -674,7 +689,18 @@ def write_holes(holes: pd.DataFrame, path: str | PathLike[str]) -> Path:
 
 
 def read_holes(path: str | PathLike[str]) -> pd.DataFrame:
-    """Read a hole table written by :func:`write_holes` (attrs restored)."""
+    """Read a hole table written by :func:`write_holes` (attrs restored).
+
+    Parameters
+    ----------
+    path : str or path-like
+        A file written by :func:`write_holes`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The hole table with its attrs.
+    """
     import json
 
     import pyarrow.parquet as pq

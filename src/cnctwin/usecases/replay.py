@@ -48,6 +48,17 @@ def make_detector(name: str, *, fs_hz: float) -> Detector:
     ``spectral``: the default band 20-240 Hz at 500 Hz, scaled with the sampling rate
     ``fs_hz`` [Hz] (UMich: 10 Hz). ``physics-torque``: the wear-adaptive monitor around the
     Kienzle-predicted torque (column ``expected_torque_nm``).
+
+    Parameters
+    ----------
+    name : str
+        Detector name.
+    fs_hz : float
+        Sample rate of the stream [Hz].
+
+    Returns
+    -------
+    Detector
     """
     from cnctwin.usecases.monitoring import WearAdaptiveDetector
 
@@ -163,6 +174,10 @@ def replay_detector(
     model : SpindleModel, optional
         The machine's calibrated spindle for the predicted current and torque (default the
         thesis machine's, said so in ``issues``).
+
+    Returns
+    -------
+    DetectorReplay
 
     Raises
     ------

@@ -224,6 +224,11 @@ def simulate_tool_temperature(
     initial_c : float, optional
         Temperature before the first hole; default ambient.
 
+    Returns
+    -------
+    numpy.ndarray
+        Temperature after each hole [°C].
+
     Notes
     -----
     ``T_k = T_amb + (T_{k-1} - T_amb) exp(-dt_k / tau) + E_k / C_eff``.

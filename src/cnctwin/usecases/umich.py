@@ -62,6 +62,10 @@ def cutting_rows(rec: Recording, *, phase_prefix: str = "Layer") -> pd.DataFrame
         One UMich experiment.
     phase_prefix : str, default 'Layer'
         Phases whose name starts with this are cutting (``Layer 1 Up`` ... ``Layer 3 Down``).
+
+    Returns
+    -------
+    pandas.DataFrame
     """
     ev = rec.events[rec.events["kind"] == "block"].sort_values("cycle")
     if ev.empty or "VALID" not in rec.hf.columns:
@@ -77,6 +81,11 @@ def cutting_rows(rec: Recording, *, phase_prefix: str = "Layer") -> pd.DataFrame
 
 def feature_table(recordings: Sequence[Recording]) -> pd.DataFrame:
     """One row per experiment: labels and :data:`UMICH_FEATURES`.
+
+    Parameters
+    ----------
+    recordings : sequence
+        The UMich experiments (:func:`cnctwin.iotools.read_umich_dataset`).
 
     Returns
     -------
@@ -159,6 +168,10 @@ def loeo_classification(
         training fold.
     alpha : float, default 1
         L2 penalty of the logistic regression.
+
+    Returns
+    -------
+    LoeoClassification
 
     Notes
     -----

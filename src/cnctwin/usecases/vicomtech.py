@@ -80,6 +80,17 @@ def cnc_wear_features(
     """CNC-internal feature columns (what the control records; no dynamometer, no accelerometer).
 
     The programmed and encoder speeds/feeds (``CON.*``) are included.
+
+    Parameters
+    ----------
+    data : pandas.DataFrame
+        The Vicomtech table (:func:`cnctwin.iotools.read_vicomtech`).
+    stats : sequence, default ('MEAN', 'RMS', 'MAX')
+        Statistics to take per signal.
+
+    Returns
+    -------
+    list of str
     """
     cols = [
         c for c in data.columns
@@ -90,7 +101,19 @@ def cnc_wear_features(
 
 
 def wear_validation(data: pd.DataFrame, *, alpha: float = 100.0) -> LogoResult:
-    """Leave-one-tool-out flank-wear error from CNC-internal features vs plain baselines."""
+    """Leave-one-tool-out flank-wear error from CNC-internal features vs plain baselines.
+
+    Parameters
+    ----------
+    data : pandas.DataFrame
+        The Vicomtech table.
+    alpha : float, default 100.0
+        Ridge penalty on standardized features.
+
+    Returns
+    -------
+    LogoResult
+    """
     return leave_one_group_out(
         data, features=cnc_wear_features(data), target="Vb", group="tool", usage="segment",
         alpha=alpha,

@@ -343,6 +343,20 @@ def ridge_fit(
 
     Returns ``(mean, scale, weights, intercept)``; predict with
     ``((x - mean) / scale) @ weights + intercept``.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        ``(n, p)`` features.
+    y : numpy.ndarray
+        ``n`` targets.
+    alpha : float
+        Ridge penalty.
+
+    Returns
+    -------
+    tuple
+        (mean, scale, weights, intercept).
     """
     mean = x.mean(axis=0)
     scale = x.std(axis=0)

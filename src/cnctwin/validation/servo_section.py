@@ -30,7 +30,13 @@ _COMPARE: dict[str, str] = {
 
 
 def position_loop_section(ctx: DemoContext) -> None:
-    """Add the position-loop section: identification on simulated milling, Fig. 3.2/3.3."""
+    """Add the position-loop section: identification on simulated milling, Fig. 3.2/3.3.
+
+    Parameters
+    ----------
+    ctx : DemoContext
+        The demo's context (report, recordings, options).
+    """
     from cnctwin.sim.scenarios import milling_square_circle
 
     sec = ctx.report.section(

@@ -166,6 +166,10 @@ def loose_tap_trial(
         Scenario overrides (e.g. ``loose_tool.torque_amplitude_nm``).
     with_fault : bool, default True
         ``False``: the tap stays tight (a fault-free run for the false-alarm rate).
+
+    Returns
+    -------
+    Trial
     """
     from cnctwin.sim.scenarios import loose_tap
     from cnctwin.usecases.holes import hole_record
@@ -261,6 +265,10 @@ def fault_trial(
         Detector for ``breakage``, ``hardness`` and ``none`` (:data:`DRILLING_MONITORS`);
         ``physics`` scores every hole from the first (no teach-in). Chatter always uses the
         spectral detector.
+
+    Returns
+    -------
+    Trial
 
     Notes
     -----
@@ -413,6 +421,11 @@ def fault_free_run(
 
 def summarize_trials(trials: list[Trial]) -> pd.DataFrame:
     """One row per fault kind: trials, detected, misses, delays, false alarms per hour.
+
+    Parameters
+    ----------
+    trials : list
+        Trials of :func:`fault_trial` / :func:`loose_tap_trial`.
 
     Returns
     -------

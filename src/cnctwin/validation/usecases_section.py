@@ -35,7 +35,21 @@ _HOLE_COLS = ("hole", "set", "position_in_set", "start_s", "depth_mm", "current_
 def plot_wear_estimate(
     holes: pd.DataFrame, truth: pd.DataFrame, v: WearValidation
 ) -> Figure:
-    """Estimated against true flank wear, the calibration points and the last forecast."""
+    """Estimated against true flank wear, the calibration points and the last forecast.
+
+    Parameters
+    ----------
+    holes : pandas.DataFrame
+        Hole record.
+    truth : pandas.DataFrame
+        The simulator's per-hole truth.
+    v : WearValidation
+        The wear validation.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(9, 3.4), layout="constrained")
@@ -226,7 +240,13 @@ def _anomaly_part(ctx: DemoContext, sec: Any) -> None:
 
 
 def use_cases_section(ctx: DemoContext) -> None:
-    """Add the use-case section (issue #6): wear, temperature, quality, anomalies."""
+    """Add the use-case section (issue #6): wear, temperature, quality, anomalies.
+
+    Parameters
+    ----------
+    ctx : DemoContext
+        The demo's context (report, recordings, options).
+    """
     sec = ctx.report.section("Use cases: tool wear, tool temperature, hole quality, "
                              "anomalies (thesis chapter 5)")
     _wear_part(ctx, sec)

@@ -163,6 +163,13 @@ def validate_wear(
         The forecast fits the last ``forecast_window`` x run length holes (quadratic).
     thermal_calibration_sets : int, default 4
         Sets of camera readings used to calibrate the soft sensor (the rest is validation).
+
+    set_size : int, default 6
+        Holes per set.
+
+    Returns
+    -------
+    WearValidation
     """
     from cnctwin.usecases.thermal import ToolThermalModel, merge_camera
 
@@ -252,6 +259,10 @@ def hole_record_chunked(
         HF chunk files per window (50 000 cycles each by default: 10 files ~ 300 MB).
     verbose : bool, default False
         Print one line per window.
+
+    Returns
+    -------
+    pandas.DataFrame
     """
     directory = Path(directory)
     if not (directory / "meta.json").is_file():

@@ -37,7 +37,18 @@ DETECTORS: tuple[str, ...] = ("physics", "envelope", "spectral", "tapping")
 
 
 def records(df: pd.DataFrame) -> list[dict[str, Any]]:
-    """Rows of ``df`` as JSON-ready dicts."""
+    """Rows of ``df`` as JSON-ready dicts.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        A table.
+
+    Returns
+    -------
+    list of dict
+        JSON-ready rows.
+    """
     cols = [str(c) for c in df.columns]
     return [{c: jsonable(v) for c, v in zip(cols, row, strict=True)}
             for row in df.itertuples(index=False, name=None)]
@@ -49,6 +60,19 @@ def hole_table(recs: Sequence[Recording], *, model: SpindleModel | None,
 
     With ``model`` the torque columns use the calibrated spindle twin; without it the
     library's default (thesis parameter set, noted in ``attrs["spindle_model"]``).
+
+    Parameters
+    ----------
+    recs : sequence
+        Recordings in time order.
+    model : SpindleModel, optional
+        Spindle model for the torque; default the thesis machine's.
+    set_size : int, default 6
+        Holes per set.
+
+    Returns
+    -------
+    pandas.DataFrame
     """
     from cnctwin.usecases.holes import hole_records
 
@@ -62,6 +86,24 @@ def trends(holes: pd.DataFrame, recs: Sequence[Recording], *, set_size: int = 6,
 
     Each part that cannot be computed is replaced by a note saying why (too few holes, no
     camera channel, ...), never by invented values.
+
+    Parameters
+    ----------
+    holes : pandas.DataFrame
+        Hole table.
+    recs : sequence
+        The recordings (camera channel).
+    set_size : int, default 6
+        Holes per set.
+    baseline : int, default 30
+        New-tool holes for the relative increase.
+    window : int, default 15
+        Moving-average window [holes].
+
+    Returns
+    -------
+    dict
+        Trend arrays, set pattern, tool temperature, hole quality and notes.
     """
     from cnctwin.usecases.wear import moving_average, relative_increase, set_pattern
 
@@ -147,6 +189,20 @@ def cutting_torque(rec: Recording, model: SpindleModel, *, spindle: str = "SP1",
     ``SpindleModel.cutting_torque`` is applied to each gap-free run of cycles separately so
     the inertia term's dOmega/dt is never taken across missing cycles. Returns the torque and
     the speed source used.
+
+    Parameters
+    ----------
+    rec : Recording
+        The recording.
+    model : SpindleModel
+        Calibrated spindle model.
+    spindle : str, default 'SP1'
+        Spindle axis name.
+
+    Returns
+    -------
+    tuple
+        (torque per HF row [Nm], the speed signal used).
     """
     from cnctwin.analysis.segments import spindle_speed_rpm
 
@@ -173,6 +229,24 @@ def anomalies(recs: Sequence[Recording], holes: pd.DataFrame, *, detector: str =
     The replay of ``cnctwin anomalies`` (:func:`~cnctwin.usecases.replay.replay_detector`)
     with the scores of a clone taught on the same rows, for the detectors the page offers
     (:data:`DETECTORS`).
+
+    Parameters
+    ----------
+    recs : sequence
+        Recordings in time order.
+    holes : pandas.DataFrame
+        Their hole table.
+    detector : str, default 'physics'
+        Detector name (``physics``, ``envelope``, ``spectral``, ``tapping``).
+    learn_s : float, optional
+        Teach-in length [s]; default the first third.
+    threshold : float, default 0.0
+        Alarm threshold; 0 = the detector's own.
+
+    Returns
+    -------
+    dict
+        Alarms, scores (decimated) and notes.
     """
     from cnctwin.usecases.replay import replay_detector
 

@@ -85,6 +85,26 @@ def plot_payload(time_s: NDArray[np.float64], cycles: NDArray[np.int64],
     buckets proportional to its samples (at least one) and the segments are joined by a
     ``null`` so the plot shows the gap instead of a line across it. A range of up to
     ``2 px`` samples is sent at full resolution (``exact``).
+
+    Parameters
+    ----------
+    time_s : numpy.ndarray
+        Sample times [s from the first cycle].
+    cycles : numpy.ndarray
+        Cycle counter (gaps split the plot).
+    values : numpy.ndarray
+        Samples.
+    px : int
+        Plot width [pixels].
+    start_s : float, optional
+        Start of the range [s]; default the first sample.
+    end_s : float, optional
+        End of the range [s]; default the last sample.
+
+    Returns
+    -------
+    dict
+        ``x``, ``y``, ``n_source``, ``n_points``, ``exact``, ``n_gaps``, ``min``, ``max``.
     """
     lo = 0 if start_s is None else int(np.searchsorted(time_s, start_s, side="left"))
     hi = time_s.size if end_s is None else int(np.searchsorted(time_s, end_s, side="right"))

@@ -24,7 +24,21 @@ __all__ = ["LiveSource", "sse_event", "tail_lines"]
 
 
 def sse_event(data: str, *, event: str | None = None, event_id: str | None = None) -> str:
-    """One Server-Sent Event (``event:``/``id:``/``data:`` lines, blank line)."""
+    """One Server-Sent Event (``event:``/``id:``/``data:`` lines, blank line).
+
+    Parameters
+    ----------
+    data : str
+        Event data (one line per ``data:``).
+    event : str, optional
+        Event name.
+    event_id : str, optional
+        Event id.
+
+    Returns
+    -------
+    str
+    """
     head = ""
     if event:
         head += f"event: {event}\n"
@@ -42,6 +56,15 @@ async def tail_lines(path: Path, *, from_start: bool, poll_s: float = 0.2,
     that is rotated (renamed and replaced by a new one, ``JsonLinesSink(rotate_bytes=...)``) is
     read to its end through the open handle before the new file is followed from its start,
     so no line is skipped across a rotation.
+
+    Parameters
+    ----------
+    path : path-like
+        The file.
+    from_start : bool
+        Read what the file holds first; else only what is appended.
+    poll_s : float, default 0.2
+        Poll interval [s].
     """
     f: IO[bytes] | None = None
     buf = b""

@@ -128,7 +128,18 @@ def _tile(m: dict[str, Any]) -> str:
 
 
 def plant_tiles(rows: Sequence[dict[str, Any]]) -> str:
-    """One status tile per machine (:func:`cnctwin.web.plant.plant_state` rows)."""
+    """One status tile per machine (:func:`cnctwin.web.plant.plant_state` rows).
+
+    Parameters
+    ----------
+    rows : sequence
+        One :func:`cnctwin.web.plant.machine_state` per machine.
+
+    Returns
+    -------
+    str
+        HTML of the tiles.
+    """
     if not rows:
         return ('<p class="muted">No edge runtimes: start the dashboard with '
                 "<code>--live DIR</code> (repeatable) or <code>--plant plant.toml</code>.</p>")
@@ -136,7 +147,20 @@ def plant_tiles(rows: Sequence[dict[str, Any]]) -> str:
 
 
 def plant_page(title: str, rows: Sequence[dict[str, Any]]) -> str:
-    """The plant at a glance: a tile per machine, refreshed every 2 s."""
+    """The plant at a glance: a tile per machine, refreshed every 2 s.
+
+    Parameters
+    ----------
+    title : str
+        Page title (the dashboard's name).
+    rows : sequence
+        One :func:`cnctwin.web.plant.machine_state` per machine.
+
+    Returns
+    -------
+    str
+        HTML.
+    """
     counts = {st: sum(1 for m in rows if m.get("state") == st) for st in
               ("running", "cutting", "alarm", "stale", "finished", "waiting")}
     summary = ", ".join(f"{n} {st}" for st, n in counts.items() if n) or "no machines"
@@ -154,7 +178,28 @@ def overview_page(title: str, machines: Sequence[dict[str, Any]], entries: Seque
                   live: bool, store_url: str | None,
                   plant: Sequence[dict[str, Any]] = ()) -> str:
     """Fleet and recordings with duration, rate, gaps, jitter, partial flags, last activity;
-    the plant's tiles first when edge runtimes are followed."""
+    the plant's tiles first when edge runtimes are followed.
+
+    Parameters
+    ----------
+    title : str
+        Page title (the dashboard's name).
+    machines : sequence
+        Fleet rows.
+    entries : sequence
+        Recordings.
+    live : bool
+        A live source is followed.
+    store_url : str, optional
+        The store shown.
+    plant : sequence, default ()
+        Plant tiles (:func:`cnctwin.web.plant.plant_state`).
+
+    Returns
+    -------
+    str
+        HTML.
+    """
     m_rows = "".join(
         f"<tr><td><a href=\"/machines/{_q(m['machine'])}\">{_e(m['machine'])}</a></td>"
         f"<td>{m['n_recordings']}</td><td>{_num(m['duration_s'], '{:.1f}', 's')}</td>"
@@ -245,7 +290,26 @@ scored on the rest.</p>
 
 def recording_page(title: str, e: Entry, signals: Sequence[str], *, calibrated: bool,
                    twin: bool = False) -> str:
-    """Summary, signal-quality figures, signal plot with server-side decimation, use cases."""
+    """Summary, signal-quality figures, signal plot with server-side decimation, use cases.
+
+    Parameters
+    ----------
+    title : str
+        Page title (the dashboard's name).
+    e : Entry
+        The recording's catalog entry.
+    signals : sequence
+        Signal names offered.
+    calibrated : bool
+        A calibrated spindle model is loaded.
+    twin : bool, default False
+        A machine file is loaded (link to the twin comparison).
+
+    Returns
+    -------
+    str
+        HTML.
+    """
     q = e.quality
     qual = "" if q is None else f"""
 <dt>rate</dt><dd>{_num(q.nominal_rate_hz, '{:g}', 'Hz')} nominal,
@@ -328,7 +392,24 @@ cycles; an axis departs where that exceeds {_num(doc.get('limits', {}).get('resi
 
 def machine_page(title: str, machine: str, entries: Sequence[Entry], *, calibrated: bool,
                  ) -> str:
-    """Hole record and trends over every recording of one machine (time order)."""
+    """Hole record and trends over every recording of one machine (time order).
+
+    Parameters
+    ----------
+    title : str
+        Page title (the dashboard's name).
+    machine : str
+        Machine name.
+    entries : sequence
+        Its recordings.
+    calibrated : bool
+        A calibrated spindle model is loaded.
+
+    Returns
+    -------
+    str
+        HTML.
+    """
     rows = "".join(f"<li><a href=\"/recordings/{_q(e.id)}\">{_e(e.label)}</a> "
                    f"{_time(e.start_time)}, {_num(e.duration_s, '{:.1f}', 's')}</li>"
                    for e in entries)
@@ -345,7 +426,24 @@ order.</p><ul>{rows}</ul>
 def live_page(title: str, results: str | None, *, machine: str | None = None,
               machines: Sequence[str] = ()) -> str:
     """Edge-runtime status, rolling cutting torque, holes and alarms as they arrive (SSE);
-    a machine picker when several runtimes are followed."""
+    a machine picker when several runtimes are followed.
+
+    Parameters
+    ----------
+    title : str
+        Page title (the dashboard's name).
+    results : str, optional
+        The followed ``results.jsonl``; None without a live source.
+    machine : str, optional
+        Label of the machine shown.
+    machines : sequence, default ()
+        Labels of all followed machines.
+
+    Returns
+    -------
+    str
+        HTML.
+    """
     if results is None:
         body = ("<h1>Live</h1><p>No live source. Start the dashboard with "
                 "<code>--live DIR</code>, the <code>--out DIR</code> of <code>cnctwin edge "
@@ -381,7 +479,26 @@ _FLEET_SORTS = (("alarms", "alarms"), ("wear", "wear"), ("drift", "drift"),
 def fleet_page(title: str, rows: Sequence[dict[str, Any]], *, source: str | None,
                sort: str, tables: Sequence[str]) -> str:
     """Machines ranked by alarms, wear, drift or data quality (``cnctwin fleet`` results),
-    each linking to its machine page."""
+    each linking to its machine page.
+
+    Parameters
+    ----------
+    title : str
+        Page title (the dashboard's name).
+    rows : sequence
+        Ranked machines (:func:`cnctwin.fleet.summary.fleet_summary` rows).
+    source : str, optional
+        The result folder.
+    sort : str
+        Ranking key.
+    tables : sequence
+        Job tables found.
+
+    Returns
+    -------
+    str
+        HTML.
+    """
     if source is None:
         body = f"""
 <h1>{_e(title)}: fleet results</h1>

@@ -40,6 +40,16 @@ def expand_recording_paths(paths: Sequence[str | os.PathLike[str]]) -> list[Path
     is kept as one, also one level down (a scenario's output directory); the simulator's truth
     files beside it (``truth.json``, ``truth_per_cycle*.parquet``) are not recordings.
 
+    Parameters
+    ----------
+    paths : sequence or path-like
+        Files and directories.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The recordings, directories expanded and sorted.
+
     Raises
     ------
     ConfigError
