@@ -80,7 +80,7 @@ def runs(mask: ArrayLike) -> NDArray[np.int64]:
     Returns
     -------
     numpy.ndarray
-        ``(k, 2)`` start and end (exclusive) of each run of True.
+        ``(k, 2)`` first and last index (inclusive) of each run of True.
     """
     m = np.asarray(mask, dtype=bool)
     if m.size == 0:

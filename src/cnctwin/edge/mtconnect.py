@@ -156,12 +156,12 @@ def item_key(name: str) -> str:
     Parameters
     ----------
     name : str
-        A cnctwin signal or result name.
+        Axis or spindle name (``X1``, ``SP1``).
 
     Returns
     -------
     str
-        The data item id it is published under.
+        The lower-case prefix of its data items' ids.
     """
     return "".join(ch if ch.isalnum() else "_" for ch in name).lower()
 

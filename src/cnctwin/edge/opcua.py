@@ -80,12 +80,12 @@ def eu_unit_id(code: str) -> int:
     Parameters
     ----------
     code : str
-        Unit text of the signal catalog (``A``, ``rpm``, ``Nm``).
+        UNECE common code (``CEL``, ``AMP``, ``RPM``; at most 4 characters).
 
     Returns
     -------
     int
-        The UNECE unit id of OPC UA EUInformation (-1 when unknown).
+        The ``UnitId`` of OPC UA ``EUInformation``.
     """
     uid = 0
     for ch in code.upper()[:4]:

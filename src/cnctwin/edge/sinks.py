@@ -45,7 +45,7 @@ def reconnect_delay_s(failures: int, *, base_s: float, max_s: float) -> float:
     Returns
     -------
     float
-        ``min(base_s 2^(failures-1), max_s)`` with +-10 % jitter [s].
+        ``min(base_s 2^(failures-1), max_s)`` [s] (``base_s`` for ``failures <= 1``).
 
     Examples
     --------

@@ -53,7 +53,7 @@ def node_ids(rec: Recording) -> tuple[dict[str, str], dict[str, str]]:
     Returns
     -------
     tuple of dict
-        Column -> NodeId of the HF signals and of the LF signals.
+        Column -> node id, and text (LF) signal name -> node id.
     """
     numbers = {name: int(n) for n, name in rec.meta.axis_map.items()}
     if not numbers:

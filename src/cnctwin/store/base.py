@@ -223,7 +223,7 @@ def external_meta(ch: ExternalChannel) -> dict[str, Any]:
     Returns
     -------
     dict
-        Its description without the data (units, rate, source, clock offset).
+        The channel's fields without its data, and ``index`` (the index column's name).
     """
     return {
         "index": ch.data.index.name or "time_s", "units": ch.units, "fs_hz": ch.fs_hz,

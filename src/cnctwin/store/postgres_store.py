@@ -204,7 +204,7 @@ def parse_pg_url(url: str) -> tuple[str, str]:
     Returns
     -------
     tuple
-        (connection URL without the schema, schema name).
+        (libpq connection string without ``schema=``, schema name).
     """
     parts = urllib.parse.urlsplit(url)
     query = urllib.parse.parse_qsl(parts.query, keep_blank_values=True)
