@@ -180,7 +180,7 @@ _REPRS = re.compile(r"\bNone\b|\bnan\b|\bNaN\b|\{'|<cnctwin\.|Timestamp\(|array\
 
 
 @pytest.fixture(scope="module")
-def plant_server(live_dir: Path, wear12: dict[str, Any], model_file: Path,
+def plant_server(live_dir: Path, wear12: dict[str, Any], model_file: Path, c4a_file: Path,
                  tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """Two machines: the finished edge run and one whose runtime went silent."""
     silent = tmp_path_factory.mktemp("plant") / "M2-silent"
@@ -189,7 +189,8 @@ def plant_server(live_dir: Path, wear12: dict[str, Any], model_file: Path,
         "machine": "DMU-2", "state": "running", "updated": "2026-01-01T00:00:00Z",
         "cycles": 5, "holes": 0, "alarms": 0}))
     with _serve(["--live", str(live_dir), "--live", str(silent), "--recording",
-                 str(wear12["path"]), "--model", str(model_file)],
+                 str(wear12["path"]), "--recording", str(c4a_file), "--model",
+                 str(model_file)],
                 tmp_path_factory.mktemp("srv-plant") / "server.log") as url:
         yield url
 
@@ -227,3 +228,8 @@ def test_pages_show_no_python_reprs_and_a_time_range(plant_server: str, tmp_path
     assert re.search(r'id="range-start"[^>]*value="10.000"', dom)
     assert re.search(r'id="range-end"[^>]*value="12.000"', dom)
     _screenshot(plant_server + "/recordings/file:0?start_s=10&end_s=12", tmp_path, "recording")
+    # a recording without drilling (the real Capture4Analysis file): no empty table or plot
+    dom = _dump_dom(plant_server + "/recordings/file:1", tmp_path)
+    assert re.search(r'id="holes-info"[^>]*>0 holes', dom)
+    for name in ("holes-table", "trend-plot", "temperature-plot"):
+        assert re.search(rf'id="{name}"[^>]*style="display: none;"', dom), name

@@ -99,8 +99,11 @@ const cnctwin = (() => {
       const h = await getJSON(`${api}/holes`);
       info.textContent = `${h.n_holes} holes; spindle model: ${h.spindle_model || "–"}; thrust: ${h.thrust_source || "–"}` +
         (h.issues.length ? `; notes: ${h.issues.join(" | ")}` : "");
+      if (!h.n_holes) {  // nothing drawn empty: no table header without rows, no blank plots
+        for (const id of ["holes-table", "trend-plot", "temperature-plot"]) $(id).style.display = "none";
+        return;
+      }
       table($("holes-table"), HOLE_COLS.filter((c) => h.columns.includes(c)), h.rows, 500);
-      if (!h.n_holes) return;
       const t = await getJSON(`${api}/trends`);
       $("trend-notes").innerHTML = t.notes.map((n) => `<li>${esc(n)}</li>`).join("");
       const traces = [
