@@ -611,6 +611,13 @@ def run_demo(out_dir: str | Path = "out/demo", *, seed: int = 0, quick: bool = F
     summary += ("\n  next: open the report in a browser, or look at a simulated wear run in the "
                 "dashboard:\n    cnctwin simulate tool_wear_run --out out/wear --option n_holes=60"
                 " && cnctwin web --recording out/wear")
+    import importlib.util
+
+    if importlib.util.find_spec("fastapi") is None:  # make demo installs no extras
+        from rich.markup import escape
+
+        summary += escape("\n    (the dashboard needs the web extra: pip install -e '.[web]', or "
+                          "make test, which installs every extra)")
     con.print(summary)
     return path
 
