@@ -22,6 +22,7 @@ Nothing a reader accepted is silently dropped: what it repaired or could not kee
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 from collections.abc import Iterable, Sequence
@@ -509,6 +510,13 @@ def empty_events() -> pd.DataFrame:
     pandas.DataFrame
         No rows, the :data:`EVENT_COLUMNS`.
     """
+    return _empty_events_template().copy()
+
+
+@functools.cache
+def _empty_events_template() -> pd.DataFrame:
+    # built once (1 ms of pandas dtype work; the edge runtime asks for one per hole), handed
+    # out as copies, so no caller can change it
     return pd.DataFrame(
         {
             "cycle": pd.Series(dtype="int64"),
@@ -533,6 +541,11 @@ def empty_lf() -> pd.DataFrame:
     pandas.DataFrame
         No rows, the :data:`LF_COLUMNS`.
     """
+    return _empty_lf_template().copy()
+
+
+@functools.cache
+def _empty_lf_template() -> pd.DataFrame:
     return pd.DataFrame(
         {
             "cycle": pd.Series(dtype="int64"),
