@@ -52,6 +52,8 @@ class CsvTable:
         File line (1-based) of each row.
     path : str
         File name for messages.
+    delimiter : str
+        Field delimiter the file was read with.
     dropped_lines : list of int
         Lines of rows with a wrong number of fields dropped under ``salvage``.
     blank_lines : list of int
@@ -62,6 +64,7 @@ class CsvTable:
     columns: list[Any]
     lines: NDArray[np.int64]
     path: str
+    delimiter: str = ","
     dropped_lines: list[int] = field(default_factory=list)
     blank_lines: list[int] = field(default_factory=list)
 
@@ -123,10 +126,6 @@ class CsvTable:
             raise FormatError(f"value {cell!r} is not a number", path=self.path,
                               position=f"line {line}", field=self.header[j]) from None
 
-    def is_numeric(self, j: int, *, decimal_comma: bool = False) -> bool:
-        """Whether every non-empty cell of column ``j`` is a number."""
-        return self.first_not_number(j, decimal_comma=decimal_comma) is None
-
     def first_not_number(self, j: int, *, decimal_comma: bool = False,
                          missing: tuple[str, ...] = ("",)) -> int | None:
         """Row index of the first non-missing cell of column ``j`` that is not a number."""
@@ -142,11 +141,13 @@ class CsvTable:
         return int(bad[0]) if bad.size else None
 
     def has_decimal_comma(self, *, rows: int = 5) -> bool:
-        """Whether the first ``rows`` rows hold a number written with a decimal comma."""
+        """Whether numbers use a decimal comma: only where ``;`` separates the fields (German
+        locale exports) and a number of the first ``rows`` rows is written ``1,5``."""
         import re
 
-        return any(re.search(r"\d,\d", str(c)) for col in self.columns
-                   for c in col.slice(0, rows).to_pylist())
+        return self.delimiter == ";" and any(
+            re.search(r"\d,\d", str(c)) for col in self.columns
+            for c in col.slice(0, rows).to_pylist())
 
 
 def read_csv_table(
@@ -251,4 +252,4 @@ def read_csv_table(
             table = table.filter(pa.array(keep))
             lines = lines[keep]
     return CsvTable(header=header, columns=list(table.columns), lines=lines, path=path,
-                    dropped_lines=bad, blank_lines=sorted(blank))
+                    delimiter=delimiter, dropped_lines=bad, blank_lines=sorted(blank))

@@ -176,13 +176,11 @@ def read_dynamometer_csv(
     if dup:
         raise FormatError(f"columns map twice onto {sorted(dup)}", path=spath,
                           position="line 1")
-    # a decimal comma only where ';' separates the fields (German locale exports)
-    decimal_comma = table.header and header_delimiter(text.splitlines()[0]) == ";" and (
-        table.has_decimal_comma())
+    decimal_comma = table.has_decimal_comma()
     cols: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
     for j, (h, k) in enumerate(zip(header, kinds, strict=True)):
-        values = table.numbers(j, decimal_comma=bool(decimal_comma))
+        values = table.numbers(j, decimal_comma=decimal_comma)
         if k is None:
             key = _normalise(h.lower()) or f"col{j}"
             cols[key] = values

@@ -153,7 +153,7 @@ def read_thermal_camera_csv(
     if not table.n_rows:
         raise FormatError("no readings after the header", path=spath,
                           position=f"line {header_line + 1}")
-    decimal_comma = delim == ";" and table.has_decimal_comma()
+    decimal_comma = table.has_decimal_comma()
     header = table.header
     kinds = [_classify(h) for h in header]
     cols: dict[str, np.ndarray] = {}
@@ -169,9 +169,12 @@ def read_thermal_camera_csv(
                 cells = [c.replace(",", ".") for c in cells]
             time_s = _parse_time(cells, spath, first_line, h) * float(k[1])
             continue
-        if k is None and not table.is_numeric(j, decimal_comma=decimal_comma):
-            continue  # a text column (frame label, comment): not a reading
-        vals = table.numbers(j, decimal_comma=decimal_comma)
+        try:
+            vals = table.numbers(j, decimal_comma=decimal_comma)
+        except FormatError:
+            if k is None:  # a text column (frame label, comment): not a reading
+                continue
+            raise
         if k is None:
             key = _norm(h) or f"col{j}"
             cols[key] = vals
