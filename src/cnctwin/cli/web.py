@@ -60,12 +60,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def _cmd_web(args: argparse.Namespace) -> int:
-    lives: dict[str, Path] = {}
-    for d in args.live:
-        label = d.name or str(d)
-        while label in lives:  # two state directories of one name in different folders
-            label += "'"
-        lives[label] = d
+    from cnctwin.web.live import directory_labels
+
+    lives = directory_labels(args.live)
     if args.plant is not None:
         from cnctwin.cli.edge import read_plant_file
 

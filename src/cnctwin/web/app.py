@@ -41,7 +41,7 @@ from cnctwin.recording import Recording
 from cnctwin.spindle import SpindleModel
 from cnctwin.web import analyses, pages
 from cnctwin.web.decimate import envelope_decimate
-from cnctwin.web.live import LiveSource
+from cnctwin.web.live import LiveSource, directory_labels
 from cnctwin.web.plant import PlantStatusOptions, plant_state
 from cnctwin.web.sources import Catalog, Entry
 
@@ -394,14 +394,7 @@ def _live_sources(live: Any) -> dict[str, LiveSource]:
     if isinstance(live, Mapping):
         return {str(k): LiveSource(v) for k, v in live.items()}
     items = [live] if isinstance(live, str | os.PathLike) else list(live)
-    out: dict[str, LiveSource] = {}
-    for item in items:
-        src = LiveSource(item)
-        label = src.directory.name or str(src.directory)
-        while label in out:  # two state directories of one name in different folders
-            label = f"{label}'"
-        out[label] = src
-    return out
+    return {label: LiveSource(p) for label, p in directory_labels(items).items()}
 
 
 def create_app(

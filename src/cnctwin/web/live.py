@@ -14,13 +14,13 @@ import asyncio
 import contextlib
 import json
 import os
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Iterable
 from pathlib import Path
 from typing import IO, Any
 
 from cnctwin.exceptions import ConfigError
 
-__all__ = ["LiveSource", "sse_event", "tail_lines"]
+__all__ = ["LiveSource", "directory_labels", "sse_event", "tail_lines"]
 
 
 def sse_event(data: str, *, event: str | None = None, event_id: str | None = None) -> str:
@@ -113,6 +113,29 @@ async def tail_lines(path: Path, *, from_start: bool, poll_s: float = 0.2,
     finally:
         if f is not None:
             f.close()
+
+
+def directory_labels(paths: Iterable[str | os.PathLike[str]]) -> dict[str, Path]:
+    """A label for each edge state directory: its folder name, primed when two share one.
+
+    Parameters
+    ----------
+    paths : iterable of path-like
+        State directories (``cnctwin edge run --out DIR``) or their ``results.jsonl``.
+
+    Returns
+    -------
+    dict
+        Label -> path, in the given order.
+    """
+    out: dict[str, Path] = {}
+    for item in paths:
+        p = Path(item)
+        label = (p.parent if p.suffix.lower() == ".jsonl" else p).name or str(p)
+        while label in out:  # two state directories of one name in different folders
+            label += "'"
+        out[label] = p
+    return out
 
 
 class LiveSource:
