@@ -27,7 +27,7 @@ import orjson
 
 from cnctwin.edge.cycles import CycleTracker
 from cnctwin.edge.pipeline import Chunk, MessageBatch, Processor, Result, Sink, Source
-from cnctwin.edge.sinks import rotated_files
+from cnctwin.edge.sinks import rotated_files, tail_lines
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import CounterGap
 
@@ -647,14 +647,7 @@ def last_emitted(results: str | PathLike[str], *, tail_bytes: int = 1 << 20
     p = Path(results)
     out: dict[str, int] = {}
     for f in [p, *reversed(rotated_files(p))]:
-        if not f.is_file():
-            continue
-        with f.open("rb") as fh:
-            fh.seek(0, os.SEEK_END)
-            size = fh.tell()
-            fh.seek(max(size - tail_bytes, 0))
-            lines = fh.read().split(b"\n")
-        for line in lines:
+        for line in tail_lines(f, tail_bytes=tail_bytes):
             try:
                 m = json.loads(line)
                 kind = str(m["kind"])

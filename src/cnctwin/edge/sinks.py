@@ -55,6 +55,35 @@ def reconnect_delay_s(failures: int, *, base_s: float, max_s: float) -> float:
     return float(min(base_s * 2.0 ** max(failures - 1, 0), max_s))
 
 
+def tail_lines(path: str | PathLike[str], *, tail_bytes: int) -> list[bytes]:
+    """The complete lines in the last ``tail_bytes`` of a file (a JSON lines results file).
+
+    A line the window starts inside is left out; so is nothing else (a last line a crash cut
+    short is returned, the caller's parser refuses it).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file.
+    tail_bytes : int
+        How much of its end is read [bytes].
+
+    Returns
+    -------
+    list of bytes
+        Lines in file order; empty for a missing file.
+    """
+    try:
+        with Path(path).open("rb") as fh:
+            size = fh.seek(0, os.SEEK_END)
+            start = max(size - tail_bytes, 0)
+            fh.seek(start)
+            lines = fh.read().split(b"\n")
+    except FileNotFoundError:
+        return []
+    return lines[1:] if start > 0 else lines
+
+
 def rotated_files(path: str | PathLike[str]) -> list[Path]:
     """The files :class:`JsonLinesSink` rotated ``path`` into, oldest first.
 

@@ -22,7 +22,6 @@ State rules, first match wins:
 from __future__ import annotations
 
 import math
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +30,7 @@ from typing import Any
 import orjson
 import pandas as pd
 
+from cnctwin.edge.sinks import tail_lines
 from cnctwin.recording import jsonable
 from cnctwin.web.live import LiveSource
 
@@ -66,16 +66,7 @@ class PlantStatusOptions:
 
 def _newest_messages(results: Path, tail_bytes: int) -> dict[str, dict[str, Any]]:
     """The newest message of each kind in :data:`_KINDS` since the newest ``run`` message."""
-    try:
-        with results.open("rb") as f:
-            size = f.seek(0, os.SEEK_END)
-            f.seek(max(size - tail_bytes, 0))
-            data = f.read()
-    except FileNotFoundError:
-        return {}
-    lines = data.split(b"\n")
-    if len(data) >= tail_bytes:
-        lines = lines[1:]  # the first line may start mid-message
+    lines = tail_lines(results, tail_bytes=tail_bytes)
     found: dict[str, dict[str, Any]] = {}
     for line in reversed(lines):
         if not line.strip():
