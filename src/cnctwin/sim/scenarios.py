@@ -645,15 +645,10 @@ class DrillingProcess(_Process):
                                       else float(initial_tool_temperature_c))
         self.temperature_c = self.initial_temperature_c
         self.holder_temperature_c = cfg.tool_thermal.ambient_temperature_c
-        self._holder_at_extraction: dict[int, float] = {}
         self._acc: dict[int, list[float]] = {}
         # chisel-edge skid direction per hole (uniform): own stream, drawn once per new hole
         self._dir_rng = np.random.default_rng(int(self.rng.integers(2**32)))
         self._entry_dir: dict[int, float] = {}
-
-    def holder_at_extraction(self, hole: int) -> float:
-        """Holder temperature when ``hole``'s cut ended [degC] (ambient with one node)."""
-        return self._holder_at_extraction.get(hole, self.cfg.tool_thermal.ambient_temperature_c)
 
     def _entry_directions(self, hole: NDArray[np.int64]) -> NDArray[np.float64]:
         for h in np.unique(hole[hole >= 0]):
@@ -693,19 +688,17 @@ class DrillingProcess(_Process):
                                              initial_c=self.temperature_c,
                                              initial_holder_c=self.holder_temperature_c)
             self.holder_temperature_c = float(holder[-1])
-            for h in np.unique(hole[(hole >= 0) & (depth > 0.0)]):
-                last = np.flatnonzero((hole == h) & (depth > 0.0))[-1]
-                self._holder_at_extraction[int(h)] = float(holder[last])
         else:
             temp = tool_temperature(power, dt_s=dt, thermal=cfg.tool_thermal,
                                     initial_c=self.temperature_c)
+            holder = None
         self.temperature_c = float(temp[-1])
         load = drilling_load(depth, n, feed, rng=self.rng, tool_temperature_c=temp,
                              walk_direction_rad=self.walk_direction_rad,
                              entry_direction_rad=self._entry_directions(hole), **kw)
         prog = np.clip(depth / self.hole_depth_mm, 0.0, 1.0)
         load = self._faults(load, ci, hole, n, prog)
-        self._holes_update(ci, hole, depth, feed, load, temp, wear, hard)
+        self._holes_update(ci, hole, depth, feed, load, temp, wear, hard, holder)
         truth = {"hole": hole, "tip_depth_mm": depth, "cutting_torque_nm": load.torque_nm,
                  "thrust_n": load.thrust_n, "fx_n": load.fx_n, "fy_n": load.fy_n,
                  "tool_temperature_c": temp, "wear_um": wear}
@@ -716,7 +709,7 @@ class DrillingProcess(_Process):
     def _holes_update(self, ci: CuttingInput, hole: NDArray[np.int64],
                       depth: NDArray[np.float64], feed: NDArray[np.float64], load: Any,
                       temp: NDArray[np.float64], wear: NDArray[np.float64],
-                      hard: NDArray[np.float64]) -> None:
+                      hard: NDArray[np.float64], holder: NDArray[np.float64] | None) -> None:
         cone = self.cfg.drill.cone_length_mm
         for h in np.unique(hole[(hole >= 0) & (depth > 0.0)]):
             row = self.holes[int(h)]
@@ -725,6 +718,8 @@ class DrillingProcess(_Process):
             row["cut_last_cycle"] = int(ci.cycle[idx[-1]])
             row["extraction_s"] = float(ci.time_s[idx[-1]])
             row["tool_temperature_extraction_c"] = float(temp[idx[-1]])
+            if holder is not None:  # the tool holder node (ToolThermal.two_node)
+                row["tool_holder_temperature_extraction_c"] = float(holder[idx[-1]])
             row["tool_temperature_max_c"] = max(row.get("tool_temperature_max_c", -1e9),
                                                 float(temp[sel].max()))
             full = sel & (depth >= cone) & (feed > 0.0)
@@ -1536,9 +1531,7 @@ def tool_wear_run(
         r["position_in_set"] = (r["hole"] - start_hole) % holes_per_set
         # camera reading delay_s after extraction: the tool cools freely (the same model:
         # one node, or the tip with its holder)
-        holder_c = hook.holder_at_extraction(int(r["hole"]))
-        if th.two_node:
-            r["tool_holder_temperature_extraction_c"] = holder_c
+        holder_c = r.get("tool_holder_temperature_extraction_c", th.ambient_temperature_c)
         r["tool_temperature_camera_c"] = free_cooling(
             r["tool_temperature_extraction_c"], holder_c, cfg.camera.delay_s, th)
     cam = None
