@@ -4,8 +4,8 @@ Each processor wraps an existing analysis instead of re-implementing it:
 
 * :class:`TorqueProcessor`: :class:`cnctwin.spindle.StreamingTorqueEstimator` (identical to
   :meth:`SpindleModel.cutting_torque` on each contiguous run of cycles).
-* :class:`HoleProcessor`: :func:`cnctwin.usecases.holes.hole_record` run incrementally on a
-  bounded buffer that starts after the previous hole.
+* :class:`HoleProcessor`: :func:`cnctwin.usecases.holes.holes_from_arrays` (the arrays form of
+  ``hole_record``) run incrementally on a bounded buffer that starts after the previous hole.
 * :class:`AnomalyProcessor`: any detector of :mod:`cnctwin.usecases.anomaly` (learn one / score
   one), taught on the first ``learn_s`` of the stream, then scoring.
 * :class:`TwinCompareProcessor`: :func:`cnctwin.compare.compare_recording` on consecutive
@@ -26,10 +26,10 @@ from cnctwin.edge.cut import CutTracker
 from cnctwin.edge.pipeline import Chunk, Result
 from cnctwin.exceptions import ConfigError
 from cnctwin.machine import MachineFile
-from cnctwin.recording import CounterGap, Recording, RecordingMeta, empty_events
+from cnctwin.recording import CounterGap, Recording, RecordingMeta
 from cnctwin.spindle import SpindleModel, StreamingTorqueEstimator
 from cnctwin.usecases.anomaly import Detector, PhysicsResidualDetector
-from cnctwin.usecases.holes import HOLE_COLUMNS
+from cnctwin.usecases.holes import HOLE_COLUMNS, HoleEvents, holes_from_arrays
 
 __all__ = ["AnomalyProcessor", "HoleProcessor", "TorqueProcessor", "TwinCompareProcessor"]
 
@@ -133,8 +133,8 @@ class HoleProcessor:
 
     The HF columns a hole row needs are kept in a buffer that starts where the previous hole
     ended (the tool back above the surface). Each time the Z axis has moved up since the last
-    check, :func:`~cnctwin.usecases.holes.hole_record` runs on the buffer; a hole is emitted
-    once it is complete: the tool is out of the material and the X/Y setpoint has left the
+    check, :func:`~cnctwin.usecases.holes.holes_from_arrays` runs on the buffer (its arrays, no
+    table is built); a hole is emitted once it is complete: the tool is out of the material and the X/Y setpoint has left the
     hole's position (next hole), or the tool has been out for ``settle_s`` (peck drilling: the
     next peck re-enters at the same X/Y within that time), or a later hole follows it. Rows
     equal those of the batch :func:`~cnctwin.usecases.holes.hole_records` on the whole
@@ -185,7 +185,7 @@ class HoleProcessor:
         self.issues: list[str] = []
         self._parts: list[Chunk] = []
         self._n = 0
-        self._events: pd.DataFrame = empty_events()
+        self._events: list[HoleEvents] = []
         self._origin_ns: int | None = None
         self._cycle_time_s = 0.002
         self._moved_up = False
@@ -221,8 +221,7 @@ class HoleProcessor:
                                  cycle_time_s=chunk.cycle_time_s, machine=chunk.machine))
         self._n += len(chunk)
         if not chunk.events.empty:
-            self._events = pd.concat([self._events, chunk.events], ignore_index=True) \
-                if not self._events.empty else chunk.events.copy()
+            self._events.append(HoleEvents.from_frame(chunk.events))
         # live plunge start and "moved up" trigger from the Z setpoint
         step = self.min_speed_mm_s * chunk.cycle_time_s
         has_prev = self._last_z is not None
@@ -282,44 +281,42 @@ class HoleProcessor:
         chunk.derived[f"CUT_FEED|{za}"] = ctx.feed_mm_min
         chunk.derived[f"CUT_SPEED|{self.spindle}"] = ctx.speed_rpm
 
-    def _buffer(self) -> Recording:
-        cols = sorted({c for p in self._parts for c in p.signals})
-        cyc = np.concatenate([p.cycles for p in self._parts])
-        t = np.concatenate([p.time_ns for p in self._parts])
-        data = {c: np.concatenate([p.signals.get(c, np.full(len(p), np.nan))
-                                   for p in self._parts]) for c in cols}
-        hf = pd.DataFrame(data, index=pd.Index(cyc, name="cycle"))
-        hf.insert(0, "time", pd.to_datetime(t, unit="ns", utc=True))
-        meta = RecordingMeta(machine=self._parts[0].machine, cycle_time_s=self._cycle_time_s,
-                             source_format="edge")
-        ev = self._events[self._events["cycle"] <= int(cyc[-1])] if not self._events.empty \
-            else self._events
-        return Recording(hf, events=ev, meta=meta)
+    def _buffer(self) -> tuple[dict[str, NDArray[np.float64]], NDArray[np.int64],
+                               NDArray[np.int64]]:
+        """The buffered columns, cycles and times as contiguous arrays."""
+        parts = self._parts
+        cols = sorted({c for p in parts for c in p.signals})
+        cyc = np.concatenate([p.cycles for p in parts])
+        t = np.concatenate([p.time_ns for p in parts])
+        data = {c: np.concatenate([np.asarray(p.signals.get(c, np.full(len(p), np.nan)),
+                                              dtype=np.float64) for p in parts])
+                for c in cols}
+        return data, cyc, t
 
     def _evaluate(self, *, final: bool) -> list[Result]:
-        from cnctwin.usecases.holes import hole_record
-
         self._moved_up = False
         if not self._parts:
             return []
-        rec = self._buffer()
-        origin = pd.Timestamp(int(self._origin_ns or 0), unit="ns", tz="UTC")
-        rows = hole_record(rec, spindle=self.spindle, z_axis=self.z_axis,
-                           xy_axes=self.xy_axes, model=self.model, window_s=self.window_s,
-                           set_size=self.set_size, first_hole=self.holes,
-                           time_origin=origin, store=False)
-        if rows.empty:
+        cols, cycles, t_ns = self._buffer()
+        speed = cols.get(f"CMD_SPEED|{self.spindle}")
+        events = HoleEvents.concat(self._events).until(int(cycles[-1]))
+        found = holes_from_arrays(cols, cycles, t_ns, cycle_time_s=self._cycle_time_s,
+                          speed_rpm=speed, events=events, spindle=self.spindle,
+                          z_axis=self.z_axis, xy_axes=self.xy_axes, model=self.model,
+                          window_s=self.window_s, set_size=self.set_size,
+                          first_hole=self.holes, origin_ns=self._origin_ns)
+        rows = found.rows
+        if not rows:
             return []
-        last_cycle = int(rec.cycles[-1])
+        last_cycle = int(cycles[-1])
         out: list[Result] = []
         cut_at: int | None = None
-        for k in range(len(rows)):
-            row = rows.iloc[k]
+        for k, row in enumerate(rows):
             ext_cycle = int(row["end_cycle"]) + round(
                 (float(row["extraction_s"]) - float(row["end_s"])) / self._cycle_time_s)
             done = final or k < len(rows) - 1 or (ext_cycle < last_cycle and (
                 (last_cycle - ext_cycle) * self._cycle_time_s >= self.settle_s
-                or self._moved_away(rec, ext_cycle, row)))
+                or self._moved_away(cols, cycles, ext_cycle, row)))
             if not done:  # look again when X/Y moves or after settle_s
                 self._pending = last_cycle + round(self.settle_s / self._cycle_time_s)
                 break
@@ -340,7 +337,7 @@ class HoleProcessor:
                 self.cut.hole_done(payload)
             self.holes += 1
             cut_at = ext_cycle
-        for note in rows.attrs.get("issues", []):
+        for note in found.attrs["issues"]:
             # the event count covers the modal history kept before the buffer: not a finding
             if "drilling-cycle calls" not in note and note not in self.issues:
                 self.issues.append(note)
@@ -355,14 +352,15 @@ class HoleProcessor:
                 return True
         return False
 
-    def _moved_away(self, rec: Recording, cycle: int, row: pd.Series) -> bool:
+    def _moved_away(self, cols: dict[str, NDArray[np.float64]], cycles: NDArray[np.int64],
+                    cycle: int, row: dict[str, Any]) -> bool:
         """The X/Y setpoint left the hole's position after the tool came out (next hole)."""
-        i0 = int(np.searchsorted(rec.cycles, cycle))
+        i0 = int(np.searchsorted(cycles, cycle))
         for axis, key in zip(self.xy_axes, ("x_mm", "y_mm"), strict=True):
-            col = f"DES_POS|{axis}"
             ref = float(row[key])
-            if rec.has(col) and math.isfinite(ref):
-                v = rec.hf[col].to_numpy(dtype=np.float64)[i0:]
+            v = cols.get(f"DES_POS|{axis}")
+            if v is not None and math.isfinite(ref):
+                v = v[i0:]
                 if v.size and np.nanmax(np.abs(v - ref)) > 0.01:
                     return True
         return False
@@ -389,8 +387,10 @@ class HoleProcessor:
             self.issues.append(f"hole buffer longer than {self.max_buffer_s:g} s without a "
                                f"complete hole: {before - self._n} cycles before {cut} dropped "
                                "from the hole search")
-        if len(self._events) > 10_000:
-            self._events = self._events.iloc[-5_000:]
+        if len(self._events) > 64:  # one part per chunk with events: merge them
+            self._events = [HoleEvents.concat(self._events)]
+        if self._events and len(self._events[0]) > 10_000:
+            self._events = [self._events[0].tail_from(-5_000), *self._events[1:]]
 
     def gap(self, gap: CounterGap) -> list[Result]:
         if self.cut is not None:
@@ -413,7 +413,7 @@ HOLE_UNITS: dict[str, str] = {
 """Units of the hole-row fields (from :data:`cnctwin.usecases.holes.HOLE_COLUMNS`)."""
 
 
-def _row_payload(row: pd.Series) -> dict[str, Any]:
+def _row_payload(row: dict[str, Any]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for k, v in row.items():
         if isinstance(v, pd.Timestamp):

@@ -502,7 +502,7 @@ class EdgeRuntime:
 
 
 CHECKPOINT_FILE = "checkpoint.pkl"
-CHECKPOINT_VERSION = 1
+CHECKPOINT_VERSION = 2  # 2: the hole processor keeps its NC events as arrays
 
 
 def source_identity(source: Any) -> dict[str, Any]:

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -43,10 +43,13 @@ from cnctwin.spindle import SpindleModel
 
 __all__ = [
     "HOLE_COLUMNS",
+    "HoleEvents",
+    "HoleRows",
     "Plunge",
     "find_plunges",
     "hole_record",
     "hole_records",
+    "holes_from_arrays",
     "holes_path",
     "read_holes",
     "write_holes",
@@ -159,7 +162,9 @@ def find_plunges(
     (the approach is short and fast, the cut long and slow); the feed stretch is the contiguous
     block of samples not faster than ``feed_factor`` times it that ends at the bottom.
     """
-    z = np.asarray(pd.Series(z_mm).interpolate(limit_direction="both"), dtype=np.float64)
+    z = np.asarray(z_mm, dtype=np.float64)
+    if not np.isfinite(z).all():
+        z = np.asarray(pd.Series(z).interpolate(limit_direction="both"), dtype=np.float64)
     if z.size < 3 or not np.isfinite(z).all():
         return []
     v = np.gradient(z) * fs_hz
@@ -212,20 +217,122 @@ def _event_arrays(ev: pd.DataFrame, *cols: str) -> tuple[Any, ...]:
     return tuple(out)
 
 
-def _cycle_info(rec: Recording, cycles: NDArray[np.int64]) -> tuple[list[str], list[float]]:
+@dataclass(frozen=True)
+class HoleEvents:
+    """The NC events a hole row reads, as plain arrays sorted by cycle.
+
+    Attributes
+    ----------
+    cycle : numpy.ndarray
+        Cycle of each event (int64, ascending).
+    kind, gcode, path, active_tool : numpy.ndarray
+        Object arrays (None where the event has no value): ``block``/``call``/..., the block
+        text, the called program path, the active tool number.
+    """
+
+    cycle: NDArray[np.int64]
+    kind: NDArray[np.object_]
+    gcode: NDArray[np.object_]
+    path: NDArray[np.object_]
+    active_tool: NDArray[np.object_]
+
+    @classmethod
+    def from_frame(cls, events: pd.DataFrame) -> HoleEvents:
+        """The arrays of an NC event table (:attr:`Recording.events`).
+
+        Parameters
+        ----------
+        events : pandas.DataFrame
+            Event table with a ``cycle`` column; ``kind``, ``gcode``, ``path`` and
+            ``active_tool`` are read where present.
+
+        Returns
+        -------
+        HoleEvents
+        """
+        if events.empty:
+            return _NO_HOLE_EVENTS
+        return cls(*_event_arrays(events, "kind", "gcode", "path", "active_tool"))
+
+    @classmethod
+    def concat(cls, parts: Sequence[HoleEvents]) -> HoleEvents:
+        """Events of consecutive stretches as one (stable order by cycle).
+
+        Parameters
+        ----------
+        parts : sequence of HoleEvents
+            The parts, in stream order.
+
+        Returns
+        -------
+        HoleEvents
+        """
+        parts = [e for e in parts if len(e)]
+        if not parts:
+            return _NO_HOLE_EVENTS
+        if len(parts) == 1:
+            return parts[0]
+        cyc = np.concatenate([e.cycle for e in parts])
+        order = np.argsort(cyc, kind="stable")
+        return cls(cyc[order], *(np.concatenate([getattr(e, f) for e in parts])[order]
+                                 for f in ("kind", "gcode", "path", "active_tool")))
+
+    def until(self, cycle: int) -> HoleEvents:
+        """The events at or before ``cycle``.
+
+        Parameters
+        ----------
+        cycle : int
+            Last cycle kept.
+
+        Returns
+        -------
+        HoleEvents
+        """
+        k = int(np.searchsorted(self.cycle, cycle, side="right"))
+        if k == len(self):
+            return self
+        return self.tail_from(0, k)
+
+    def tail_from(self, start: int, stop: int | None = None) -> HoleEvents:
+        """Events ``start:stop`` by position.
+
+        Parameters
+        ----------
+        start : int
+            First position kept.
+        stop : int, optional
+            Position after the last kept; default the end.
+
+        Returns
+        -------
+        HoleEvents
+        """
+        sl = slice(start, stop)
+        return HoleEvents(self.cycle[sl], self.kind[sl], self.gcode[sl], self.path[sl],
+                          self.active_tool[sl])
+
+    def __len__(self) -> int:
+        return int(self.cycle.size)
+
+
+_NO_HOLE_EVENTS = HoleEvents(np.empty(0, dtype=np.int64), *(np.empty(0, dtype=object)
+                                                            for _ in range(4)))
+
+
+def _cycle_info(ev: HoleEvents, cycles: NDArray[np.int64]) -> tuple[list[str], list[float]]:
     """Drilling-cycle name and reference plane (RFP) active at each cycle, from NC events."""
-    ev = rec.events
     n = len(cycles)
     names = [""] * n
     rfp = [math.nan] * n
-    if ev.empty:
+    if not len(ev):
         return names, rfp
-    ec, kinds, texts, paths = _event_arrays(ev, "kind", "gcode", "path")
     # modal state walked in event order
     cur_name, cur_rfp = "", math.nan
     state_name: list[str] = []
     state_rfp: list[float] = []
-    for kind, text, path in zip(kinds.tolist(), texts.tolist(), paths.tolist(), strict=True):
+    for kind, text, path in zip(ev.kind.tolist(), ev.gcode.tolist(), ev.path.tolist(),
+                                strict=True):
         if kind == "block":
             t = str(text or "").upper()
             m = _CYCLE_RE.search(t)
@@ -246,7 +353,7 @@ def _cycle_info(rec: Recording, cycles: NDArray[np.int64]) -> tuple[list[str], l
                 cur_name = m.group(1).upper()
         state_name.append(cur_name)
         state_rfp.append(cur_rfp)
-    idx = np.searchsorted(ec, cycles, side="right") - 1
+    idx = np.searchsorted(ev.cycle, cycles, side="right") - 1
     for k, j in enumerate(idx.tolist()):
         if j >= 0:
             names[k] = state_name[j]
@@ -254,15 +361,12 @@ def _cycle_info(rec: Recording, cycles: NDArray[np.int64]) -> tuple[list[str], l
     return names, rfp
 
 
-def _active_tool(rec: Recording, cycles: NDArray[np.int64]) -> list[int | None]:
-    ev = rec.events
-    if ev.empty or "active_tool" not in ev.columns:
-        return [None] * len(cycles)
-    ec, tools = _event_arrays(ev, "active_tool")
+def _active_tool(ev: HoleEvents, cycles: NDArray[np.int64]) -> list[int | None]:
+    tools = ev.active_tool
     known = np.array([t is not None for t in tools.tolist()], dtype=bool)
     if not known.any():
         return [None] * len(cycles)
-    tc, tv = ec[known], tools[known]
+    tc, tv = ev.cycle[known], tools[known]
     idx = np.searchsorted(tc, cycles, side="right") - 1
     return [int(tv[j]) if j >= 0 else None for j in idx.tolist()]
 
@@ -294,29 +398,290 @@ def _contact(
     return lo + k0
 
 
-def _zload(rec: Recording, z_axis: str) -> tuple[NDArray[np.float64], str, bool] | None:
+def _zload(cols: Mapping[str, NDArray[np.float64]], z_axis: str
+           ) -> tuple[NDArray[np.float64], str, bool] | None:
     for code, unit in (("TORQUE", "Nm"), ("CURRENT", "A")):
         col = f"{code}|{z_axis}"
-        if rec.has(col):
-            return rec.hf[col].to_numpy(dtype=np.float64), f"{col} [{unit}]", True
+        if col in cols:
+            return cols[col], f"{col} [{unit}]", True
     des, enc = f"DES_POS|{z_axis}", f"ENC_POS|{z_axis}"
-    if rec.has(des) and rec.has(enc):
-        d = rec.hf[des].to_numpy(dtype=np.float64) - rec.hf[enc].to_numpy(dtype=np.float64)
-        return d, f"{des} - {enc} (following error) [mm]", False
+    if des in cols and enc in cols:
+        return cols[des] - cols[enc], f"{des} - {enc} (following error) [mm]", False
     return None
 
 
-def _dev(rec: Recording, axis: str, idx: NDArray[np.int64]) -> tuple[float, float, float]:
+def _dev(cols: Mapping[str, NDArray[np.float64]], axis: str, idx: NDArray[np.int64]
+         ) -> tuple[float, float, float]:
     des, enc = f"DES_POS|{axis}", f"ENC_POS|{axis}"
-    if not (rec.has(des) and rec.has(enc)):
+    if not (des in cols and enc in cols):
         return (math.nan, math.nan, math.nan)
-    d = rec.hf[des].to_numpy(dtype=np.float64)[idx] - rec.hf[enc].to_numpy(
-        dtype=np.float64
-    )[idx]
+    d = cols[des][idx] - cols[enc][idx]
     d = d[np.isfinite(d)]
     if d.size == 0:
         return (math.nan, math.nan, math.nan)
     return float(d.mean()), float(np.abs(d).max()), float(np.sqrt(np.mean(d * d)))
+
+
+@dataclass(frozen=True)
+class HoleRows:
+    """What :func:`holes_from_arrays` found: one dict per hole and the notes of the table.
+
+    Attributes
+    ----------
+    rows : list of dict
+        One dict per hole with the keys of :data:`HOLE_COLUMNS` (``start_time`` a UTC
+        ``pandas.Timestamp``, ``tool`` an int or None, NaN where a value is not known).
+    attrs : dict
+        ``thrust_source``, ``spindle_model``, ``z_source``, ``event_cycle_calls``,
+        ``window_s``, ``set_size`` and ``issues`` (list of str).
+    """
+
+    rows: list[dict[str, Any]]
+    attrs: dict[str, Any]
+
+    def to_frame(self) -> pd.DataFrame:
+        """The rows as the table :func:`hole_record` returns (typed columns, ``attrs``).
+
+        Returns
+        -------
+        pandas.DataFrame
+        """
+        ints = ("hole", "set", "position_in_set", "start_cycle", "cut_start_cycle",
+                "cut_end_cycle", "end_cycle")
+        columns: dict[str, Any] = {}
+        for col in _columns():  # one frame, typed as built (astype per column ~0.2 ms each)
+            vals: list[Any] = [r[col] for r in self.rows]
+            columns[col] = (pd.array(vals, dtype="Int64") if col == "tool"
+                            else np.asarray(vals, dtype=np.int64) if col in ints
+                            else pd.Series(vals, dtype=object) if not self.rows else vals)
+        df = pd.DataFrame(columns)
+        df.attrs.update(self.attrs)
+        return df
+
+
+_HOLE_SIGNALS = ("DES_POS", "ENC_POS")
+
+
+def holes_from_arrays(
+    columns: Mapping[str, NDArray[np.float64]],
+    cycles: NDArray[np.int64],
+    time_ns: NDArray[np.int64],
+    *,
+    cycle_time_s: float,
+    speed_rpm: NDArray[np.float64] | None,
+    events: HoleEvents | None = None,
+    spindle: str = "SP1",
+    z_axis: str = "Z1",
+    xy_axes: tuple[str, str] = ("X1", "Y1"),
+    model: SpindleModel | None = None,
+    window_s: float = 0.6,
+    set_size: int = 6,
+    first_hole: int = 0,
+    origin_ns: int | None = None,
+    min_travel_mm: float = 0.5,
+    min_speed_rpm: float = 10.0,
+) -> HoleRows:
+    """The per-hole rows from plain arrays: the work of :func:`hole_record` without a
+    :class:`~cnctwin.recording.Recording` (the edge runtime calls it on its buffer).
+
+    Parameters
+    ----------
+    columns : mapping of str to numpy.ndarray
+        HF signals by column name, float64, one value per cycle: ``CURRENT|<spindle>`` and
+        ``DES_POS|<z_axis>`` or ``ENC_POS|<z_axis>`` at least; ``DES_POS``/``ENC_POS`` of the
+        X/Y axes and ``TORQUE``/``CURRENT`` of Z where recorded.
+    cycles : numpy.ndarray
+        Cycle counter per row (int64).
+    time_ns : numpy.ndarray
+        UTC time of each row [ns since the epoch] (int64).
+    cycle_time_s : float
+        Position-control cycle [s].
+    speed_rpm : numpy.ndarray or None
+        Spindle speed per row [rpm] (gaps filled from the neighbours); None: not recorded,
+        torque and energy are NaN (noted in ``issues``).
+    events : HoleEvents, optional
+        NC events for the drilling cycle, reference plane and tool.
+    spindle, z_axis, xy_axes, model, window_s, set_size, first_hole, min_travel_mm, \
+min_speed_rpm
+        As in :func:`hole_record`.
+    origin_ns : int, optional
+        UTC time that ``start_s``/``end_s``/``extraction_s`` count from [ns]; default the
+        first row.
+
+    Returns
+    -------
+    HoleRows
+
+    Raises
+    ------
+    SignalNotFoundError
+        Without spindle current or Z position.
+    ConfigError
+        ``set_size`` < 1.
+    """
+    if set_size < 1:
+        raise ConfigError(f"set_size must be >= 1, not {set_size}")
+    i_col = f"CURRENT|{spindle}"
+    z_des, z_enc = f"DES_POS|{z_axis}", f"ENC_POS|{z_axis}"
+    if i_col not in columns or not (z_des in columns or z_enc in columns):
+        raise SignalNotFoundError(
+            f"the hole rows need {i_col!r} and {z_des!r} or {z_enc!r}; the data has: "
+            f"{', '.join(columns)}")
+    issues: list[str] = []
+    ct = cycle_time_s
+    fs = 1.0 / ct
+    z_src = z_des if z_des in columns else z_enc
+    zm = columns[z_src]
+    za = columns.get(z_enc, zm)
+    current = columns[i_col]
+    if speed_rpm is not None:
+        speed = np.asarray(speed_rpm, dtype=np.float64)
+        if not np.isfinite(speed).all():
+            speed = np.asarray(pd.Series(speed).ffill().bfill().fillna(0.0), dtype=np.float64)
+    else:
+        speed = np.full(current.size, math.nan)
+        issues.append(f"no spindle speed for {spindle}: torque and energy are NaN")
+    if model is None:
+        model = SpindleModel.from_parameters("thesis_spinner_840dsl")
+        model_note = "thesis_spinner_840dsl (default, not calibrated to this machine)"
+    else:
+        model_note = model.describe()
+    with np.errstate(invalid="ignore"):
+        torque = model.cutting_torque(current, speed, fs_hz=fs)
+    zl = _zload(columns, z_axis)
+    ev = events if events is not None else _NO_HOLE_EVENTS
+    t0 = int(origin_ns) if origin_ns is not None else (int(time_ns[0]) if len(time_ns) else 0)
+
+    def t_s(k: int) -> float:
+        return float(np.float64(int(time_ns[k]) - t0) / 1e9)
+
+    plunges = find_plunges(zm, fs_hz=fs, min_travel_mm=min_travel_mm)
+    starts = (cycles[[p.feed_start for p in plunges]] if plunges
+              else np.empty(0, dtype=np.int64))
+    names, rfps = _cycle_info(ev, starts)
+    tools = _active_tool(ev, starts)
+    xd = columns.get(f"DES_POS|{xy_axes[0]}")
+    yd = columns.get(f"DES_POS|{xy_axes[1]}")
+
+    # group peck plunges into holes: a plunge starting inside the previous hole continues it
+    groups: list[list[int]] = []
+    for k, p in enumerate(plunges):
+        if groups:
+            q = plunges[groups[-1][0]]
+            same_xy = all(
+                arr is None or abs(float(arr[p.feed_start]) - float(arr[q.feed_start])) < 0.01
+                for arr in (xd, yd)
+            )
+            first_top = float(zm[q.feed_start])
+            if same_xy and float(zm[p.feed_start]) < first_top - 0.5:
+                groups[-1].append(k)
+                continue
+        groups.append([k])
+
+    rows: list[dict[str, Any]] = []
+    for grp in groups:
+        first = plunges[grp[0]]
+        last = plunges[grp[-1]]
+        bottom = min((plunges[i].bottom for i in grp), key=lambda b: float(za[b]))
+        name, rfp = names[grp[0]], rfps[grp[0]]
+        lo, hi = first.feed_start, bottom
+        if math.isfinite(rfp):
+            surface, src = rfp, "cycle"
+            inside = np.flatnonzero(za[lo : hi + 1] <= rfp)
+            cut_start = lo + int(inside[0]) if inside.size else lo
+        else:
+            c = _contact(current, lo, hi, fs)
+            if c is not None:
+                cut_start, surface, src = c, float(za[c]), "current"
+            else:
+                cut_start, surface, src = lo, float(zm[lo]), "feed"
+        cut_end = max(hi, cut_start)
+        # samples in the material: the feed parts of all plunges of the hole (peck retracts
+        # and re-approaches excluded), from the surface on
+        parts = []
+        deepest = math.inf
+        for i in grp:
+            seg = np.arange(max(plunges[i].feed_start, cut_start), plunges[i].bottom + 1)
+            parts.append(seg[zm[seg] < deepest])  # new material only (not the re-entry)
+            deepest = min(deepest, float(zm[plunges[i].bottom]))
+        sl = np.concatenate(parts)
+        if sl.size == 0:
+            sl = np.arange(cut_start, cut_end + 1)
+        sp = np.abs(speed[sl])
+        sp = sp[np.isfinite(sp)]
+        n_med = float(np.median(sp)) if sp.size else math.nan
+        if not n_med >= min_speed_rpm:  # NaN (no speed signal): cannot be told from a move
+            issues.append(f"plunge at cycle {int(cycles[first.feed_start])} with the spindle "
+                          f"at {n_med:.3g} rpm (< min_speed_rpm {min_speed_rpm:g}) is not a "
+                          "hole: skipped")
+            continue
+        h = len(rows)
+        nwin = max(1, round(window_s * fs))
+        fw = sl[:nwin]
+        omega = speed[sl] * 2.0 * math.pi / 60.0
+        energy = float(np.nansum(torque[sl] * omega) * ct)
+        thrust = math.nan
+        if zl is not None:
+            # feed in air before contact; its first half may still hold the exact-stop ramp
+            air = zl[0][lo + (cut_start - lo) // 2 : cut_start]
+            air = air[np.isfinite(air)]
+            if air.size >= 5:
+                # positive = pushing the tool into the part: the Z load (and the lag of the
+                # encoder behind the setpoint) grows negative while the axis pushes down
+                thrust = -float(np.nanmean(zl[0][sl]) - np.mean(air))
+        out_idx = np.flatnonzero(za[last.end:] > surface)
+        extraction = last.end + int(out_idx[0]) if out_idx.size else len(za) - 1
+        row: dict[str, Any] = {
+            "hole": first_hole + h,
+            "set": (first_hole + h) // set_size,
+            "position_in_set": (first_hole + h) % set_size,
+            "start_cycle": int(cycles[first.feed_start]),
+            "cut_start_cycle": int(cycles[cut_start]),
+            "cut_end_cycle": int(cycles[cut_end]),
+            "end_cycle": int(cycles[last.end]),
+            "start_time": pd.Timestamp(int(time_ns[cut_start]), unit="ns", tz="UTC"),
+            "start_s": t_s(cut_start),
+            "end_s": t_s(cut_end),
+            "extraction_s": t_s(extraction),
+            "cut_duration_s": float(sl.size * ct),
+            "x_mm": float(np.median(xd[sl])) if xd is not None else math.nan,
+            "y_mm": float(np.median(yd[sl])) if yd is not None else math.nan,
+            "surface_z_mm": float(surface),
+            "surface_source": src,
+            "bottom_z_mm": float(za[bottom]),
+            "depth_mm": float(surface - za[bottom]),
+            "feed_mm_min": float(first.feed_mm_s * 60.0),
+            "speed_rpm": (float(np.nanmedian(speed[sl])) if np.isfinite(speed[sl]).any()
+                          else math.nan),
+            "current_mean_a": float(np.nanmean(current[sl])),
+            "current_peak_a": float(np.nanmax(np.abs(current[sl]))),
+            "current_first_a": float(np.nanmean(current[fw])),
+            "torque_first_nm": float(np.nanmean(torque[fw])),
+            "torque_mean_nm": float(np.nanmean(torque[sl])),
+            "energy_j": energy,
+            "thrust_proxy": thrust,
+        }
+        for ax, tag in ((xy_axes[0], "x"), (xy_axes[1], "y"), (z_axis, "z")):
+            m, mx, rms = _dev(columns, ax, sl)
+            row[f"dev_{tag}_mean_mm"] = m
+            row[f"dev_{tag}_maxabs_mm"] = mx
+            row[f"dev_{tag}_rms_mm"] = rms
+        row["tool"] = tools[grp[0]]
+        row["cycle"] = name
+        rows.append(row)
+    n_calls = _count_cycle_calls(ev)
+    if n_calls and n_calls != len(rows):
+        issues.append(f"{n_calls} drilling-cycle calls in the NC events but {len(rows)} holes "
+                      "found in the Z motion")
+    return HoleRows(rows, {
+        "thrust_source": zl[1] if zl is not None else "none",
+        "spindle_model": model_note,
+        "z_source": z_src,
+        "event_cycle_calls": n_calls,
+        "window_s": window_s,
+        "set_size": set_size,
+        "issues": issues,
+    })
 
 
 def hole_record(
@@ -387,8 +752,6 @@ def hole_record(
     the drive values are not recorded) in the cut minus its mean during the feed in air just
     before contact, which removes gravity, friction and the velocity-proportional lag.
     """
-    if set_size < 1:
-        raise ConfigError(f"set_size must be >= 1, not {set_size}")
     i_col = f"CURRENT|{spindle}"
     if not rec.has(i_col):
         raise SignalNotFoundError(
@@ -400,173 +763,23 @@ def hole_record(
             f"hole_record segments holes from the Z motion and needs {z_des!r} or {z_enc!r}; "
             f"pass z_axis=... (the recording has: {', '.join(rec.columns)})"
         )
-    issues: list[str] = []
-    fs = rec.fs_hz
-    ct = rec.meta.cycle_time_s
-    z_src = z_des if rec.has(z_des) else z_enc
-    zm = rec.hf[z_src].to_numpy(dtype=np.float64)
-    za = rec.hf[z_enc].to_numpy(dtype=np.float64) if rec.has(z_enc) else zm
-    current = rec.hf[i_col].to_numpy(dtype=np.float64)
+    names = [i_col, f"TORQUE|{z_axis}", f"CURRENT|{z_axis}",
+             *(f"{c}|{a}" for a in (*xy_axes, z_axis) for c in _HOLE_SIGNALS)]
+    cols = {c: rec.hf[c].to_numpy(dtype=np.float64) for c in names if rec.has(c)}
     try:
-        speed, _ = spindle_speed_rpm(rec, spindle)
-        speed = np.asarray(pd.Series(speed).ffill().bfill().fillna(0.0), dtype=np.float64)
+        speed: NDArray[np.float64] | None = spindle_speed_rpm(rec, spindle)[0]
     except SignalNotFoundError:
-        speed = np.full(current.size, math.nan)
-        issues.append(f"no spindle speed for {spindle}: torque and energy are NaN")
-    if model is None:
-        model = SpindleModel.from_parameters("thesis_spinner_840dsl")
-        model_note = "thesis_spinner_840dsl (default, not calibrated to this machine)"
-    else:
-        model_note = model.describe()
-    with np.errstate(invalid="ignore"):
-        torque = model.cutting_torque(current, speed, fs_hz=fs)
-    zl = _zload(rec, z_axis)
-    cycles = rec.cycles
-    times = pd.DatetimeIndex(rec.hf["time"])
-    origin = pd.Timestamp(time_origin) if time_origin is not None else (
-        times[0] if len(times) else pd.Timestamp(0, tz="UTC"))
-    t_s = ((times - origin) / pd.Timedelta(seconds=1)).to_numpy(dtype=np.float64)
-
-    plunges = find_plunges(zm, fs_hz=fs, min_travel_mm=min_travel_mm)
-    names, rfps = _cycle_info(rec, cycles[[p.feed_start for p in plunges]] if plunges else
-                              np.empty(0, dtype=np.int64))
-    tools = _active_tool(rec, cycles[[p.feed_start for p in plunges]] if plunges else
-                         np.empty(0, dtype=np.int64))
-    x_des = f"DES_POS|{xy_axes[0]}"
-    y_des = f"DES_POS|{xy_axes[1]}"
-    xd = rec.hf[x_des].to_numpy(dtype=np.float64) if rec.has(x_des) else None
-    yd = rec.hf[y_des].to_numpy(dtype=np.float64) if rec.has(y_des) else None
-
-    # group peck plunges into holes: a plunge starting inside the previous hole continues it
-    groups: list[list[int]] = []
-    for k, p in enumerate(plunges):
-        if groups:
-            q = plunges[groups[-1][0]]
-            same_xy = all(
-                arr is None or abs(float(arr[p.feed_start]) - float(arr[q.feed_start])) < 0.01
-                for arr in (xd, yd)
-            )
-            first_top = float(zm[q.feed_start])
-            if same_xy and float(zm[p.feed_start]) < first_top - 0.5:
-                groups[-1].append(k)
-                continue
-        groups.append([k])
-
-    rows: list[dict[str, object]] = []
-    for grp in groups:
-        first = plunges[grp[0]]
-        last = plunges[grp[-1]]
-        bottom = min((plunges[i].bottom for i in grp), key=lambda b: float(za[b]))
-        name, rfp = names[grp[0]], rfps[grp[0]]
-        lo, hi = first.feed_start, bottom
-        if math.isfinite(rfp):
-            surface, src = rfp, "cycle"
-            inside = np.flatnonzero(za[lo : hi + 1] <= rfp)
-            cut_start = lo + int(inside[0]) if inside.size else lo
-        else:
-            c = _contact(current, lo, hi, fs)
-            if c is not None:
-                cut_start, surface, src = c, float(za[c]), "current"
-            else:
-                cut_start, surface, src = lo, float(zm[lo]), "feed"
-        cut_end = max(hi, cut_start)
-        # samples in the material: the feed parts of all plunges of the hole (peck retracts
-        # and re-approaches excluded), from the surface on
-        parts = []
-        deepest = math.inf
-        for i in grp:
-            seg = np.arange(max(plunges[i].feed_start, cut_start), plunges[i].bottom + 1)
-            parts.append(seg[zm[seg] < deepest])  # new material only (not the re-entry)
-            deepest = min(deepest, float(zm[plunges[i].bottom]))
-        sl = np.concatenate(parts)
-        if sl.size == 0:
-            sl = np.arange(cut_start, cut_end + 1)
-        sp = np.abs(speed[sl])
-        sp = sp[np.isfinite(sp)]
-        n_med = float(np.median(sp)) if sp.size else math.nan
-        if not n_med >= min_speed_rpm:  # NaN (no speed signal): cannot be told from a move
-            issues.append(f"plunge at cycle {int(cycles[first.feed_start])} with the spindle "
-                          f"at {n_med:.3g} rpm (< min_speed_rpm {min_speed_rpm:g}) is not a "
-                          "hole: skipped")
-            continue
-        h = len(rows)
-        nwin = max(1, round(window_s * fs))
-        fw = sl[:nwin]
-        omega = speed[sl] * 2.0 * math.pi / 60.0
-        energy = float(np.nansum(torque[sl] * omega) * ct)
-        thrust = math.nan
-        if zl is not None:
-            # feed in air before contact; its first half may still hold the exact-stop ramp
-            air = zl[0][lo + (cut_start - lo) // 2 : cut_start]
-            air = air[np.isfinite(air)]
-            if air.size >= 5:
-                # positive = pushing the tool into the part: the Z load (and the lag of the
-                # encoder behind the setpoint) grows negative while the axis pushes down
-                thrust = -float(np.nanmean(zl[0][sl]) - np.mean(air))
-        out_idx = np.flatnonzero(za[last.end:] > surface)
-        extraction = last.end + int(out_idx[0]) if out_idx.size else len(za) - 1
-        row: dict[str, object] = {
-            "hole": first_hole + h,
-            "set": (first_hole + h) // set_size,
-            "position_in_set": (first_hole + h) % set_size,
-            "start_cycle": int(cycles[first.feed_start]),
-            "cut_start_cycle": int(cycles[cut_start]),
-            "cut_end_cycle": int(cycles[cut_end]),
-            "end_cycle": int(cycles[last.end]),
-            "start_time": times[cut_start],
-            "start_s": float(t_s[cut_start]),
-            "end_s": float(t_s[cut_end]),
-            "extraction_s": float(t_s[extraction]),
-            "cut_duration_s": float(sl.size * ct),
-            "x_mm": float(np.median(xd[sl])) if xd is not None else math.nan,
-            "y_mm": float(np.median(yd[sl])) if yd is not None else math.nan,
-            "surface_z_mm": float(surface),
-            "surface_source": src,
-            "bottom_z_mm": float(za[bottom]),
-            "depth_mm": float(surface - za[bottom]),
-            "feed_mm_min": float(first.feed_mm_s * 60.0),
-            "speed_rpm": (float(np.nanmedian(speed[sl])) if np.isfinite(speed[sl]).any()
-                          else math.nan),
-            "current_mean_a": float(np.nanmean(current[sl])),
-            "current_peak_a": float(np.nanmax(np.abs(current[sl]))),
-            "current_first_a": float(np.nanmean(current[fw])),
-            "torque_first_nm": float(np.nanmean(torque[fw])),
-            "torque_mean_nm": float(np.nanmean(torque[sl])),
-            "energy_j": energy,
-            "thrust_proxy": thrust,
-        }
-        for ax, tag in ((xy_axes[0], "x"), (xy_axes[1], "y"), (z_axis, "z")):
-            m, mx, rms = _dev(rec, ax, sl)
-            row[f"dev_{tag}_mean_mm"] = m
-            row[f"dev_{tag}_maxabs_mm"] = mx
-            row[f"dev_{tag}_rms_mm"] = rms
-        row["tool"] = tools[grp[0]]
-        row["cycle"] = name
-        rows.append(row)
-    ints = ("hole", "set", "position_in_set", "start_cycle", "cut_start_cycle",
-            "cut_end_cycle", "end_cycle")
-    columns: dict[str, Any] = {}
-    for col in _columns():  # one frame, typed as built (astype per column cost ~0.2 ms each)
-        vals: list[Any] = [r[col] for r in rows]
-        columns[col] = (pd.array(vals, dtype="Int64") if col == "tool"
-                        else np.asarray(vals, dtype=np.int64) if col in ints
-                        else pd.Series(vals, dtype=object) if not rows else vals)
-    df = pd.DataFrame(columns)
-    n_calls = _count_cycle_calls(rec)
-    if n_calls and n_calls != len(df):
-        issues.append(f"{n_calls} drilling-cycle calls in the NC events but {len(df)} holes "
-                      "found in the Z motion")
-    df.attrs.update(
-        {
-            "thrust_source": zl[1] if zl is not None else "none",
-            "spindle_model": model_note,
-            "z_source": z_src,
-            "event_cycle_calls": n_calls,
-            "window_s": window_s,
-            "set_size": set_size,
-            "issues": issues,
-        }
-    )
+        speed = None
+    t_ns = rec.hf["time"].to_numpy(dtype="datetime64[ns]").view(np.int64)
+    origin = (None if time_origin is None
+              else int(pd.Timestamp(time_origin).as_unit("ns").value))
+    found = holes_from_arrays(cols, rec.cycles, t_ns, cycle_time_s=rec.meta.cycle_time_s,
+                      speed_rpm=speed, events=HoleEvents.from_frame(rec.events),
+                      spindle=spindle, z_axis=z_axis, xy_axes=xy_axes, model=model,
+                      window_s=window_s, set_size=set_size, first_hole=first_hole,
+                      origin_ns=origin, min_travel_mm=min_travel_mm,
+                      min_speed_rpm=min_speed_rpm)
+    df = found.to_frame()
     if store:
         rec.meta.attrs["holes"] = df
     return df
@@ -579,12 +792,8 @@ def _columns() -> list[str]:
     return [*cols, "tool", "cycle"]
 
 
-def _count_cycle_calls(rec: Recording) -> int:
-    ev = rec.events
-    if ev.empty:
-        return 0
-    _, kinds, paths = _event_arrays(ev, "kind", "path")
-    return sum(1 for k, p in zip(kinds.tolist(), paths.tolist(), strict=True)
+def _count_cycle_calls(ev: HoleEvents) -> int:
+    return sum(1 for k, p in zip(ev.kind.tolist(), ev.path.tolist(), strict=True)
                if k == "call" and p is not None and _COUNT_RE.search(str(p)))
 
 
