@@ -39,10 +39,11 @@ import json
 import math
 import re
 from dataclasses import dataclass
+from itertools import chain, repeat
 from typing import Any
 
+import msgspec
 import numpy as np
-import orjson
 import pandas as pd
 from numpy.typing import NDArray
 
@@ -139,6 +140,39 @@ def merge_columns(batches: list[DatabusColumns]) -> DatabusColumns:
                       "datapoint (another message); the last is kept")
     return DatabusColumns(cyc, cols, sum(b.n_values for b in batches), issues)
 
+
+class _BulkValue(msgspec.Struct, gc=False):
+    """One value of a bulk message as the fast path accepts it (anything else: None)."""
+
+    id: str
+    ts: str
+    val: int | float
+    qc: int = 3
+
+
+class _Bulk(msgspec.Struct, gc=False):
+    vals: list[_BulkValue]
+    seq: int | str | float | None = None
+
+
+_BULK_DECODER = msgspec.json.Decoder(_Bulk)
+
+
+def _utc_ns(stamps: list[str]) -> NDArray[np.int64] | None:
+    """Plain UTC times (``_PLAIN_UTC``, years 1678-2261, what the ns base holds) as ns since
+    the epoch; None for anything else (numpy also reads "now", "NaT", offsets: the general
+    path parses or names those)."""
+    if not all(map(_PLAIN_UTC.fullmatch, stamps)) or min(stamps)[:4] < "1678" \
+            or max(stamps)[:4] > "2261":
+        return None
+    core = [t[:-1] if t[-1] == "Z" else t for t in stamps]
+    try:
+        t_ns = np.array(core, dtype="datetime64[ns]").view(np.int64)
+    except ValueError:
+        return None
+    if (t_ns == np.iinfo(np.int64).min).any():
+        return None
+    return t_ns
 
 _PLAIN_UTC = re.compile(r"\d{4}-\d\d-\d\d(?:T\d\d(?::\d\d(?::\d\d(?:\.\d{1,9})?)?)?)?Z?")
 """``YYYY-MM-DD[Thh[:mm[:ss[.f]]]][Z]``: a UTC time numpy reads as the general path does."""
@@ -367,77 +401,81 @@ class DatabusDecoder:
         """
         if self.metadata is None:
             return None
-        try:
-            doc = orjson.loads(message)
-        except orjson.JSONDecodeError:
+        try:  # typed decode in C: every value an object with str id/ts, number val, int qc
+            # (the UTF-8 check first: msgspec does not look inside the keys it skips)
+            text = message.decode("utf-8") if isinstance(message, bytes) else message
+            doc = _BULK_DECODER.decode(text)
+        except (msgspec.DecodeError, UnicodeDecodeError):  # the general path names it
             return None
-        vals = doc.get("vals") if isinstance(doc, dict) else None
-        if not isinstance(vals, list) or not vals:
+        vals = doc.vals
+        if not vals:
             return None
         ids = self._ids
+        vid = [v.id for v in vals]
+        if not set(vid) <= ids.keys():
+            return None
+        ts = [v.ts for v in vals]
+        raw = [v.val for v in vals]
         try:
-            vid = [v["id"] for v in vals]
-            ts = [v["ts"] for v in vals]
-            raw = [v["val"] for v in vals]
-            qc = [v.get("qc", 3) for v in vals]
-            # type checks by sets (one pass each; unhashable values end in TypeError)
-            if {type(x) for x in vid} != {str} or not set(vid) <= ids.keys():
-                return None
-            if {type(x) for x in ts} != {str} or not {type(x) for x in qc} <= {int}:
-                return None
-            kinds = {type(x) for x in raw}
-            if not kinds <= {float, int}:
-                return None
-            if int in kinds and max(abs(x) for x in raw if type(x) is int) > 2**53:
-                return None
-        except (TypeError, KeyError, AttributeError):
+            value = np.array(raw, dtype=np.float64)
+        except OverflowError:
             return None
-        uniq = {t: k for k, t in enumerate(dict.fromkeys(ts))}
-        keys = list(uniq)
-        # plain UTC times only (numpy also reads "now", "NaT", offsets); the ns base holds
-        # the years 1678-2261
-        if not all(map(_PLAIN_UTC.fullmatch, keys)) or min(keys)[:4] < "1678" \
-                or max(keys)[:4] > "2261":
-            return None
-        core = [t[:-1] if t[-1] == "Z" else t for t in keys]
-        try:
-            t_ns = np.array(core, dtype="datetime64[ns]").view(np.int64)
-        except ValueError:  # an offset or another spelling: the general path parses it
-            return None
-        if (t_ns == np.iinfo(np.int64).min).any():
-            return None
-        self._seq(doc, topic)
+        big = np.flatnonzero(np.abs(value) > 2**53)
+        if big.size and any(type(raw[k]) is int for k in big.tolist()):
+            return None  # a 64-bit integer a float cannot hold: the general path says so
+        n = len(vals)
+        # the regular layout of a bulk HF message: the same k ids, in the same order, for
+        # each timestamp in turn; then the values are the grid row by row
+        t0 = ts[0]
+        k = next((j for j, t in enumerate(ts) if t != t0), n)
+        rows_ts = ts[::k]
+        regular = (n % k == 0 and vid == vid[:k] * (n // k)
+                   and ts == list(chain.from_iterable(repeat(t, k) for t in rows_ts))
+                   and len({ids[x]["column"] for x in vid[:k]}) == k)
         step = round(self.cycle_time_s * 1e9)
-        cyc_of_ts = np.floor_divide(t_ns, step)
-        cycles, ts_row = np.unique(cyc_of_ts, return_inverse=True)
-        row = ts_row[np.array([uniq[t] for t in ts], dtype=np.int64)]
-        names = list(dict.fromkeys(ids[x]["column"] for x in dict.fromkeys(vid)))
-        col_index = {n: k for k, n in enumerate(names)}
-        id_col = {x: col_index[ids[x]["column"]] for x in dict.fromkeys(vid)}
-        col = np.array([id_col[x] for x in vid], dtype=np.int64)
-        value = np.array(raw, dtype=np.float64)
-        grid = np.full((cycles.size, len(names)), np.nan)
-        key = row * len(names) + col
         issues: list[str] = []
-        if np.unique(key).size == key.size:
-            grid[row, col] = value
-        else:  # the last value of a column in a cycle wins, as in recording()
-            _, first_rev = np.unique(key[::-1], return_index=True)
-            last = key.size - 1 - first_rev
-            grid[row[last], col[last]] = value[last]
-            issues.append(f"{key.size - last.size} values shared a cycle with a later value "
-                          "of the same datapoint; the last is kept in the HF table")
-        cols = {n: grid[:, k].copy() for k, n in enumerate(names)}
-        qa = np.array(qc)
-        for q, label in ((0, "BAD"), (1, "UNCERTAIN")):
-            bad = np.flatnonzero(qa == q)
-            if bad.size:
-                per: dict[str, int] = {}
-                for k in bad.tolist():
-                    n = names[int(col[k])]
-                    per[n] = per.get(n, 0) + 1
-                issues.append(f"{bad.size} values with quality {label} (qc={q}) kept: {per}")
-        return DatabusColumns(cycles, cols, len(vals), issues)
+        t_ns = _utc_ns(rows_ts) if regular else None
+        if t_ns is not None and (t_ns.size < 2 or bool((np.diff(t_ns // step) > 0).all())):
+            names = [ids[x]["column"] for x in vid[:k]]
+            grid = value.reshape(n // k, k)
+            cycles = t_ns // step
+            col = np.tile(np.arange(k, dtype=np.int64), n // k)
+        else:  # any order: rows from the distinct timestamps, values scattered
+            uniq = {t: j for j, t in enumerate(dict.fromkeys(ts))}
+            t_ns = _utc_ns(list(uniq))
+            if t_ns is None:
+                return None
+            cycles, ts_row = np.unique(t_ns // step, return_inverse=True)
+            row = ts_row[np.array([uniq[t] for t in ts], dtype=np.int64)]
+            names = list(dict.fromkeys(ids[x]["column"] for x in dict.fromkeys(vid)))
+            col_index = {c: j for j, c in enumerate(names)}
+            id_col = {x: col_index[ids[x]["column"]] for x in dict.fromkeys(vid)}
+            col = np.array([id_col[x] for x in vid], dtype=np.int64)
+            grid = np.full((cycles.size, len(names)), np.nan)
+            key = row * len(names) + col
+            if np.unique(key).size == key.size:
+                grid[row, col] = value
+            else:  # the last value of a column in a cycle wins, as in recording()
+                _, first_rev = np.unique(key[::-1], return_index=True)
+                last = key.size - 1 - first_rev
+                grid[row[last], col[last]] = value[last]
+                issues.append(f"{key.size - last.size} values shared a cycle with a later "
+                              "value of the same datapoint; the last is kept in the HF table")
+        self._seq({"seq": doc.seq}, topic)
+        cols = {c: grid[:, j].copy() for j, c in enumerate(names)}
+        qc = [v.qc for v in vals]
+        if min(qc) < 2:
+            qa = np.array(qc)
+            for q, label in ((0, "BAD"), (1, "UNCERTAIN")):
+                bad = np.flatnonzero(qa == q)
+                if bad.size:
+                    per: dict[str, int] = {}
+                    for j in bad.tolist():
+                        c = names[int(col[j])]
+                        per[c] = per.get(c, 0) + 1
+                    issues.append(f"{bad.size} values with quality {label} (qc={q}) kept: "
+                                  f"{per}")
+        return DatabusColumns(cycles, cols, n, issues)
 
     def _decode(self, message: str | bytes | dict[str, Any], topic: str,
                 ) -> list[DatabusValue]:
