@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import re
+import statistics
 from dataclasses import dataclass
 
 import numpy as np
@@ -217,42 +218,69 @@ class CutTracker:
         CutContext
         """
         n = int(cycles.size)
-        hole = np.full(n, -1.0)
-        prog = np.full(n, np.nan)
-        dep = np.full(n, np.nan)
-        feed = np.full(n, np.nan)
-        spd = np.full(n, np.nan)
+        out = CutContext(np.full(n, -1.0), np.full(n, np.nan), np.full(n, np.nan),
+                         np.full(n, np.nan), np.full(n, np.nan))
+        if not n:
+            return out
         evs = self._events(events) if events is not None else []
-        if not evs and n:
-            fast = self._update_array(cycles, z_des_mm, z_enc_mm, speed_rpm)
-            if fast is not None:
-                return fast
-        k = 0
+        # the geometry changes only at NC events: between them the chunk is one segment
+        bounds = [0]
+        geos: list[tuple[float, float] | None] = []
+        cyc = np.asarray(cycles, dtype=np.int64)
+        for c, geo in evs:
+            if c > int(cyc[-1]):
+                break
+            j = int(np.searchsorted(cyc, c, side="left"))
+            if j > bounds[-1]:
+                bounds.append(j)
+                geos.append(None)
+            if geos:
+                geos[-1] = geo
+            else:
+                self.nc_geometry = geo
+        bounds.append(n)
+        # (an event applies from the first cycle at or after it: the geometry of segment k)
+        for k in range(len(bounds) - 1):
+            if k and k - 1 < len(geos):
+                self.nc_geometry = geos[k - 1]
+            self._segment(cyc, z_des_mm, z_enc_mm, speed_rpm, xy_des_mm, bounds[k],
+                          bounds[k + 1], out)
+        return out
+
+    def _segment(self, cyc: NDArray[np.int64], zd: NDArray[np.float64],
+                 ze: NDArray[np.float64], sp: NDArray[np.float64],
+                 xy: tuple[NDArray[np.float64], ...], j0: int, j1: int,
+                 out: CutContext) -> None:
+        """Cycles ``j0:j1`` (one NC geometry throughout) into ``out``: the in-cut test in
+        array code, a loop only over the first cycles of each cut (hole number, latch of
+        feed and speed), the rest of each run of cut cycles in array code."""
         step = self.min_speed_mm_s * self.cycle_time_s
-        cyc = cycles.tolist()
-        zd, ze, sp = z_des_mm.tolist(), z_enc_mm.tolist(), speed_rpm.tolist()
-        xy = [a.tolist() for a in xy_des_mm]
-        for j in range(n):
-            c = cyc[j]
-            while k < len(evs) and evs[k][0] <= c:
-                self.nc_geometry = evs[k][1]
-                k += 1
-            z = zd[j]
-            prev = self._prev_z
-            self._prev_z = z
-            down = prev is not None and z - prev < -step
-            geo = self.nc_geometry or self.row_geometry
-            inside = (down and geo is not None and ze[j] <= geo[0]
-                      and abs(sp[j]) >= self.min_speed_rpm)
-            if not inside:
-                if self.in_cut:
-                    self.in_cut = False
-                    self._last_out = c
-                continue
+        prev = self._prev_z
+        zs = zd[j0:j1]
+        zprev = np.empty(j1 - j0)
+        zprev[0] = np.nan if prev is None else prev
+        zprev[1:] = zs[:-1]
+        geo = self.nc_geometry or self.row_geometry
+        self._prev_z = float(zs[-1])
+        if geo is None:
+            inside = np.zeros(j1 - j0, dtype=bool)
+        else:
+            with np.errstate(invalid="ignore"):
+                inside = (((zs - zprev) < -step) & (ze[j0:j1] <= geo[0])
+                          & (np.abs(sp[j0:j1]) >= self.min_speed_rpm))
+        edges = np.flatnonzero(np.diff(np.concatenate(([0], inside.view(np.int8), [0]))))
+        pos = j0
+        for s, e in zip((edges[0::2] + j0).tolist(), (edges[1::2] + j0).tolist(),
+                        strict=True):
+            if s > pos and self.in_cut:  # outside cycles before this run: the cut ended
+                self.in_cut = False
+                self._last_out = int(cyc[pos])
             assert geo is not None
-            here = tuple(a[j] for a in xy)
+            j = s
             if not self.in_cut:
                 self.in_cut = True
+                c = int(cyc[j])
+                here = tuple(float(a[j]) for a in xy)
                 same = (self._last_out is not None and self.hole >= 0
                         and (c - self._last_out) * self.cycle_time_s <= self.settle_s
                         and len(here) == len(self._xy)
@@ -263,58 +291,34 @@ class CutTracker:
                     self._deepest = math.inf
                     self._xy = here
                     self._feeds, self._speeds = [], []
-            if ze[j] >= self._deepest or prev is None:  # re-entry through material already cut
-                continue
-            self._deepest = ze[j]
-            if len(self._feeds) < self.latch_cycles:
-                self._feeds.append((prev - z) / self.cycle_time_s * 60.0)
-                self._speeds.append(abs(sp[j]))
-                self._feed = float(np.median(self._feeds))
-                self._speed = float(np.median(self._speeds))
-            d = geo[0] - ze[j]
-            hole[j] = self.hole
-            dep[j] = d
-            prog[j] = d / geo[1]
-            feed[j] = self._feed
-            spd[j] = self._speed
-        return CutContext(hole, prog, dep, feed, spd)
+            while j < e and len(self._feeds) < self.latch_cycles:
+                z_e = float(ze[j])
+                if z_e < self._deepest:  # else a re-entry through material already cut
+                    self._deepest = z_e
+                    z_prev = float(zprev[j - j0])
+                    self._feeds.append((z_prev - float(zd[j])) / self.cycle_time_s * 60.0)
+                    self._speeds.append(abs(float(sp[j])))
+                    self._feed = statistics.median(self._feeds)
+                    self._speed = statistics.median(self._speeds)
+                    self._put(out, j, j + 1, geo, np.array([True]), ze)
+                j += 1
+            if j < e:  # feed and speed latched: the rest of the run at once
+                z_run = ze[j:e]
+                before = np.minimum.accumulate(np.concatenate([[self._deepest], z_run[:-1]]))
+                self._deepest = float(min(self._deepest, float(z_run.min())))
+                self._put(out, j, e, geo, z_run < before, ze)
+            pos = e
+        if pos < j1 and self.in_cut:
+            self.in_cut = False
+            self._last_out = int(cyc[pos])
 
-    def _update_array(self, cycles: NDArray[np.int64], z_des_mm: NDArray[np.float64],
-                      z_enc_mm: NDArray[np.float64], speed_rpm: NDArray[np.float64]
-                      ) -> CutContext | None:
-        """:meth:`update` in array code for the two common chunks without NC events: the
-        tool outside the material throughout, or inside one hole throughout (feed and speed
-        already latched). None for any other chunk (the loop handles it)."""
-        n = int(cycles.size)
-        prev = self._prev_z
-        step = self.min_speed_mm_s * self.cycle_time_s
-        zprev = np.empty(n)
-        zprev[0] = np.nan if prev is None else prev
-        zprev[1:] = z_des_mm[:-1]
-        with np.errstate(invalid="ignore"):
-            down = (z_des_mm - zprev) < -step
-        geo = self.nc_geometry or self.row_geometry
-        if geo is None:
-            inside = np.zeros(n, dtype=bool)
-        else:
-            with np.errstate(invalid="ignore"):
-                inside = down & (z_enc_mm <= geo[0]) & (np.abs(speed_rpm) >= self.min_speed_rpm)
-        nan = np.full(n, np.nan)
-        if not inside.any():
-            if self.in_cut:
-                self.in_cut = False
-                self._last_out = int(cycles[0])
-            self._prev_z = float(z_des_mm[-1])
-            return CutContext(np.full(n, -1.0), nan, nan.copy(), nan.copy(), nan.copy())
-        if not (inside.all() and self.in_cut and len(self._feeds) >= self.latch_cycles):
-            return None
-        assert geo is not None
-        before = np.minimum.accumulate(np.concatenate([[self._deepest], z_enc_mm[:-1]]))
-        new = z_enc_mm < before
-        self._prev_z = float(z_des_mm[-1])
-        self._deepest = float(min(self._deepest, float(z_enc_mm.min())))
-        d = geo[0] - z_enc_mm
-        hole = np.where(new, float(self.hole), -1.0)
-        dep = np.where(new, d, np.nan)
-        return CutContext(hole, np.where(new, d / geo[1], np.nan), dep,
-                          np.where(new, self._feed, np.nan), np.where(new, self._speed, np.nan))
+    def _put(self, out: CutContext, j: int, e: int, geo: tuple[float, float],
+             new: NDArray[np.bool_], ze: NDArray[np.float64]) -> None:
+        """Context of the new-material cycles among ``j:e`` (the others stay outside)."""
+        k = np.flatnonzero(new) + j
+        d = geo[0] - ze[k]
+        out.hole[k] = self.hole
+        out.depth_mm[k] = d
+        out.progress[k] = d / geo[1]
+        out.feed_mm_min[k] = self._feed
+        out.speed_rpm[k] = self._speed

@@ -134,9 +134,10 @@ class HoleProcessor:
     The HF columns a hole row needs are kept in a buffer that starts where the previous hole
     ended (the tool back above the surface). Each time the Z axis has moved up since the last
     check, :func:`~cnctwin.usecases.holes.holes_from_arrays` runs on the buffer (its arrays, no
-    table is built); a hole is emitted once it is complete: the tool is out of the material and the X/Y setpoint has left the
-    hole's position (next hole), or the tool has been out for ``settle_s`` (peck drilling: the
-    next peck re-enters at the same X/Y within that time), or a later hole follows it. Rows
+    table is built); a hole is emitted once it is complete: the tool is out of the material
+    and the X/Y setpoint has left the hole's position (next hole), or the tool has been out
+    for ``settle_s`` (peck drilling: the next peck re-enters at the same X/Y within that
+    time), or a later hole follows it. Rows
     equal those of the batch :func:`~cnctwin.usecases.holes.hole_records` on the whole
     recording (the test checks it) because the buffer holds the hole with its approach.
 
