@@ -37,6 +37,8 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from cnctwin.usecases.holes import HoleEvents
+
 __all__ = ["CutContext", "CutTracker", "drilling_cycle_geometry"]
 
 _CYCLE = re.compile(r"\b(CYCLE8[1-9])\s*\(([^)]*)\)", re.IGNORECASE)
@@ -173,20 +175,15 @@ class CutTracker:
         if self.in_cut:
             self.in_cut = False
 
-    def _events(self, events: pd.DataFrame) -> list[tuple[int, tuple[float, float] | None]]:
-        if events.empty or "gcode" not in events.columns:
-            return []
-        # plain lists: a chunk holds a few events, pandas' string and sort calls cost ~3 ms
-        cyc = events["cycle"].to_numpy(dtype=np.int64)
-        order = np.argsort(cyc, kind="stable").tolist()
-        kinds = events["kind"].astype(object).tolist()
-        texts = events["gcode"].astype(object).tolist()
+    def _events(self, events: pd.DataFrame | HoleEvents
+                ) -> list[tuple[int, tuple[float, float] | None]]:
+        ev = events if isinstance(events, HoleEvents) else HoleEvents.from_frame(events)
         out: list[tuple[int, tuple[float, float] | None]] = []
-        for k in order:
-            if kinds[k] != "block":
+        for c, kind, g in zip(ev.cycle.tolist(), ev.kind.tolist(), ev.gcode.tolist(),
+                              strict=True):
+            if kind != "block":
                 continue
-            c, g = int(cyc[k]), texts[k]
-            text = str(g) if isinstance(g, str) else ""
+            text = g if isinstance(g, str) else ""
             geo = drilling_cycle_geometry(text)
             if geo is not None:
                 out.append((int(c), geo))
@@ -197,7 +194,7 @@ class CutTracker:
     def update(self, cycles: NDArray[np.int64], z_des_mm: NDArray[np.float64],
                z_enc_mm: NDArray[np.float64], speed_rpm: NDArray[np.float64], *,
                xy_des_mm: tuple[NDArray[np.float64], ...] = (),
-               events: pd.DataFrame | None = None) -> CutContext:
+               events: pd.DataFrame | HoleEvents | None = None) -> CutContext:
         """Hole context of the next consecutive cycles.
 
         Parameters
@@ -210,7 +207,7 @@ class CutTracker:
             Spindle speed command [rpm].
         xy_des_mm : tuple of numpy.ndarray
             X/Y setpoints [mm] (a move between cuts starts a new hole).
-        events : pandas.DataFrame, optional
+        events : pandas.DataFrame or HoleEvents, optional
             NC events of these cycles (the drilling-cycle calls give surface and depth).
 
         Returns

@@ -221,8 +221,9 @@ class HoleProcessor:
         self._parts.append(Chunk(chunk.cycles, chunk.time_ns, keep,
                                  cycle_time_s=chunk.cycle_time_s, machine=chunk.machine))
         self._n += len(chunk)
-        if not chunk.events.empty:
-            self._events.append(HoleEvents.from_frame(chunk.events))
+        events = HoleEvents.from_frame(chunk.events)  # once, for the buffer and the tracker
+        if len(events):
+            self._events.append(events)
         # live plunge start and "moved up" trigger from the Z setpoint
         step = self.min_speed_mm_s * chunk.cycle_time_s
         has_prev = self._last_z is not None
@@ -256,14 +257,14 @@ class HoleProcessor:
                 if self._up_run >= 5:
                     self._in_plunge = False
         if self.live_context:
-            self._context(chunk, z)
+            self._context(chunk, z, events)
         if self._moved_up:
             self._pending = None
             out += self._evaluate(final=False)
         self._trim()
         return out
 
-    def _context(self, chunk: Chunk, z: NDArray[np.float64]) -> None:
+    def _context(self, chunk: Chunk, z: NDArray[np.float64], events: HoleEvents) -> None:
         """Live hole context of the chunk's cycles into ``chunk.derived``."""
         if self.cut is None:
             self.cut = CutTracker(cycle_time_s=chunk.cycle_time_s,
@@ -274,7 +275,7 @@ class HoleProcessor:
         nan = np.full(len(chunk), np.nan)
         speed = s.get(f"CMD_SPEED|{self.spindle}", nan)
         xy = tuple(s[f"DES_POS|{a}"] for a in self.xy_axes if f"DES_POS|{a}" in s)
-        ctx = self.cut.update(chunk.cycles, z, enc, speed, xy_des_mm=xy, events=chunk.events)
+        ctx = self.cut.update(chunk.cycles, z, enc, speed, xy_des_mm=xy, events=events)
         za = self.z_axis
         chunk.derived[f"HOLE|{za}"] = ctx.hole
         chunk.derived[f"CUT_PROGRESS|{za}"] = ctx.progress

@@ -207,11 +207,8 @@ def _event_arrays(ev: pd.DataFrame, *cols: str) -> tuple[Any, ...]:
     order = np.argsort(ec, kind="stable")
     out: list[Any] = [ec[order]]
     for c in cols:
-        if c in ev.columns:
-            v = ev[c].astype(object).to_numpy()[order]
-            out.append(np.array([None if x is None or x is pd.NA or (isinstance(x, float)
-                                                                     and math.isnan(x))
-                                 else x for x in v], dtype=object))
+        if c in ev.columns:  # None for NaN, NA and None alike
+            out.append(ev[c].to_numpy(dtype=object, na_value=None)[order])  # type: ignore[call-overload]
         else:
             out.append(np.full(len(ec), None, dtype=object))
     return tuple(out)
