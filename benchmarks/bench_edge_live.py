@@ -241,6 +241,7 @@ def main() -> None:
     cycles = sum(int(v.get("cycles") or 0) for v in summary.values())
     errors = {k: v for k, v in summary.items() if "error" in v}
     lat_p99, lat_p50, lat_max, lost = [], [], [], 0
+    pipe_cpu_s = 0.0
     for name in summary:
         st = json.loads((tmp / "state" / name / "status.json").read_text())
         lm = st["latency_ms"]
@@ -249,6 +250,7 @@ def main() -> None:
             lat_p50.append(lm["p50"])
             lat_max.append(lm["max"])
         lost += sum(int(v) for v in st["overload"].values())
+        pipe_cpu_s += float(st.get("cpu_s") or 0.0)
     # end to end: per torque result, arrival - send of the message holding its last cycle
     ext = []
     for machine, first, n, t_rx in got:
@@ -283,6 +285,8 @@ def main() -> None:
           f"{np.percentile(e, 50):.1f} / {np.percentile(e, 99):.1f} |")
     print(f"| plant CPU [s] for {n_cyc / NEED * args.machines:.0f} machine-seconds | "
           f"{cpu_s:.1f} |")
+    print(f"| of which the machines' pipelines (`cpu_s` in status.json: chunk -> results in "
+          f"the sinks, checkpoints) [s] | {pipe_cpu_s:.1f} |")
     print(f"| machines at 500 Hz per core, live (Databus + full path + MQTT) | "
           f"{cycles / cpu_s / NEED:.0f} |")
     print(f"| floor: bare estimator, same chunks, machines per core | {floor / NEED:,.0f} |")

@@ -230,3 +230,7 @@ def test_idle_live_runtime_reports_and_measures_latency(broker: Broker, tmp_path
     lat = st["latency_ms"]
     # each message is its own chunk, processed within a fraction of its 100 ms period
     assert lat["chunks"] == 6 and 0.0 <= lat["p50"] <= lat["p99"] <= lat["max"] < 1000.0
+    # the pipeline's own CPU (its thread): positive, and no more than the wall time it was
+    # busy (thread CPU cannot exceed it); what a machine costs a core
+    assert 0.0 < st["cpu_s"] <= st["cycles"] / st["cycles_per_busy_s"] + 1e-3
+    assert st["cycles_per_cpu_s"] == pytest.approx(300 / st["cpu_s"], rel=0.01)  # cpu_s: to the us

@@ -45,6 +45,7 @@ class _Counters:
     alarms: int = 0
     started_wall: float = field(default_factory=time.monotonic)
     busy_s: float = 0.0
+    cpu_s: float = 0.0
     lag_s: float = float("nan")
     age_s: float = float("nan")
     last_cycle: int | None = None
@@ -151,7 +152,7 @@ class EdgeRuntime:
     # ------------------------------------------------------------------ one chunk
     def process(self, chunk: Chunk) -> None:
         """Run one source chunk through the pipeline (split at gaps, late rows counted)."""
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         if self.tracker is None:
             self.tracker = CycleTracker(modulus=int(getattr(self.source, "counter_modulus", 0)))
         else:
@@ -199,6 +200,7 @@ class EdgeRuntime:
             self.c.latencies.append(self.c.lag_s)
         self._maybe_checkpoint(chunk.cycle_time_s)
         self.c.busy_s += time.perf_counter() - t0
+        self.c.cpu_s += time.thread_time() - c0
         self._maybe_status()
 
     def _gap(self, gap: CounterGap) -> list[Result]:
@@ -376,6 +378,8 @@ class EdgeRuntime:
             "last_cycle": c.last_cycle,
             "cycles_per_s": c.cycles / wall, "cycles_per_s_recent": recent_rate,
             "cycles_per_busy_s": c.cycles / c.busy_s if c.busy_s > 0 else float("nan"),
+            "cpu_s": round(c.cpu_s, 6),
+            "cycles_per_cpu_s": c.cycles / c.cpu_s if c.cpu_s > 0 else float("nan"),
             "machine_rate_cycles_per_s": 1.0 / ct,
             "lag_s": c.lag_s, "data_age_s": c.age_s,
             "latency_ms": _latency_ms(c.latencies),
