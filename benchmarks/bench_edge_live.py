@@ -119,6 +119,8 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=30.0, help="machine time published")
     ap.add_argument("--cycles-per-message", type=int, default=50)
     ap.add_argument("--workers", type=int, default=0, help="plant workers (0: the cores)")
+    ap.add_argument("--status-s", type=float, default=1.0,
+                    help="the machines' status interval (edge run --status-s) [s]")
     ap.add_argument("--keep", action="store_true", help="keep the temporary folder")
     args = ap.parse_args()
     import paho.mqtt.client as mqtt
@@ -159,7 +161,8 @@ def main() -> None:
     lines = [f"workers = {args.workers}" if args.workers else "", 'out = "state"', "",
              "[defaults]", f'model = "{tmp / "spindle.json"}"',
              f'publish = "mqtt://127.0.0.1:{port}/results"', "learn-s = 5",
-             "idle-timeout-s = 5", "session-expiry-s = 0", "no-twin = true", ""]
+             "idle-timeout-s = 5", "session-expiry-s = 0", "no-twin = true",
+             f"status-s = {args.status_s}", ""]
     for k, (meta, _, _) in enumerate(topics):
         lines += ["[[machine]]", f'name = "mill-{k:03d}"',
                   f'source = "mqtt://127.0.0.1:{port}/{meta}"', ""]
@@ -269,7 +272,8 @@ def main() -> None:
     print(f"machine: {cpu_model()}, {os.cpu_count()} vCPU; load average "
           f"{load[0]:.1f}/{load[1]:.1f}/{load[2]:.1f}; python {platform.python_version()}")
     print(f"{args.machines} machines x {n_cyc} cycles ({n_cyc / NEED:.0f} s, "
-          f"{cpm} cycles per message, {1 + len(COLUMNS)} datapoints); publisher behind "
+          f"{cpm} cycles per message, {1 + len(COLUMNS)} datapoints, status every "
+          f"{args.status_s:g} s); publisher behind "
           f"schedule at the end by {lag_end * 1e3:.0f} ms; errors {len(errors)}; "
           f"cycles processed {cycles} of {args.machines * n_cyc}; counted losses {lost}")
     print()

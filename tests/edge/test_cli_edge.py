@@ -43,3 +43,18 @@ def test_edge_run_and_status(tmp_path: Path, wear_run: dict[str, Any], wear_reco
     text = capsys.readouterr().out
     assert "holes" in text and "finished" in text
     assert main(["edge", "status", str(tmp_path / "nothing")]) == 2
+
+
+def test_edge_run_status_interval(tmp_path: Path, wear_run: dict[str, Any],
+                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """``--status-s`` above 5 s is refused with what to give (the dashboard calls a machine
+    stale after 10 s without a status); one within the range runs."""
+    mfile = save_spindle_model(SpindleModel(1.01, 8.3e-5, 0.34), tmp_path / "spindle.toml")
+    args = ["edge", "run", "--source", str(wear_run["path"]), "--model", str(mfile),
+            "--quiet", "--no-holes", "--no-anomaly"]
+    assert main([*args, "--out", str(tmp_path / "a"), "--status-s", "30"]) == 2
+    assert "--status-s 30.0: give a number of seconds above 0 and at most 5" in \
+        capsys.readouterr().err
+    assert main([*args, "--out", str(tmp_path / "b"), "--status-s", "5"]) == 0
+    status = json.loads((tmp_path / "b" / "status.json").read_text())
+    assert status["state"] == "finished" and status["cpu_s"] > 0

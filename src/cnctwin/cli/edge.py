@@ -183,6 +183,10 @@ def _add_run_options(r: argparse.ArgumentParser) -> None:
     r.add_argument("--checkpoint-s", type=float, default=10.0, metavar="S",
                    help="stream time between checkpoints of the processors' state in OUT "
                    "(a crashed run resumes from it; 10)")
+    r.add_argument("--status-s", type=float, default=1.0, metavar="S",
+                   help="wall time between updates of status.json and status messages [s] "
+                   "(at most 5: the dashboard calls a machine stale after 10 s without one; "
+                   "1)")
     r.add_argument("--max-queue", type=int, default=200_000,
                    help="store-and-forward bound [messages]")
     r.add_argument("--idle-timeout-s", type=float, default=None,
@@ -555,8 +559,12 @@ def _build(args: argparse.Namespace) -> Any:
     if args.checkpoint_s is not None and args.checkpoint_s <= 0:
         raise ConfigError(f"--checkpoint-s {args.checkpoint_s}: give a positive number of "
                           "seconds")
+    if not 0 < args.status_s <= 5:
+        raise ConfigError(f"--status-s {args.status_s}: give a number of seconds above 0 and "
+                          "at most 5 (the dashboard calls a machine stale after 10 s without "
+                          "a status)")
     rt = EdgeRuntime(src, procs, sinks, state_dir=out, machine=machine,
-                     checkpoint_every_s=args.checkpoint_s)
+                     checkpoint_every_s=args.checkpoint_s, status_every_s=args.status_s)
     info = rt.resume()  # a run that ended without finishing (crash, kill -9) continues
     if info["resumed"]:
         how = ("from its checkpoint (open hole, detectors and estimator restored)"
