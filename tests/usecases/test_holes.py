@@ -20,6 +20,7 @@ from cnctwin.sim.programs import hole_pattern
 from cnctwin.sim.scenarios import tool_wear_run
 from cnctwin.spindle import SpindleModel
 from cnctwin.usecases.holes import (
+    HoleEvents,
     find_plunges,
     hole_record,
     hole_records,
@@ -198,3 +199,27 @@ def test_real_capture4analysis_has_no_drilling() -> None:
     holes = hole_record(rec)
     assert len(holes) == 0
     assert any("not a hole" in m and "5558098" in m for m in holes.attrs["issues"])
+
+
+def test_hole_events_arrays_follow_the_event_table(cycle81: Recording) -> None:
+    """The event arrays the hole rows read: sorted by cycle (stable), None for a missing value
+    (NaN, NA, None alike), and the parts of a stream joined equal the whole table's."""
+    ev = cycle81.events
+    assert len(ev) >= 3
+    shuffled = ev.sample(frac=1.0, random_state=1)
+    whole = HoleEvents.from_frame(shuffled)
+    order = np.argsort(shuffled["cycle"].to_numpy(), kind="stable")
+    assert whole.cycle.tolist() == shuffled["cycle"].to_numpy()[order].tolist()
+    assert whole.kind.tolist() == [None if pd.isna(x) else x
+                                   for x in shuffled["kind"].to_numpy()[order]]
+    assert all(t is None or isinstance(t, int | np.integer) for t in whole.active_tool)
+    cut = int(ev["cycle"].iloc[len(ev) // 2])
+    parts = [HoleEvents.from_frame(ev[ev["cycle"] <= cut]),
+             HoleEvents.from_frame(ev[ev["cycle"] > cut])]
+    joined = HoleEvents.concat(parts)
+    ordered = HoleEvents.from_frame(ev)
+    for f in ("cycle", "kind", "gcode", "path", "active_tool"):
+        assert getattr(joined, f).tolist() == getattr(ordered, f).tolist(), f
+    assert len(joined.until(cut)) == int((ev["cycle"] <= cut).sum())
+    assert joined.take(-2).cycle.tolist() == ordered.cycle.tolist()[-2:]
+    assert len(HoleEvents.from_frame(ev.iloc[:0])) == 0

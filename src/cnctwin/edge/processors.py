@@ -392,7 +392,7 @@ class HoleProcessor:
         if len(self._events) > 64:  # one part per chunk with events: merge them
             self._events = [HoleEvents.concat(self._events)]
         if self._events and len(self._events[0]) > 10_000:
-            self._events = [self._events[0].tail_from(-5_000), *self._events[1:]]
+            self._events = [self._events[0].take(-5_000), *self._events[1:]]
 
     def gap(self, gap: CounterGap) -> list[Result]:
         if self.cut is not None:

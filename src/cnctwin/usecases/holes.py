@@ -289,9 +289,9 @@ class HoleEvents:
         k = int(np.searchsorted(self.cycle, cycle, side="right"))
         if k == len(self):
             return self
-        return self.tail_from(0, k)
+        return self.take(0, k)
 
-    def tail_from(self, start: int, stop: int | None = None) -> HoleEvents:
+    def take(self, start: int, stop: int | None = None) -> HoleEvents:
         """Events ``start:stop`` by position.
 
         Parameters
