@@ -303,10 +303,10 @@ class HoleProcessor:
         speed = cols.get(f"CMD_SPEED|{self.spindle}")
         events = HoleEvents.concat(self._events).until(int(cycles[-1]))
         found = holes_from_arrays(cols, cycles, t_ns, cycle_time_s=self._cycle_time_s,
-                          speed_rpm=speed, events=events, spindle=self.spindle,
-                          z_axis=self.z_axis, xy_axes=self.xy_axes, model=self.model,
-                          window_s=self.window_s, set_size=self.set_size,
-                          first_hole=self.holes, origin_ns=self._origin_ns)
+                                  speed_rpm=speed, events=events, spindle=self.spindle,
+                                  z_axis=self.z_axis, xy_axes=self.xy_axes, model=self.model,
+                                  window_s=self.window_s, set_size=self.set_size,
+                                  first_hole=self.holes, origin_ns=self._origin_ns)
         rows = found.rows
         if not rows:
             return []

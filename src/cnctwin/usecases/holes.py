@@ -771,11 +771,11 @@ def hole_record(
     origin = (None if time_origin is None
               else int(pd.Timestamp(time_origin).as_unit("ns").value))
     found = holes_from_arrays(cols, rec.cycles, t_ns, cycle_time_s=rec.meta.cycle_time_s,
-                      speed_rpm=speed, events=HoleEvents.from_frame(rec.events),
-                      spindle=spindle, z_axis=z_axis, xy_axes=xy_axes, model=model,
-                      window_s=window_s, set_size=set_size, first_hole=first_hole,
-                      origin_ns=origin, min_travel_mm=min_travel_mm,
-                      min_speed_rpm=min_speed_rpm)
+                              speed_rpm=speed, events=HoleEvents.from_frame(rec.events),
+                              spindle=spindle, z_axis=z_axis, xy_axes=xy_axes, model=model,
+                              window_s=window_s, set_size=set_size, first_hole=first_hole,
+                              origin_ns=origin, min_travel_mm=min_travel_mm,
+                              min_speed_rpm=min_speed_rpm)
     df = found.to_frame()
     if store:
         rec.meta.attrs["holes"] = df
