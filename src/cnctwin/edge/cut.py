@@ -220,28 +220,19 @@ class CutTracker:
         if not n:
             return out
         evs = self._events(events) if events is not None else []
-        # the geometry changes only at NC events: between them the chunk is one segment
-        bounds = [0]
-        geos: list[tuple[float, float] | None] = []
+        # the geometry changes only at NC events: between them the chunk is one segment; an
+        # event applies from the first cycle at or after it
         cyc = np.asarray(cycles, dtype=np.int64)
+        j0 = 0
         for c, geo in evs:
             if c > int(cyc[-1]):
                 break
             j = int(np.searchsorted(cyc, c, side="left"))
-            if j > bounds[-1]:
-                bounds.append(j)
-                geos.append(None)
-            if geos:
-                geos[-1] = geo
-            else:
-                self.nc_geometry = geo
-        bounds.append(n)
-        # (an event applies from the first cycle at or after it: the geometry of segment k)
-        for k in range(len(bounds) - 1):
-            if k and k - 1 < len(geos):
-                self.nc_geometry = geos[k - 1]
-            self._segment(cyc, z_des_mm, z_enc_mm, speed_rpm, xy_des_mm, bounds[k],
-                          bounds[k + 1], out)
+            if j > j0:
+                self._segment(cyc, z_des_mm, z_enc_mm, speed_rpm, xy_des_mm, j0, j, out)
+                j0 = j
+            self.nc_geometry = geo
+        self._segment(cyc, z_des_mm, z_enc_mm, speed_rpm, xy_des_mm, j0, n, out)
         return out
 
     def _segment(self, cyc: NDArray[np.int64], zd: NDArray[np.float64],
