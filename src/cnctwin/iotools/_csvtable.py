@@ -111,6 +111,13 @@ class CsvTable:
         import pyarrow as pa
         import pyarrow.compute as pc
 
+        if not decimal_comma and not any(map(_is_number, missing)):
+            # clean numbers (no blanks, no missing cell: the cast refuses both): one cast
+            try:
+                fast: NDArray[np.float64] = pc.cast(self.columns[j], pa.float64()).to_numpy()
+                return fast
+            except (pa.ArrowInvalid, ValueError):
+                pass  # blanks, missing cells or a bad value: the checked path below
         text = pc.utf8_trim_whitespace(self.columns[j])
         if decimal_comma:
             text = pc.replace_substring(text, ",", ".")
@@ -148,6 +155,18 @@ class CsvTable:
         return self.delimiter == ";" and any(
             re.search(r"\d,\d", str(c)) for col in self.columns
             for c in col.slice(0, rows).to_pylist())
+
+
+def _is_number(cell: str) -> bool:
+    """Whether Arrow's string-to-float cast reads ``cell`` as a number (``"nan"`` does)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    try:
+        pc.cast(pa.array([cell], pa.string()), pa.float64())
+    except (pa.ArrowInvalid, ValueError):
+        return False
+    return True
 
 
 def read_csv_table(
@@ -245,8 +264,10 @@ def read_csv_table(
         import pyarrow.compute as pc
 
         keep = np.zeros(table.num_rows, dtype=np.bool_)
-        for col in table.columns:
+        for col in table.columns:  # until every row has a value (the first column, mostly)
             keep |= pc.not_equal(pc.utf8_trim_whitespace(col), "").to_numpy()
+            if keep.all():
+                break
         if not keep.all():
             blank += [int(x) for x in lines[~keep]]
             table = table.filter(pa.array(keep))
