@@ -16,6 +16,7 @@ are converted column-wise. What the readers promise is kept:
 from __future__ import annotations
 
 import csv
+import functools
 import io
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -157,8 +158,10 @@ class CsvTable:
             for c in col.slice(0, rows).to_pylist())
 
 
+@functools.lru_cache(maxsize=64)
 def _is_number(cell: str) -> bool:
-    """Whether Arrow's string-to-float cast reads ``cell`` as a number (``"nan"`` does)."""
+    """Whether Arrow's string-to-float cast reads ``cell`` as a number (``"nan"`` does);
+    asked once per missing-cell token, not once per column."""
     import pyarrow as pa
     import pyarrow.compute as pc
 
