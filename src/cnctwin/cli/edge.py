@@ -432,6 +432,14 @@ def _build(args: argparse.Namespace) -> Any:
         session_client_id,
     )
 
+    # options first: nothing is opened or connected for a run that cannot start
+    if args.checkpoint_s is not None and args.checkpoint_s <= 0:
+        raise ConfigError(f"--checkpoint-s {args.checkpoint_s}: give a positive number of "
+                          "seconds")
+    if not 0 < args.status_s <= 5:
+        raise ConfigError(f"--status-s {args.status_s}: give a number of seconds above 0 and "
+                          "at most 5 (the dashboard calls a machine stale after 10 s without "
+                          "a status)")
     machine_name, model, machine_file = _machine_and_model(args)
     args.machine = machine_name
     from cnctwin.iotools.mqtt import MqttSecurity
@@ -556,13 +564,6 @@ def _build(args: argparse.Namespace) -> Any:
                                publish_hz=args.opcua_publish_hz, security=ua_security))
     if args.mtconnect or args.shdr:
         sinks.append(_mtconnect_sink(args, machine))
-    if args.checkpoint_s is not None and args.checkpoint_s <= 0:
-        raise ConfigError(f"--checkpoint-s {args.checkpoint_s}: give a positive number of "
-                          "seconds")
-    if not 0 < args.status_s <= 5:
-        raise ConfigError(f"--status-s {args.status_s}: give a number of seconds above 0 and "
-                          "at most 5 (the dashboard calls a machine stale after 10 s without "
-                          "a status)")
     rt = EdgeRuntime(src, procs, sinks, state_dir=out, machine=machine,
                      checkpoint_every_s=args.checkpoint_s, status_every_s=args.status_s)
     info = rt.resume()  # a run that ended without finishing (crash, kill -9) continues
