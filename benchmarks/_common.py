@@ -1,13 +1,16 @@
-"""Helpers shared by the benchmark scripts: one core, the machine's name, an older source tree,
-a section of BENCHMARKS.md. Scripts import it as ``from _common import ...`` (run from this
-folder's parent; Python puts the script's folder on ``sys.path``)."""
+"""Helpers shared by the benchmark scripts: one core, best-of timing, the machine's name, an
+older source tree, a section of BENCHMARKS.md. Scripts import it as ``from _common import
+...`` (run from this folder's parent; Python puts the script's folder on ``sys.path``)."""
 
 from __future__ import annotations
 
 import os
 import re
 import subprocess
+import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -19,6 +22,17 @@ def pin_one_core() -> str:
         os.sched_setaffinity(0, {cpu})
         return f"sched_setaffinity cpu {cpu}"
     return "not pinned"
+
+
+def best_wall_cpu(fn: Callable[[], Any], repeat: int) -> tuple[float, float]:
+    """Best (wall s, CPU s of this process) of ``repeat`` calls of ``fn``."""
+    best_w, best_c = float("inf"), float("inf")
+    for _ in range(repeat):
+        c0, w0 = time.process_time(), time.perf_counter()
+        fn()
+        best_w = min(best_w, time.perf_counter() - w0)
+        best_c = min(best_c, time.process_time() - c0)
+    return best_w, best_c
 
 
 def cpu_model() -> str:

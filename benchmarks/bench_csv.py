@@ -21,23 +21,9 @@ import os
 import platform
 import shutil
 import tempfile
-import time
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
-from _common import cpu_model
-
-
-def _best(fn: Callable[[], Any], repeat: int) -> tuple[float, float]:
-    """Best (wall s, CPU s) over ``repeat`` runs."""
-    bw, bc = float("inf"), float("inf")
-    for _ in range(repeat):
-        c0, w0 = time.process_time(), time.perf_counter()
-        fn()
-        bw = min(bw, time.perf_counter() - w0)
-        bc = min(bc, time.process_time() - c0)
-    return bw, bc
+from _common import best_wall_cpu, cpu_model
 
 
 def main() -> None:
@@ -74,7 +60,7 @@ def main() -> None:
         for label, fn in (("floor: pyarrow.csv.read_csv of _hfdata.csv", floor),
                           ("baseline: pandas.read_csv (C engine) of _hfdata.csv", pandas_c),
                           ("read_flat_csv (header, events, checks, Recording)", reader)):
-            rows.append((label, *_best(fn, args.repeat)))
+            rows.append((label, *best_wall_cpu(fn, args.repeat)))
         load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
         print(f"machine: {cpu_model()}, {os.cpu_count()} vCPU; load average "
               f"{load[0]:.1f}/{load[1]:.1f}/{load[2]:.1f}; python {platform.python_version()}")

@@ -43,7 +43,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from _common import cpu_model
+from _common import best_wall_cpu, cpu_model
 from cnctwin.edge import (
     AnomalyProcessor,
     EdgeRuntime,
@@ -57,17 +57,6 @@ from cnctwin.recording import Recording
 from cnctwin.spindle import SpindleModel, StreamingTorqueEstimator
 
 NEED = 500.0  # cycles/s per machine
-
-
-def _measure(fn: Callable[[], Any], repeat: int) -> tuple[float, float]:
-    """Best (wall s, CPU s) over ``repeat`` runs."""
-    best_w, best_c = float("inf"), float("inf")
-    for _ in range(repeat):
-        c0, w0 = time.process_time(), time.perf_counter()
-        fn()
-        best_w = min(best_w, time.perf_counter() - w0)
-        best_c = min(best_c, time.process_time() - c0)
-    return best_w, best_c
 
 
 def _broker() -> tuple[subprocess.Popen[bytes], int] | None:
@@ -185,11 +174,11 @@ def main() -> None:
 
     rows: list[tuple[str, float, float]] = []
     target: list[float] = []  # CPU s of the 1 s-message full path with MQTT (replay, plant)
-    w, c = _measure(floor, args.repeat)
+    w, c = best_wall_cpu(floor, args.repeat)
     rows.append(("floor: StreamingTorqueEstimator.update, 50-cycle chunks", n / w, n / c))
-    w, c = _measure(runtime(False), args.repeat)
+    w, c = best_wall_cpu(runtime(False), args.repeat)
     rows.append(("runtime: torque -> JSON lines", n / w, n / c))
-    w, c = _measure(runtime(True), args.repeat)
+    w, c = best_wall_cpu(runtime(True), args.repeat)
     rows.append(("runtime: torque + holes + anomaly -> JSON lines", n / w, n / c))
     import importlib.util
 
@@ -232,7 +221,7 @@ def main() -> None:
     if br is not None:
         proc, port = br
         try:
-            w, c = _measure(runtime(True, port), args.repeat)
+            w, c = best_wall_cpu(runtime(True, port), args.repeat)
             rows.append(("runtime: same + MQTT (store-and-forward queue, QoS 1)", n / w, n / c))
             per, start, pipe = _plant_marginal(rec, tmp, port, args.plant_machines)
             rows.append((f"plant: `edge run --config`, 1 worker process, "
@@ -241,10 +230,10 @@ def main() -> None:
                          f"{start:.2f} CPU-s per machine, not counted)", float("nan"), per))
             rows.append(("plant: same run, the machines' pipelines (`cpu_s` in status.json)",
                          float("nan"), pipe))
-            w, c = _measure(runtime(True, chunk=500), args.repeat)
+            w, c = best_wall_cpu(runtime(True, chunk=500), args.repeat)
             rows.append(("500-cycle chunks (1 s Databus messages): torque + holes + anomaly "
                          "-> JSON lines", n / w, n / c))
-            w, c = _measure(runtime(True, port, chunk=500), args.repeat)
+            w, c = best_wall_cpu(runtime(True, port, chunk=500), args.repeat)
             rows.append(("500-cycle chunks: same + MQTT (store-and-forward queue, QoS 1)",
                          n / w, n / c))
             target.append(c)
