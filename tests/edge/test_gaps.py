@@ -10,7 +10,7 @@ import numpy as np
 
 from cnctwin.edge import CycleTracker, EdgeRuntime, ReplaySource, TorqueProcessor
 from cnctwin.recording import Recording
-from cnctwin.spindle import SpindleModel
+from cnctwin.spindle import SpindleModel, speed_change_flags
 
 from ._memsink import MemorySink
 
@@ -51,7 +51,8 @@ def test_runtime_flags_gap_and_never_invents(wear_recording: Recording,
     assert st["gaps"] == 2 and st["missing_cycles"] == 3861
     tq = [m for m in mem.messages if m["kind"] == "torque"]
     cyc = np.concatenate([np.arange(m["first_cycle"], m["first_cycle"] + m["n"]) for m in tq])
-    tau = np.concatenate([m["torque_nm"] for m in tq])
+    tau = np.concatenate([np.asarray(m["torque_nm"], dtype=np.float64) for m in tq])
+    flags = np.concatenate([m.get("flags", np.zeros(m["n"], dtype=int)) for m in tq])
     assert np.array_equal(cyc, gapped.cycles)  # only received cycles, none invented
     # per contiguous segment the batch estimate (no derivative across a gap)
     i = gapped.hf["CURRENT|SP1"].to_numpy()
@@ -59,7 +60,12 @@ def test_runtime_flags_gap_and_never_invents(wear_recording: Recording,
     cuts = np.flatnonzero(np.diff(gapped.cycles) != 1) + 1
     ref = np.concatenate([spindle_model.cutting_torque(ii, nn)
                           for ii, nn in zip(np.split(i, cuts), np.split(n, cuts), strict=True)])
-    np.testing.assert_array_equal(tau, ref)
+    # speed changes (run-up, braking) are flagged, not a cutting torque (issue 24, point 3):
+    # the flags of each contiguous run, as it is estimated
+    bflags = np.concatenate([speed_change_flags(nn) for nn in np.split(n, cuts)])
+    np.testing.assert_array_equal(flags, bflags)
+    assert (flags != 0).any()
+    np.testing.assert_array_equal(tau, np.where(bflags == 0, ref, np.nan))
     # each torque message covers consecutive cycles only
     for m in tq:
         assert not any(g["after_cycle"] < m["first_cycle"] + m["n"] - 1
@@ -81,10 +87,11 @@ def test_real_capture4analysis_gap(c4a_file: Any, spindle_model: SpindleModel) -
         (5559591, 5563451)]  # docs/reference/data-formats.md §1.2: one gap of 3860 ticks
     assert st["cycles"] == rec.n_cycles == 3818 and st["holes"] == 0
     tq = [m for m in mem.messages if m["kind"] == "torque"]
-    tau = np.concatenate([m["torque_nm"] for m in tq])
+    tau = np.concatenate([np.asarray(m["torque_nm"], dtype=np.float64) for m in tq])
     i = rec.hf["CURRENT|SP1"].to_numpy()
     n = rec.hf["CMD_SPEED|SP1"].to_numpy()
     cut = int(np.flatnonzero(np.diff(rec.cycles) != 1)[0]) + 1
-    ref = np.concatenate([spindle_model.cutting_torque(i[:cut], n[:cut]),
-                          spindle_model.cutting_torque(i[cut:], n[cut:])])
+    ref = np.concatenate([np.where(speed_change_flags(nn) == 0,
+                                   spindle_model.cutting_torque(ii, nn), np.nan)
+                          for ii, nn in ((i[:cut], n[:cut]), (i[cut:], n[cut:]))])
     np.testing.assert_array_equal(tau, ref)

@@ -28,7 +28,7 @@ from cnctwin.edge import EdgeRuntime, HoleProcessor, ReplaySource, TorqueProcess
 from cnctwin.edge.opcua import OpcUaSink, decimate_peak, eu_unit_id
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import Recording
-from cnctwin.spindle import SpindleModel
+from cnctwin.spindle import SpindleModel, speed_change_flags
 from cnctwin.usecases.holes import hole_records
 from cnctwin.usecases.thermal import ToolThermalModel, simulate_tool_temperature
 from tests._services import free_port
@@ -71,8 +71,10 @@ def _batch_windows(rec: Recording, tau: np.ndarray) -> dict[int, tuple[float, fl
     for w in np.unique(cyc // WINDOW):
         sel = (cyc // WINDOW) == w
         v = tau[sel]
-        out[int(t_ns[sel][-1]) // 1000 * 1000] = (float(speed[sel].mean()), float(v.mean()),
-                                                  float(v[np.argmax(np.abs(v))]))
+        v = v[np.isfinite(v)]  # flagged cycles (speed change) carry no cutting torque
+        mean, peak = ((float(v.mean()), float(v[np.argmax(np.abs(v))])) if v.size
+                      else (math.nan, math.nan))
+        out[int(t_ns[sel][-1]) // 1000 * 1000] = (float(speed[sel].mean()), mean, peak)
     return out
 
 
@@ -175,14 +177,17 @@ def test_opcua_matches_batch(wear_recording: Recording, spindle_model: SpindleMo
         sink.close()
     assert not th.is_alive() and sink.last_error == ""
 
-    tau = spindle_model.cutting_torque(rec.hf["CURRENT|SP1"].to_numpy(),
-                                       rec.hf["CMD_SPEED|SP1"].to_numpy())
+    n = rec.hf["CMD_SPEED|SP1"].to_numpy()
+    tau = np.where(speed_change_flags(n, fs_hz=rec.fs_hz) == 0,
+                   spindle_model.cutting_torque(rec.hf["CURRENT|SP1"].to_numpy(), n), np.nan)
     windows = _batch_windows(rec, tau)
     # every value the client saw is the batch peak of the window its source time names
     assert len(got) >= 40, len(got)  # of ~125 windows; coalescing may skip some
     for val, t_ns in got:
         assert t_ns in windows, t_ns
-        assert math.isclose(val, windows[t_ns][2], rel_tol=1e-12, abs_tol=1e-12)
+        ref = windows[t_ns][2]  # NaN: the whole window flagged (speed change), no cut
+        assert (math.isnan(val) and math.isnan(ref)) or math.isclose(
+            val, ref, rel_tol=1e-12, abs_tol=1e-12), (val, ref)
     # final window: mean speed, mean torque, peak, stamped with the last cycle's time
     t_last = _ns(rec.hf["time"].iloc[-1]) // 1000 * 1000
     spd, mean, peak = windows[t_last]
@@ -228,7 +233,8 @@ def test_opcua_matches_batch(wear_recording: Recording, spindle_model: SpindleMo
     assert final["SerialNumber"] == "mill-1"
     assert final["MT.ActualSpeed"] == final["SpindleSpeed"].Value.Value
     assert final["IsRotating"] is (abs(final["SpindleSpeed"].Value.Value) > 1.0)
-    assert final["MT.CuttingTorque"] == final["CuttingTorque"].Value.Value
+    a, b = final["MT.CuttingTorque"], final["CuttingTorque"].Value.Value
+    assert a == b or (math.isnan(a) and math.isnan(b))  # NaN: the last window only brakes
     assert final["MT.HoleCount"] == 3
     assert final["AlarmActive"] is False
     calls = rec.events[rec.events["kind"] == "call"]["path"].dropna()

@@ -31,7 +31,7 @@ from cnctwin.edge import (
 )
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import Recording
-from cnctwin.spindle import SpindleModel
+from cnctwin.spindle import SpindleModel, speed_change_flags
 from cnctwin.usecases.holes import hole_records
 
 from ._memsink import MemorySink
@@ -64,10 +64,13 @@ def test_streamed_torque_equals_batch(wear_recording: Recording, spindle_model: 
         mem = _run(rec, spindle_model, chunk)
     cyc, tau = _torque(mem.kind("torque"))
     assert np.array_equal(cyc, rec.cycles)  # every cycle once, in order, none invented
-    batch = spindle_model.cutting_torque(rec.hf["CURRENT|SP1"].to_numpy(),
-                                         rec.hf["CMD_SPEED|SP1"].to_numpy())
-    # StreamingTorqueEstimator reproduces the vectorized derivative exactly (spindle.py)
-    np.testing.assert_array_equal(tau, batch)
+    n = rec.hf["CMD_SPEED|SP1"].to_numpy()
+    batch = spindle_model.cutting_torque(rec.hf["CURRENT|SP1"].to_numpy(), n)
+    # StreamingTorqueEstimator reproduces the vectorized derivative exactly (spindle.py);
+    # the run-up and the braking are flagged, no cutting torque (speed_change_flags)
+    flags = speed_change_flags(n, fs_hz=rec.fs_hz)
+    assert (flags == 1).sum() > 150  # run-up and braking, each with 0.3 s of settling
+    np.testing.assert_array_equal(tau, np.where(flags == 0, batch, np.nan))
 
 
 def test_hole_rows_equal_batch_and_truth(wear_run: dict[str, Any], wear_recording: Recording,
@@ -116,8 +119,9 @@ def test_jsonl_and_store_sinks(tmp_path: Path, wear_recording: Recording,
     assert [m["seq"] for m in lines] == list(range(len(lines)))
     assert {m["kind"] for m in lines} >= {"torque", "hole_start", "hole", "status"}
     assert read_status(tmp_path / "out")["state"] == "finished"
-    batch = spindle_model.cutting_torque(rec.hf["CURRENT|SP1"].to_numpy(),
-                                         rec.hf["CMD_SPEED|SP1"].to_numpy())
+    n = rec.hf["CMD_SPEED|SP1"].to_numpy()
+    batch = np.where(speed_change_flags(n, fs_hz=rec.fs_hz) == 0,
+                     spindle_model.cutting_torque(rec.hf["CURRENT|SP1"].to_numpy(), n), np.nan)
     with cnctwin.store.open(tmp_path / "store") as store:
         cat = store.recordings(machine="mill-1")
         assert len(cat) == 3  # 6246 cycles in blocks of about 2500
@@ -126,7 +130,8 @@ def test_jsonl_and_store_sinks(tmp_path: Path, wear_recording: Recording,
     cyc = np.concatenate([p.cycles for p in parts])
     tau = np.concatenate([p.hf["CUT_TORQUE|SP1"].to_numpy() for p in parts])
     assert np.array_equal(cyc, rec.cycles)
-    # blocks end at the newest estimated cycle (the inertia term holds one back): no NaN
+    # blocks end at the newest estimated cycle (the inertia term holds one back): NaN only
+    # where a speed change is flagged (no cutting torque there)
     np.testing.assert_array_equal(tau, batch)
     holes = [h for p in parts for h in p.meta.attrs["holes"]]
     assert [h["hole"] for h in holes] == [0, 1, 2]

@@ -144,6 +144,9 @@ class CutTracker:
         """(surface, depth) of the modal drilling cycle, from the NC events [mm]."""
         self.row_geometry: tuple[float, float] | None = None
         """(surface, depth) of the last completed hole row [mm] (fallback)."""
+        self.nc_cancelled = False
+        """The NC events cancelled the drilling cycle (``MCALL``, ``G80``): no hole until the
+        next cycle call, so the last row's geometry is not used (a milling plunge is no hole)."""
         self.in_cut = False
         self.hole = -1
         self._prev_z: float | None = None
@@ -232,6 +235,7 @@ class CutTracker:
                 self._segment(cyc, z_des_mm, z_enc_mm, speed_rpm, xy_des_mm, j0, j, out)
                 j0 = j
             self.nc_geometry = geo
+            self.nc_cancelled = geo is None
         self._segment(cyc, z_des_mm, z_enc_mm, speed_rpm, xy_des_mm, j0, n, out)
         return out
 
@@ -248,7 +252,7 @@ class CutTracker:
         zprev = np.empty(j1 - j0)
         zprev[0] = np.nan if prev is None else prev
         zprev[1:] = zs[:-1]
-        geo = self.nc_geometry or self.row_geometry
+        geo = self.nc_geometry or (None if self.nc_cancelled else self.row_geometry)
         self._prev_z = float(zs[-1])
         if geo is None:
             inside = np.zeros(j1 - j0, dtype=bool)

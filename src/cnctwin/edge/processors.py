@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -27,11 +28,15 @@ from cnctwin.edge.pipeline import Chunk, Result
 from cnctwin.exceptions import ConfigError
 from cnctwin.machine import MachineFile
 from cnctwin.recording import CounterGap, Recording, RecordingMeta
-from cnctwin.spindle import SpindleModel, StreamingTorqueEstimator
+from cnctwin.spindle import SpeedChangeFlags, SpindleModel, StreamingTorqueEstimator
 from cnctwin.usecases.anomaly import Detector, PhysicsResidualDetector
 from cnctwin.usecases.holes import HOLE_COLUMNS, HoleEvents, holes_from_arrays
 
-__all__ = ["AnomalyProcessor", "HoleProcessor", "TorqueProcessor", "TwinCompareProcessor"]
+__all__ = ["TORQUE_FLAGS", "AnomalyProcessor", "HoleProcessor", "TorqueProcessor",
+           "TwinCompareProcessor"]
+
+TORQUE_FLAGS: Mapping[int, str] = SpeedChangeFlags.CODES
+"""Codes of a ``torque`` result's ``flags`` (present when any cycle is flagged)."""
 
 
 class TorqueProcessor:
@@ -46,6 +51,15 @@ class TorqueProcessor:
     accel_term : bool, default True
         Subtract ``J dOmega/dt`` (one cycle of delay, see ``StreamingTorqueEstimator``).
 
+    speed_step_rpm : float, default 1
+        A change of the speed command by more than this from one cycle to the next is a speed
+        change (run-up, braking, a new S word) [rpm].
+    settle_s : float, default 0.3
+        Time after the last speed change during which the estimate is still flagged (the
+        drive's speed loop and current filter settle) [s].
+    min_speed_rpm : float, default 10
+        Below this the spindle stands: no cut is possible, the estimate is flagged [rpm].
+
     Notes
     -----
     At a gap the estimator is flushed and restarted, so the derivative is never taken across
@@ -53,18 +67,34 @@ class TorqueProcessor:
     :meth:`~cnctwin.spindle.SpindleModel.cutting_torque` of that run exactly.
     Each ``torque`` result holds ``first_cycle``, ``n`` and the arrays ``torque_nm``,
     ``speed_rpm``, ``current_a`` for consecutive cycles.
+
+    **No torque without a cut.** While the speed changes the current mostly accelerates the
+    rotor and the sampled current does not follow the cycle's mean torque
+    (:class:`~cnctwin.spindle.SpeedChangeFlags`): such cycles, and a standing spindle, are no
+    cutting-torque estimate. ``torque_nm`` is null there and the result carries ``flags``
+    (one code per cycle, :data:`TORQUE_FLAGS`), so no display, MTConnect or OPC UA client
+    shows a cut while the spindle only brakes; the same cycles are NaN in ``chunk.derived``
+    (not judged by the torque detectors). Equal to
+    :func:`~cnctwin.spindle.speed_change_flags` on the whole stream.
     """
 
     name = "torque"
 
     def __init__(self, model: SpindleModel, *, spindle: str = "SP1",
-                 accel_term: bool = True) -> None:
+                 accel_term: bool = True, speed_step_rpm: float = 1.0,
+                 settle_s: float = 0.3, min_speed_rpm: float = 10.0) -> None:
+        SpeedChangeFlags(speed_step_rpm=speed_step_rpm, settle_s=settle_s,
+                         min_speed_rpm=min_speed_rpm)  # checks the options now
+        self.speed_step_rpm, self.settle_s = speed_step_rpm, settle_s
+        self.min_speed_rpm = min_speed_rpm
+        self._flagger: SpeedChangeFlags | None = None
         self.model = model
         self.spindle = spindle
         self.i_col = f"CURRENT|{spindle}"
         self.n_col = f"CMD_SPEED|{spindle}"
         self.column = f"CUT_TORQUE|{spindle}"
         self._fs: float | None = None
+        self._ct = 0.0
         self.accel_term = accel_term
         self._est: StreamingTorqueEstimator | None = None
         self._pending: deque[tuple[int, float, float]] = deque()  # (cycle, i, n) held back
@@ -77,12 +107,28 @@ class TorqueProcessor:
                                                  accel_term=self.accel_term)
         return self._est
 
+    def _flags(self, n: list[float]) -> NDArray[np.int8]:
+        """Flag codes of consecutive output cycles (the next cycle's command is known: the
+        estimate of a cycle waits for it, central difference)."""
+        if self._flagger is None:
+            self._flagger = SpeedChangeFlags(
+                fs_hz=1.0 / (self._ct or 0.002), speed_step_rpm=self.speed_step_rpm,
+                settle_s=self.settle_s, min_speed_rpm=self.min_speed_rpm)
+        return self._flagger.update(n, self._pending[0][2] if self._pending else None)
+
     def _result(self, cycles: list[int], tau: NDArray[np.float64], i: list[float],
                 n: list[float]) -> Result:
-        return Result("torque", cycles[0], {
+        flags = self._flags(n)
+        payload: dict[str, Any] = {
             "spindle": self.spindle, "first_cycle": cycles[0], "n": len(cycles),
             "torque_nm": tau.tolist(), "speed_rpm": n, "current_a": i,
-            "units": {"torque_nm": "Nm", "speed_rpm": "rpm", "current_a": "A"}})
+            "units": {"torque_nm": "Nm", "speed_rpm": "rpm", "current_a": "A"}}
+        if flags.any():
+            tau = tau.copy()
+            tau[flags != 0] = np.nan
+            payload["torque_nm"] = tau.tolist()
+            payload["flags"] = flags.tolist()
+        return Result("torque", cycles[0], payload)
 
     def process(self, chunk: Chunk) -> list[Result]:
         if self.i_col not in chunk.signals or self.n_col not in chunk.signals:
@@ -99,6 +145,10 @@ class TorqueProcessor:
         nn = [b for _, _, b in held] + n.tolist()
         k = tau.size
         self._pending = deque(zip(cyc[k:], ii[k:], nn[k:], strict=True))
+        self._ct = chunk.cycle_time_s
+        res = self._result(cyc[:k], tau, ii[:k], nn[:k]) if k else None
+        if res is not None and "flags" in res.payload:
+            tau = np.asarray(res.payload["torque_nm"], dtype=np.float64)
         derived = np.full(len(chunk), np.nan)
         # estimates for this chunk's own cycles (the held-back one of the last chunk came out)
         off = len(held)
@@ -107,7 +157,7 @@ class TorqueProcessor:
         chunk.derived[self.column] = derived
         if off and k >= off:  # the previous chunk's held-back cycle came out now
             chunk.late[self.column] = (held[-1][0], float(tau[off - 1]))
-        return [self._result(cyc[:k], tau, ii[:k], nn[:k])] if k else []
+        return [res] if res is not None else []
 
     def _flush(self) -> list[Result]:
         if self._est is None:
@@ -122,7 +172,9 @@ class TorqueProcessor:
                              [b for _, _, b in held])]
 
     def gap(self, gap: CounterGap) -> list[Result]:
-        return self._flush()
+        out = self._flush()
+        self._flagger = None  # each contiguous run is flagged on its own, as it is estimated
+        return out
 
     def finish(self) -> list[Result]:
         return self._flush()

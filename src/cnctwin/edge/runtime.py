@@ -506,7 +506,7 @@ class EdgeRuntime:
 
 
 CHECKPOINT_FILE = "checkpoint.pkl"
-CHECKPOINT_VERSION = 2  # 2: the hole processor keeps its NC events as arrays
+CHECKPOINT_VERSION = 3  # 2: NC events as arrays; 3: the torque processor flags speed changes
 
 
 def source_identity(source: Any) -> dict[str, Any]:

@@ -15,6 +15,12 @@ inside the hole drilled just before at the same XY (peck drilling, CYCLE83) cont
 (the workpiece surface, RFP = 2nd cycle parameter) and the active tool. Without events the
 surface is where the spindle current leaves its air-feed level.
 
+**What is a hole.** Every plunge inside a drilling cycle (the cycle call is a hole, loaded or
+not). Outside a drilling cycle (or without NC events) a plunge is a hole only when it drills:
+X/Y stay where they are from the feed start to the retract and the spindle current leaves its
+air level (``cycle`` = ``'plunge'``). A milling entry (plunge, then the contour at depth), a
+ramp, a helix or a plunge through air is not a hole; each is named in ``attrs["issues"]``.
+
 References
 ----------
 .. [1] Thesis, Koç University, chapter 4.3 (mean over the first 0.6 s of each cut, Fig. 4.5) and
@@ -85,7 +91,8 @@ HOLE_COLUMNS: dict[str, str] = {
     "thrust_proxy": "Z-axis load in the cut minus its air-feed level (unit in attrs) [-]",
     "dev_{x,y,z}_{mean,maxabs,rms}_mm": "DES_POS - ENC_POS statistics during the cut [mm]",
     "tool": "active tool number (NC events), <NA> without events",
-    "cycle": "drilling cycle name (CYCLE81 ...), '' without events",
+    "cycle": "drilling cycle name (CYCLE81 ...); 'plunge' for a straight Z plunge with "
+             "drilling load outside any drilling cycle",
 }
 """Columns of :func:`hole_record` with their meaning and unit."""
 
@@ -395,6 +402,33 @@ def _contact(
     return lo + k0
 
 
+_DRILL_LOAD_NM = 0.25
+"""Median cutting torque over a plunge's feed part above which it drills when the current's
+rise from its air level is not in the data (a plunge that starts in the material, e.g. after
+a restart) [Nm]; an uncalibrated spindle model's air offset is ~0.1 Nm."""
+
+
+def _not_a_drilled_hole(xd: NDArray[np.float64] | None, yd: NDArray[np.float64] | None,
+                        lo: int, hi: int, loaded: bool, *, xy_tol_mm: float = 0.01) -> str:
+    """Why a plunge outside a drilling cycle is no hole ('' if it is one).
+
+    A drilled hole keeps X/Y from the feed start to the retract and loads the spindle; a
+    milling entry moves X/Y at depth (a plunge, then the contour), a ramp or a helix moves
+    X/Y while Z goes down, and a plunge through air never leaves the air level of the current.
+    """
+    for arr, ax in ((xd, "X"), (yd, "Y")):
+        if arr is None:
+            continue
+        seg = arr[lo : hi + 1]
+        seg = seg[np.isfinite(seg)]
+        if seg.size and float(seg.max() - seg.min()) > xy_tol_mm:
+            return (f"the {ax} setpoint moves {float(seg.max() - seg.min()):.3g} mm while Z "
+                    "is down (a milling entry, ramp or helix)")
+    if not loaded:
+        return "no drilling load (the spindle current never leaves its air level)"
+    return ""
+
+
 def _zload(cols: Mapping[str, NDArray[np.float64]], z_axis: str
            ) -> tuple[NDArray[np.float64], str, bool] | None:
     for code, unit in (("TORQUE", "Nm"), ("CURRENT", "A")):
@@ -592,6 +626,15 @@ min_speed_rpm
                 cut_start, surface, src = c, float(za[c]), "current"
             else:
                 cut_start, surface, src = lo, float(zm[lo]), "feed"
+        if not name:
+            seg_tq = torque[lo : hi + 1]
+            loaded = src == "current" or bool(
+                np.isfinite(seg_tq).any() and float(np.nanmedian(seg_tq)) > _DRILL_LOAD_NM)
+            why = _not_a_drilled_hole(xd, yd, first.feed_start, last.end, loaded)
+            if why:
+                issues.append(f"Z plunge at cycle {int(cycles[first.feed_start])} outside a "
+                              f"drilling cycle is not a hole: {why}")
+                continue
         cut_end = max(hi, cut_start)
         # samples in the material: the feed parts of all plunges of the hole (peck retracts
         # and re-approaches excluded), from the surface on
@@ -664,7 +707,7 @@ min_speed_rpm
             row[f"dev_{tag}_maxabs_mm"] = mx
             row[f"dev_{tag}_rms_mm"] = rms
         row["tool"] = tools[grp[0]]
-        row["cycle"] = name
+        row["cycle"] = name or "plunge"
         rows.append(row)
     n_calls = _count_cycle_calls(ev)
     if n_calls and n_calls != len(rows):
