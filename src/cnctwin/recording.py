@@ -57,8 +57,44 @@ __all__ = [
     "meta_from_json",
     "meta_to_dict",
     "meta_to_json",
+    "nc_program_name",
     "unwrap_cycles",
 ]
+
+def nc_program_name(path: str | None) -> str | None:
+    """The main program's name as the operator knows it, from an NC ``call`` event's path.
+
+    Parameters
+    ----------
+    path : str or None
+        The control's internal path of a called program, e.g.
+        ``/_N_MPF_DIR/_N_PART_MPF`` or ``/_N_WKS_DIR/_N_JOB_WPD/_N_PART_MPF``.
+
+    Returns
+    -------
+    str or None
+        ``'PART.MPF'``; None for a call that is not a main program (a cycle under
+        ``/_CYCLES_DIR``, a subprogram ``_SPF``, a path without the ``_N_`` file prefix).
+
+    Notes
+    -----
+    SINUMERIK stores a file ``NAME.EXT`` as ``_N_NAME_EXT`` in the passive file system
+    (Siemens, SINUMERIK 840D sl Basic functions, K1: program names); main programs are MPF.
+
+    Examples
+    --------
+    >>> nc_program_name("/_N_MPF_DIR/_N_PART_MPF")
+    'PART.MPF'
+    >>> nc_program_name("/_CYCLES_DIR/_CYCLE81") is None
+    True
+    """
+    if not isinstance(path, str):
+        return None
+    leaf = path.rstrip("/").rsplit("/", 1)[-1]
+    if not (leaf.startswith("_N_") and leaf.upper().endswith("_MPF")) or len(leaf) <= 7:
+        return None
+    return f"{leaf[3:-4]}.MPF"
+
 
 CYCLE_COUNTER_MODULUS = 2**31
 """The raw CYCLE counter runs 0..2147483647 and then wraps (Siemens FAQ)."""

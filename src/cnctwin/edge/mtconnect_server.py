@@ -45,6 +45,7 @@ from cnctwin.edge.mtconnect import (
 )
 from cnctwin.edge.pipeline import Chunk
 from cnctwin.exceptions import ConfigError
+from cnctwin.recording import nc_program_name
 
 __all__ = ["MTConnectAgent", "MTConnectSink", "ShdrAdapter", "parse_listen_url"]
 
@@ -366,8 +367,14 @@ class MTConnectSink:
         self._last_event: dict[str, Any] = {}
         self._holes = 0
         self.observations = 0
-        self._put(None, [("avail", "AVAILABLE"), ("system", ("NORMAL", None, None)),
-                         (f"{self._sp}_cond", ("NORMAL", None, None))])
+        self._await: dict[int, int] = {}  # sampled cycle -> its time, torque not yet known
+        # every data item starts UNAVAILABLE (as an MTConnect agent does): /current then
+        # lists each one, with a value or UNAVAILABLE, never leaves one out
+        first = {"avail": "AVAILABLE", "system": ("NORMAL", None, None),
+                 f"{self._sp}_cond": ("NORMAL", None, None)}
+        self._put(None, [(d.id, first.get(d.id, ("UNAVAILABLE", None, None)
+                                          if d.category == "CONDITION" else None))
+                         for d in self.model.data_items])
 
     def _put(self, t_ns: int | None, items: list[tuple[str, Any]]) -> None:
         import time
@@ -399,6 +406,13 @@ class MTConnectSink:
                 for i in range(int(msg["n"])):
                     torque[c0 + i] = (float(tq[i]) if tq[i] is not None else math.nan,
                                       float(sp[i]) if sp[i] is not None else math.nan)
+        for c in [c for c in self._await if c in torque]:  # a sample held for its torque
+            t = self._await.pop(c)
+            by_time.setdefault(t, []).extend([(f"{self._sp}_cut_torque", torque[c][0]),
+                                              (f"{self._sp}_speed", torque[c][1])])
+        if len(self._await) > 4:  # a gap or the end: that torque never comes
+            for c in sorted(self._await)[:-4]:
+                del self._await[c]
         if chunk is not None and len(chunk):
             self._samples(chunk, torque, by_time)
             self._events(chunk, by_time)
@@ -461,6 +475,8 @@ class MTConnectSink:
             c = int(chunk.cycles[i])
             if c in torque:
                 items += [(f"{sp}_cut_torque", torque[c][0]), (f"{sp}_speed", torque[c][1])]
+            else:  # the chunk's last cycle: its torque comes with the next chunk
+                self._await[c] = int(chunk.time_ns[i])
             by_time.setdefault(int(chunk.time_ns[i]), []).extend(items)
 
     def _events(self, chunk: Chunk, by_time: dict[int, list[tuple[str, Any]]]) -> None:
@@ -469,8 +485,9 @@ class MTConnectSink:
             return
         for _, row in ev.iterrows():
             items: list[tuple[str, Any]] = []
-            if row.get("kind") == "call" and isinstance(row.get("path"), str):
-                self._event("program", row["path"], items)
+            name = nc_program_name(row.get("path")) if row.get("kind") == "call" else None
+            if name is not None:  # the main program, not a cycle or subprogram it calls
+                self._event("program", name, items)
             tool = row.get("active_tool")
             if tool is not None and not (isinstance(tool, float) and math.isnan(tool)):
                 with contextlib.suppress(TypeError, ValueError):

@@ -47,6 +47,7 @@ from numpy.typing import NDArray
 from cnctwin.edge.listen import check_bindable
 from cnctwin.edge.pipeline import Chunk
 from cnctwin.exceptions import ConfigError
+from cnctwin.recording import nc_program_name
 
 __all__ = [
     "DEFAULT_NAMESPACE",
@@ -684,9 +685,13 @@ class OpcUaSink:
             return []
         ev = chunk.events
         calls = ev[ev["kind"].astype(str) == "call"]
-        if "path" not in calls or calls["path"].dropna().empty:
+        if "path" not in calls:
             return []
-        name = str(calls["path"].dropna().iloc[-1])
+        # the main program as the operator knows it (PART.MPF), not a cycle it calls
+        names = [n for n in map(nc_program_name, calls["path"].tolist()) if n is not None]
+        if not names:
+            return []
+        name = names[-1]
         if name == self._program:
             return []
         self._program = name
