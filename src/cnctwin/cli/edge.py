@@ -512,7 +512,12 @@ def _build(args: argparse.Namespace) -> Any:
             raise ConfigError(f"--detector {args.detector} needs the hole processor (the live "
                               "hole number and progress): drop --no-holes")
         makers: dict[str, Callable[[], Detector]] = {
-            "physics": PhysicsResidualDetector, "tapping": TappingDetector,
+            # the air current against the twin, judged only where no tool can cut, with a
+            # spread of at least 10 % of the predicted current + 0.05 A (friction drifts
+            # ~0.5 %/K with the bearings' temperature; the calibration's uncertainty)
+            "physics": lambda: PhysicsResidualDetector(gate="air", rel_floor=0.1,
+                                                       abs_floor=0.05),
+            "tapping": TappingDetector,
             "spectral": SpectralDetector, "adaptive": WearAdaptiveDetector,
             "physics-torque": lambda: WearAdaptiveDetector(expected="expected_torque_nm")}
         det = makers[args.detector]()

@@ -516,6 +516,12 @@ class AnomalyProcessor:
         ``expected_torque_nm``.
     diameter_mm, point_angle_deg : float
         Drill geometry of ``expected_torque_nm`` [mm], [deg].
+    xy_axes : (str, str), default ('X1', 'Y1')
+        Lateral axes for the ``air`` input.
+    air_still_s, air_after_plunge_s : float, default 0.3, 1.0
+        ``air`` (given when the detector asks for it): 1 where every feed axis has stood
+        still for ``air_still_s`` and Z has not gone down for ``air_after_plunge_s`` (a tool
+        cuts only while an axis feeds, or dwells at a hole's bottom), 0 else [s].
 
     Notes
     -----
@@ -530,7 +536,9 @@ class AnomalyProcessor:
                  spindle: str = "SP1", z_axis: str = "Z1", learn_s: float = 10.0,
                  learn_holes: int | None = None, threshold: float = 0.0,
                  refractory_s: float = 1.0, material: str = "aisi1045",
-                 diameter_mm: float = 8.5, point_angle_deg: float = 140.0) -> None:
+                 diameter_mm: float = 8.5, point_angle_deg: float = 140.0,
+                 xy_axes: tuple[str, str] = ("X1", "Y1"), air_still_s: float = 0.3,
+                 air_after_plunge_s: float = 1.0) -> None:
         from cnctwin.usecases.monitoring import KIENZLE_PARAMETERS
 
         self.detector = detector if detector is not None else PhysicsResidualDetector()
@@ -550,6 +558,11 @@ class AnomalyProcessor:
                               f"deg; got {diameter_mm} mm, {point_angle_deg} deg")
         self.material, self.diameter_mm = material, diameter_mm
         self.point_angle_deg = point_angle_deg
+        self.xy_axes = xy_axes
+        self.air_still_s, self.air_after_plunge_s = air_still_s, air_after_plunge_s
+        self._air_last: tuple[float, ...] | None = None
+        self._air_since_move = 0
+        self._air_since_down = 0
         self.learned = 0
         self.scored = 0
         self.alarms = 0
@@ -600,6 +613,8 @@ class AnomalyProcessor:
         if tq is not None:
             cols["torque_nm"] = tq
         keys = list(self.detector.inputs)
+        if "air" in keys:
+            cols["air"] = self._air(chunk)
         needs_holes = "hole" in keys or "progress" in keys or self.learn_holes is not None
         if needs_holes and hole is None:
             raise ConfigError(f"{self.name} needs the live hole context (hole, progress): run "
@@ -652,6 +667,37 @@ class AnomalyProcessor:
             self._alarms(chunk.cycles[n_learn:m], sc, x, n_learn, refr, out)
         chunk.derived[f"ANOMALY_SCORE|{self.spindle}"] = scores
         return out
+
+    def _air(self, chunk: Chunk) -> NDArray[np.float64]:
+        """1.0 where the tool cannot be cutting: every feed axis (X, Y, Z setpoints) has stood
+        still for ``air_still_s`` and Z has not moved down for ``air_after_plunge_s`` (the
+        dwell at a hole's bottom); 0.0 else, and everywhere without the setpoints."""
+        n_rows = len(chunk)
+        axes = [chunk.signals.get(f"DES_POS|{a}") for a in (*self.xy_axes, self.z_axis)]
+        if n_rows == 0 or any(v is None for v in axes):
+            return np.zeros(n_rows)
+        step = 0.05 * chunk.cycle_time_s  # 0.05 mm/s, the hole record's standstill
+        moving = np.zeros(n_rows, dtype=bool)
+        zdown = np.zeros(n_rows, dtype=bool)
+        last = self._air_last
+        for j, v in enumerate(axes):
+            assert v is not None
+            prev = np.concatenate([[v[0] if last is None else last[j]], v[:-1]])
+            with np.errstate(invalid="ignore"):
+                d = v - prev
+                moving |= ~(np.abs(d) <= step)
+                if j == len(axes) - 1:
+                    zdown = d < -step
+        self._air_last = tuple(float(v[-1]) for v in axes if v is not None)
+        idx = np.arange(n_rows)
+        out = np.ones(n_rows, dtype=bool)
+        for mask, attr, hold_s in ((moving, "_air_since_move", self.air_still_s),
+                                   (zdown, "_air_since_down", self.air_after_plunge_s)):
+            lastk = np.maximum.accumulate(np.where(mask, idx, -1))
+            since = np.where(lastk >= 0, idx - lastk, getattr(self, attr) + idx + 1)
+            setattr(self, attr, int(since[-1]))
+            out &= since >= round(hold_s / chunk.cycle_time_s)
+        return out.astype(np.float64)
 
     def _alarms(self, cycles: NDArray[np.int64], sc: NDArray[np.float64],
                 x: dict[str, NDArray[np.float64]], offset: int, refr: int,

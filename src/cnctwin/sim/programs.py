@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -31,12 +32,14 @@ from cnctwin.sim.gcode import ISO_COARSE_PITCH_MM
 
 __all__ = [
     "AIR_CUT_SPEEDS_RPM",
+    "ProductionProgram",
     "air_cut_sweep_program",
     "axis_test_program",
     "circle_path",
     "drilling_validation_program",
     "hole_pattern",
     "hole_positions",
+    "production_program",
     "square_path",
     "tapping_program",
     "warm_up_program",
@@ -560,3 +563,136 @@ def tapping_program(
             lines.append(f"X{_fmt(x)} Y{_fmt(y)}")
     lines += ["MCALL" if cycle == "CYCLE84" else "G80", "G0 Z50", "M5 M9", "M30"]
     return "\n".join(lines) + "\n"
+
+
+@dataclass(frozen=True)
+class ProductionProgram:
+    """A randomly drawn production program and what it must give (the truth of a soak).
+
+    Attributes
+    ----------
+    text : str
+        Program text.
+    holes : int
+        Drilling- and tapping-cycle calls: the holes a correct hole count finds [-].
+    operations : tuple of str
+        The operations in order (``drill CYCLE81 4 x 12 mm``, ``mill pocket``, ...).
+    surface_z_mm : float
+        Workpiece surface; the tool cannot cut while its tip is above it [mm].
+    """
+
+    text: str
+    holes: int
+    operations: tuple[str, ...]
+    surface_z_mm: float = 0.0
+
+
+def production_program(seed: int, *, operations: int = 8, tapping: bool = True
+                       ) -> ProductionProgram:
+    """Varied production from a seed: drilling, peck drilling, tapping, milling entries and
+    contours, tool changes, speed changes, dwells and air moves, in random order.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of every choice; the same seed gives the same program.
+    operations : int, default 8
+        Number of operations [-].
+    tapping : bool, default True
+        Include rigid tapping (CYCLE84) among the choices.
+
+    Returns
+    -------
+    ProductionProgram
+
+    Notes
+    -----
+    Every hole is drilled at a fresh X/Y of a 12 mm grid (no hole twice); milling enters with
+    a straight plunge (``G1 Z``), a ramp or a helix and then follows a contour at depth, which
+    no correct hole count takes for a hole. Speeds 1200-3200 rpm, feeds 0.08-0.2 mm/rev,
+    hole depths 4-20 mm, tapping M6-M10 at 300-500 rpm.
+    """
+    if operations < 1:
+        raise ConfigError(f"operations must be >= 1, not {operations}")
+    rng = np.random.default_rng(seed)
+    cells = [(12.0 * (i + 1), 12.0 * (j + 1)) for i in range(16) for j in range(16)]
+    order = rng.permutation(len(cells))
+    free = [cells[k] for k in order.tolist()]
+    lines = [f"; production draw {seed}", "G90 G17 G94 G60", "T1 M6"]
+    speed = float(rng.choice([1600.0, 2000.0, 2400.0, 2800.0]))
+    lines.append(f"S{_fmt(speed)} M3 M8")
+    ops: list[str] = []
+    holes = 0
+    tool = 1
+    kinds = ["drill", "peck", "mill", "ramp", "helix", "speed", "tool", "air"]
+    if tapping:
+        kinds.append("tap")
+    for k_op in range(operations):
+        # production drills: the first operation drills (the simulator's drilling model
+        # also carries the milling passes as air cuts, see docs/simulator.md)
+        kind = "drill" if k_op == 0 else str(rng.choice(kinds))
+        if kind in ("drill", "peck") and len(free) >= 6:
+            n = int(rng.integers(2, 6))
+            depth = float(rng.choice([4.0, 8.0, 12.0, 16.0, 20.0]))
+            speed = float(rng.choice([1200.0, 1800.0, 2400.0, 3200.0]))
+            feed = round(speed * float(rng.uniform(0.08, 0.2)), 0)
+            pos = [free.pop() for _ in range(n)]
+            lines += [f"S{_fmt(speed)} M3", f"F{_fmt(feed)}",
+                      f"G0 X{_fmt(pos[0][0])} Y{_fmt(pos[0][1])} Z10"]
+            if kind == "drill":
+                lines.append(f"MCALL CYCLE81(10, 0, 2, {_fmt(-depth)})")
+            else:
+                lines.append(f"MCALL CYCLE83(10, 0, 2, {_fmt(-depth)}, , , "
+                             f"{_fmt(max(depth / 3, 2.0))}, 0, 0, 0, 1, 1)")
+            lines += [f"X{_fmt(x)} Y{_fmt(y)}" for x, y in pos]
+            lines += ["MCALL", "G0 Z10"]
+            holes += n
+            ops.append(f"{kind} {'CYCLE81' if kind == 'drill' else 'CYCLE83'} {n} x "
+                       f"{_fmt(depth)} mm at {_fmt(speed)} rpm")
+        elif kind == "tap" and len(free) >= 4:
+            n = int(rng.integers(1, 4))
+            size = int(rng.choice([6, 8, 10]))
+            sst = float(rng.choice([300.0, 400.0, 500.0]))
+            pos = [free.pop() for _ in range(n)]
+            tool = 2
+            lines += ["T2 M6", f"S{_fmt(sst)} M3",
+                      f"G0 X{_fmt(pos[0][0])} Y{_fmt(pos[0][1])} Z10",
+                      f"MCALL CYCLE84(10, 0, 2, -12, , 0, 3, , "
+                      f"{_fmt(ISO_COARSE_PITCH_MM[size])}, 0, {_fmt(sst)}, {_fmt(sst)})"]
+            lines += [f"X{_fmt(x)} Y{_fmt(y)}" for x, y in pos]
+            lines += ["MCALL", "G0 Z10", "T1 M6", f"S{_fmt(speed)} M3"]
+            tool = 1
+            holes += n
+            ops.append(f"tap M{size} {n} x 12 mm at {_fmt(sst)} rpm")
+        elif kind in ("mill", "ramp", "helix"):
+            x0, y0 = float(rng.uniform(20, 150)), float(rng.uniform(20, 150))
+            w, h = float(rng.uniform(10, 40)), float(rng.uniform(10, 40))
+            d = float(rng.choice([0.5, 1.0, 2.0]))
+            f = float(rng.choice([200.0, 400.0, 800.0]))
+            lines.append(f"G0 X{_fmt(x0)} Y{_fmt(y0)} Z2")
+            if kind == "mill":  # straight plunge, then the contour at depth
+                lines.append(f"G1 Z{_fmt(-d)} F100")
+            elif kind == "ramp":
+                lines.append(f"G1 X{_fmt(x0 + w)} Z{_fmt(-d)} F{_fmt(f)}")
+                lines.append(f"G1 X{_fmt(x0)} F{_fmt(f)}")
+            else:  # one helical turn of radius 3 mm down to the depth
+                lines.append(f"G1 X{_fmt(x0 + 3)} F{_fmt(f)}")
+                lines.append(f"G2 X{_fmt(x0 + 3)} Y{_fmt(y0)} Z{_fmt(-d)} I-3 J0")
+                lines.append(f"G1 X{_fmt(x0)} Y{_fmt(y0)}")
+            lines += [f"G1 X{_fmt(x0 + w)} F{_fmt(f)}", f"G1 Y{_fmt(y0 + h)}",
+                      f"G1 X{_fmt(x0)}", f"G1 Y{_fmt(y0)}", "G0 Z10"]
+            ops.append(f"{kind} contour {_fmt(w)} x {_fmt(h)} mm at {_fmt(d)} mm")
+        elif kind == "speed":
+            speed = float(rng.choice([800.0, 1600.0, 2400.0, 3600.0, 4800.0]))
+            lines += [f"S{_fmt(speed)} M3", f"G4 F{_fmt(float(rng.uniform(0.5, 2.0)))}"]
+            ops.append(f"speed {_fmt(speed)} rpm")
+        elif kind == "tool":
+            tool = 3 - tool if tool in (1, 2) else 1
+            lines += ["G0 Z50", "M5", f"T{tool} M6", f"S{_fmt(speed)} M3", "G4 F1"]
+            ops.append(f"tool change T{tool}")
+        else:
+            lines.append(f"G0 X{_fmt(float(rng.uniform(0, 200)))} "
+                         f"Y{_fmt(float(rng.uniform(0, 200)))} Z{_fmt(float(rng.uniform(5, 50)))}")
+            ops.append("air move")
+    lines += ["G0 Z50", "M5 M9", "M30"]
+    return ProductionProgram("\n".join(lines) + "\n", holes, tuple(ops))

@@ -204,6 +204,19 @@ class PhysicsResidualDetector(Detector):
         than ``max(10 speed_tol_rpm, 1 % of the speed)`` from the speed at the last change
         [rpm]. The speed command (``CMD_SPEED``) is noise-free; on a noisy actual speed fewer
         samples are judged.
+    gate : str or None, default None
+        Key of an air indicator (1: the tool cannot be cutting, e.g. every feed axis has
+        stood still for a while; :class:`cnctwin.edge.AnomalyProcessor` gives ``air``):
+        other samples are neither learned nor judged. The twin's prediction is the current
+        *without* a cut, so a cut is no departure from it; without a gate every cut is one.
+    rel_floor : float, default 0
+        Lower bound of the standard deviation, a fraction of ``|predicted|`` [-]: what the
+        twin cannot know (friction drifts with the bearing temperature by ~0.5 %/K, 10 %
+        over a warm-up), so that a learned spread of a few quiet seconds does not make
+        every later speed an alarm.
+    abs_floor : float, default 0
+        Further lower bound of the standard deviation, in the unit of ``measured`` (the
+        calibration's uncertainty of the prediction and the sensor's noise).
     """
 
     def __init__(
@@ -216,7 +229,14 @@ class PhysicsResidualDetector(Detector):
         speed: str | None = "speed_rpm",
         settle_samples: int = 150,
         speed_tol_rpm: float = 1.0,
+        gate: str | None = None,
+        rel_floor: float = 0.0,
+        abs_floor: float = 0.0,
     ) -> None:
+        if rel_floor < 0 or abs_floor < 0:
+            raise ConfigError(f"rel_floor ({rel_floor}) and abs_floor ({abs_floor}) must be "
+                              ">= 0")
+        self.gate, self.rel_floor, self.abs_floor = gate, rel_floor, abs_floor
         if smoothing < 1:
             raise ConfigError(f"smoothing must be >= 1 sample, not {smoothing}")
         if settle_samples < 0 or speed_tol_rpm < 0:
@@ -229,7 +249,8 @@ class PhysicsResidualDetector(Detector):
         self.speed = speed
         self.settle_samples = settle_samples
         self.speed_tol_rpm = speed_tol_rpm
-        self.inputs = (measured, predicted) if speed is None else (measured, predicted, speed)
+        keys = (measured, predicted) if speed is None else (measured, predicted, speed)
+        self.inputs = keys if gate is None else (*keys, gate)
         self._alpha = 1.0 / smoothing
         self._ewma: float | None = None
         self._stats = _Welford()
@@ -241,7 +262,8 @@ class PhysicsResidualDetector(Detector):
         return {"measured": self.measured, "predicted": self.predicted,
                 "smoothing": self.smoothing, "threshold_sigma": self.threshold_sigma,
                 "speed": self.speed, "settle_samples": self.settle_samples,
-                "speed_tol_rpm": self.speed_tol_rpm}
+                "speed_tol_rpm": self.speed_tol_rpm, "gate": self.gate,
+                "rel_floor": self.rel_floor, "abs_floor": self.abs_floor}
 
     def _smooth(self, x: Mapping[str, float]) -> float:
         r = float(x[self.measured]) - float(x[self.predicted])
@@ -265,19 +287,29 @@ class PhysicsResidualDetector(Detector):
         self._since_change += 1
         return self._since_change > self.settle_samples
 
+    def _open(self, x: Mapping[str, float]) -> bool:
+        return self.gate is None or float(x[self.gate]) == 1.0
+
+    def _std(self, predicted: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Standard deviation of each sample: the learned one, at least the floor."""
+        std = self._stats.std
+        floor = self.rel_floor * np.abs(predicted) + self.abs_floor
+        return np.fmax(floor, std if math.isfinite(std) else 0.0)
+
     def learn_one(self, x: Mapping[str, float]) -> None:
         s = self._smooth(x)
-        if self._steady(x):
+        if self._steady(x) and self._open(x):
             self._stats.update(s)
 
     def score_one(self, x: Mapping[str, float]) -> float:
         s = self._smooth(x)
-        if not self._steady(x):
-            return math.nan  # speed changing: the constant-speed twin does not apply
-        std = self._stats.std
+        if not (self._steady(x) and self._open(x)):
+            return math.nan  # speed changing or maybe cutting: the twin does not apply
+        std = float(self._std(np.array([float(x[self.predicted])]))[0])
         if not math.isfinite(std) or std == 0.0:
             return 0.0
-        return abs(s - self._stats.mean) / std - self.threshold_sigma
+        mean = self._stats.mean if self._stats.n else 0.0
+        return abs(s - mean) / std - self.threshold_sigma
 
     # ------------------------------------------------------------ chunks (array code)
     def _smooth_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> NDArray[np.float64]:
@@ -318,18 +350,22 @@ class PhysicsResidualDetector(Detector):
         key = self.speed
         return np.array([self._steady({key: v}) for v in n.tolist()], dtype=bool)
 
+    def _open_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> NDArray[np.bool_]:
+        if self.gate is None:
+            return np.ones(len(next(iter(x.values()))), dtype=bool)
+        return np.asarray(x[self.gate], dtype=np.float64) == 1.0
+
     def learn_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> None:
         s = self._smooth_chunk(x)
-        self._stats.update_many(s[self._steady_chunk(x)])
+        self._stats.update_many(s[self._steady_chunk(x) & self._open_chunk(x)])
 
     def score_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> NDArray[np.float64]:
         s = self._smooth_chunk(x)
-        steady = self._steady_chunk(x)
-        std = self._stats.std
-        if not math.isfinite(std) or std == 0.0:
-            out = np.zeros(s.size)
-        else:
-            out = np.abs(s - self._stats.mean) / std - self.threshold_sigma
+        steady = self._steady_chunk(x) & self._open_chunk(x)
+        std = self._std(np.asarray(x[self.predicted], dtype=np.float64))
+        mean = self._stats.mean if self._stats.n else 0.0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = np.where(std > 0, np.abs(s - mean) / std - self.threshold_sigma, 0.0)
         out[~steady] = np.nan
         return out
 
