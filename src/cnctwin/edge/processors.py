@@ -369,7 +369,8 @@ class HoleProcessor:
             ext_cycle = int(row["end_cycle"]) + round(
                 (float(row["extraction_s"]) - float(row["end_s"])) / self._cycle_time_s)
             done = final or k < len(rows) - 1 or (ext_cycle < last_cycle and (
-                (last_cycle - ext_cycle) * self._cycle_time_s >= self.settle_s
+                ((last_cycle - ext_cycle) * self._cycle_time_s >= self.settle_s
+                 and not self._reentered(cols, cycles, ext_cycle, row))
                 or self._moved_away(cols, cycles, ext_cycle, row)))
             if not done:  # look again when X/Y moves or after settle_s
                 self._pending = last_cycle + round(self.settle_s / self._cycle_time_s)
@@ -405,6 +406,17 @@ class HoleProcessor:
             if v is not None and v.size and float(np.nanmax(v) - np.nanmin(v)) > 0.01:
                 return True
         return False
+
+    def _reentered(self, cols: dict[str, NDArray[np.float64]], cycles: NDArray[np.int64],
+                   cycle: int, row: dict[str, Any]) -> bool:
+        """The tip went back below the hole's surface after it came out: the next peck of
+        the same hole (CYCLE83 re-enters after its retract), so the hole is not complete."""
+        z = cols.get(f"ENC_POS|{self.z_axis}", cols.get(f"DES_POS|{self.z_axis}"))
+        surface = float(row["surface_z_mm"])
+        if z is None or not math.isfinite(surface):
+            return False
+        after = z[int(np.searchsorted(cycles, cycle)) + 1:]
+        return bool(after.size and np.nanmin(after) <= surface)
 
     def _moved_away(self, cols: dict[str, NDArray[np.float64]], cycles: NDArray[np.int64],
                     cycle: int, row: dict[str, Any]) -> bool:
