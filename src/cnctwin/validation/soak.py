@@ -152,10 +152,10 @@ def tally_run(results: str | PathLike[str], rec: Recording, *, holes_expected: i
                 holes += 1
                 plunges += m["row"].get("cycle") == "plunge"
             elif kind == "torque":
-                n = int(m["n"])
-                cyc.append(np.arange(m["first_cycle"], m["first_cycle"] + n))
+                size = int(m["n"])
+                cyc.append(np.arange(m["first_cycle"], m["first_cycle"] + size))
                 tq.append(np.asarray(m["torque_nm"], dtype=np.float64))
-                fl.append(np.asarray(m.get("flags", np.zeros(n)), dtype=np.int64))
+                fl.append(np.asarray(m.get("flags", np.zeros(size)), dtype=np.int64))
                 cur.append(np.asarray(m["current_a"], dtype=np.float64))
                 spd.append(np.asarray(m["speed_rpm"], dtype=np.float64))
     c = np.concatenate(cyc) if cyc else np.empty(0, dtype=np.int64)
