@@ -46,7 +46,12 @@ from numpy.typing import ArrayLike, NDArray
 from cnctwin.analysis.align import align_external, external_on_hf
 from cnctwin.analysis.correlation import plot_correlation_heatmaps
 from cnctwin.analysis.filters import fold_frequency, lowpass, stator_frequency_hz
-from cnctwin.analysis.segments import cutting_regions, speed_plateaus, spindle_speed_rpm
+from cnctwin.analysis.segments import (
+    cutting_regions,
+    samples_since,
+    speed_plateaus,
+    spindle_speed_rpm,
+)
 from cnctwin.analysis.spectra import dominant_line
 from cnctwin.exceptions import ConfigError, IdentificationError, SignalNotFoundError
 from cnctwin.recording import Recording
@@ -1684,9 +1689,7 @@ class SpeedChangeFlags:
         tol = self.speed_step_rpm
         with np.errstate(invalid="ignore"):
             changed = ~((np.abs(nv - prev) <= tol) & (np.abs(nxt - nv) <= tol))
-        idx = np.arange(nv.size)
-        last = np.maximum.accumulate(np.where(changed, idx, -1))
-        since = np.where(last >= 0, idx - last, self._since + idx + 1)
+        since = samples_since(changed, before=self._since)
         flags[since <= self.settle_samples] = 1
         with np.errstate(invalid="ignore"):
             flags[~(np.abs(nv) >= self.min_speed_rpm)] = 2

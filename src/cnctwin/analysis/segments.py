@@ -28,6 +28,7 @@ __all__ = [
     "hysteresis_mask",
     "lf_on_hf",
     "runs",
+    "samples_since",
     "speed_plateaus",
     "spindle_speed_rpm",
 ]
@@ -89,6 +90,33 @@ def runs(mask: ArrayLike) -> NDArray[np.int64]:
     starts = np.flatnonzero(d == 1)
     ends = np.flatnonzero(d == -1) - 1
     return np.column_stack([starts, ends]).astype(np.int64)
+
+
+def samples_since(mask: ArrayLike, *, before: int) -> NDArray[np.int64]:
+    """Samples since the last True at or before each sample, carried across blocks.
+
+    Parameters
+    ----------
+    mask : array-like of bool
+        Events per sample (a speed change, an axis moving, ...).
+    before : int
+        Samples since the last event at the end of the previous block (a large number if
+        there was none); the block's first sample counts ``before + 1`` without an event.
+
+    Returns
+    -------
+    numpy.ndarray of int64
+        0 at an event, then 1, 2, ...; pass the last value as ``before`` of the next block.
+
+    Examples
+    --------
+    >>> samples_since([False, True, False, False], before=5).tolist()
+    [6, 0, 1, 2]
+    """
+    m = np.asarray(mask, dtype=bool)
+    idx = np.arange(m.size, dtype=np.int64)
+    last = np.maximum.accumulate(np.where(m, idx, -1))
+    return np.where(last >= 0, idx - last, before + idx + 1)
 
 
 def lf_on_hf(rec: Recording, code: str, axis: str | None) -> pd.Series | None:

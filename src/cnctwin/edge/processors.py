@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from cnctwin.analysis.segments import samples_since
 from cnctwin.edge.cut import CutTracker
 from cnctwin.edge.pipeline import Chunk, Result
 from cnctwin.exceptions import ConfigError
@@ -94,7 +95,6 @@ class TorqueProcessor:
         self.n_col = f"CMD_SPEED|{spindle}"
         self.column = f"CUT_TORQUE|{spindle}"
         self._fs: float | None = None
-        self._ct = 0.0
         self.accel_term = accel_term
         self._est: StreamingTorqueEstimator | None = None
         self._pending: deque[tuple[int, float, float]] = deque()  # (cycle, i, n) held back
@@ -107,26 +107,26 @@ class TorqueProcessor:
                                                  accel_term=self.accel_term)
         return self._est
 
-    def _flags(self, n: list[float]) -> NDArray[np.int8]:
-        """Flag codes of consecutive output cycles (the next cycle's command is known: the
-        estimate of a cycle waits for it, central difference)."""
+    def _flagged(self, tau: NDArray[np.float64], n: list[float]
+                 ) -> tuple[NDArray[np.float64], NDArray[np.int8]]:
+        """The estimates of consecutive output cycles with their flag codes, NaN where
+        flagged (the next cycle's command is known: a cycle's estimate waits for it)."""
         if self._flagger is None:
             self._flagger = SpeedChangeFlags(
-                fs_hz=1.0 / (self._ct or 0.002), speed_step_rpm=self.speed_step_rpm,
+                fs_hz=self._fs or 500.0, speed_step_rpm=self.speed_step_rpm,
                 settle_s=self.settle_s, min_speed_rpm=self.min_speed_rpm)
-        return self._flagger.update(n, self._pending[0][2] if self._pending else None)
+        flags = self._flagger.update(n, self._pending[0][2] if self._pending else None)
+        if flags.any():
+            tau = np.where(flags == 0, tau, np.nan)
+        return tau, flags
 
-    def _result(self, cycles: list[int], tau: NDArray[np.float64], i: list[float],
-                n: list[float]) -> Result:
-        flags = self._flags(n)
+    def _result(self, cycles: list[int], tau: NDArray[np.float64], flags: NDArray[np.int8],
+                i: list[float], n: list[float]) -> Result:
         payload: dict[str, Any] = {
             "spindle": self.spindle, "first_cycle": cycles[0], "n": len(cycles),
             "torque_nm": tau.tolist(), "speed_rpm": n, "current_a": i,
             "units": {"torque_nm": "Nm", "speed_rpm": "rpm", "current_a": "A"}}
         if flags.any():
-            tau = tau.copy()
-            tau[flags != 0] = np.nan
-            payload["torque_nm"] = tau.tolist()
             payload["flags"] = flags.tolist()
         return Result("torque", cycles[0], payload)
 
@@ -145,10 +145,10 @@ class TorqueProcessor:
         nn = [b for _, _, b in held] + n.tolist()
         k = tau.size
         self._pending = deque(zip(cyc[k:], ii[k:], nn[k:], strict=True))
-        self._ct = chunk.cycle_time_s
-        res = self._result(cyc[:k], tau, ii[:k], nn[:k]) if k else None
-        if res is not None and "flags" in res.payload:
-            tau = np.asarray(res.payload["torque_nm"], dtype=np.float64)
+        res = None
+        if k:
+            tau, flags = self._flagged(tau, nn[:k])
+            res = self._result(cyc[:k], tau, flags, ii[:k], nn[:k])
         derived = np.full(len(chunk), np.nan)
         # estimates for this chunk's own cycles (the held-back one of the last chunk came out)
         off = len(held)
@@ -168,8 +168,9 @@ class TorqueProcessor:
         self.samples += tau.size
         if not tau.size or not held:
             return []
-        return [self._result([c for c, _, _ in held], tau, [a for _, a, _ in held],
-                             [b for _, _, b in held])]
+        n = [b for _, _, b in held]
+        tau, flags = self._flagged(tau, n)
+        return [self._result([c for c, _, _ in held], tau, flags, [a for _, a, _ in held], n)]
 
     def gap(self, gap: CounterGap) -> list[Result]:
         out = self._flush()
@@ -689,26 +690,19 @@ class AnomalyProcessor:
         if n_rows == 0 or any(v is None for v in axes):
             return np.zeros(n_rows)
         step = 0.05 * chunk.cycle_time_s  # 0.05 mm/s, the hole record's standstill
-        moving = np.zeros(n_rows, dtype=bool)
-        zdown = np.zeros(n_rows, dtype=bool)
-        last = self._air_last
-        for j, v in enumerate(axes):
-            assert v is not None
-            prev = np.concatenate([[v[0] if last is None else last[j]], v[:-1]])
-            with np.errstate(invalid="ignore"):
-                d = v - prev
-                moving |= ~(np.abs(d) <= step)
-                if j == len(axes) - 1:
-                    zdown = d < -step
-        self._air_last = tuple(float(v[-1]) for v in axes if v is not None)
-        idx = np.arange(n_rows)
-        out = np.ones(n_rows, dtype=bool)
-        for mask, attr, hold_s in ((moving, "_air_since_move", self.air_still_s),
-                                   (zdown, "_air_since_down", self.air_after_plunge_s)):
-            lastk = np.maximum.accumulate(np.where(mask, idx, -1))
-            since = np.where(lastk >= 0, idx - lastk, getattr(self, attr) + idx + 1)
-            setattr(self, attr, int(since[-1]))
-            out &= since >= round(hold_s / chunk.cycle_time_s)
+        pos = np.vstack([v for v in axes if v is not None])  # X, Y, Z setpoints, a row each
+        first = pos[:, :1] if self._air_last is None else np.array(self._air_last)[:, None]
+        d = np.diff(np.hstack([first, pos]), axis=1)
+        self._air_last = tuple(pos[:, -1].tolist())
+        with np.errstate(invalid="ignore"):
+            moving = ~(np.abs(d) <= step).all(axis=0)
+            zdown = d[-1] < -step
+        ct = chunk.cycle_time_s
+        since_move = samples_since(moving, before=self._air_since_move)
+        since_down = samples_since(zdown, before=self._air_since_down)
+        self._air_since_move, self._air_since_down = int(since_move[-1]), int(since_down[-1])
+        out = ((since_move >= round(self.air_still_s / ct))
+               & (since_down >= round(self.air_after_plunge_s / ct)))
         return out.astype(np.float64)
 
     def _alarms(self, cycles: NDArray[np.int64], sc: NDArray[np.float64],
