@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
-import json
 import sys
 import tempfile
 import time
@@ -29,7 +28,7 @@ from cnctwin.cli import main
 from cnctwin.iotools import read_recording
 from cnctwin.sim.programs import production_program
 from cnctwin.sim.scenarios import random_spindle_overrides
-from cnctwin.validation.soak import SoakTally, tally_run
+from cnctwin.validation.soak import SoakTally, current_noise_a, tally_run
 
 REFERENCE = "drill_1_aisi1045_2400rpm_0p16"
 SPEEDS = list(range(200, 5001, 400)) + list(range(4600, 199, -400))
@@ -68,11 +67,9 @@ def draw(d: Path, machine: Path, sets: list[str], seed: int, operations: int) ->
     st = d / f"edge{seed}"
     cli("edge", "run", "--source", sim / f"part{seed}.json", "--machine", machine,
         "--out", st, "--no-twin")
-    truth = json.loads((sim / "truth.json").read_text())
-    spindle = truth["machine"]["spindle"]
-    noise = (spindle["current_noise_a"] ** 2 + spindle["ripple_amplitude_a"] ** 2 / 2) ** 0.5
     return tally_run(st / "results.jsonl", read_recording(sim / f"part{seed}.json"),
-                     holes_expected=prog.holes, machine_file=machine, noise_a=noise)
+                     holes_expected=prog.holes, machine_file=machine,
+                     noise_a=current_noise_a(sim / "truth.json"))
 
 
 def run(draws: int, operations: int, machine_seed: int, first_seed: int) -> list[SoakTally]:

@@ -20,7 +20,7 @@ import pytest
 from cnctwin.iotools import read_recording
 from cnctwin.sim.programs import production_program
 from cnctwin.sim.scenarios import random_spindle_overrides
-from cnctwin.validation.soak import tally_run
+from cnctwin.validation.soak import current_noise_a, tally_run
 from tests.calibration._campaign import REFERENCE, cli, sets
 
 pytestmark = pytest.mark.slow
@@ -73,9 +73,8 @@ def _run(machine: dict[str, Any], name: str, text: str, seed: int) -> tuple[Path
     rec = d / f"sim_{name}" / f"{name}.json"
     assert cli("edge", "run", "--source", rec, "--machine", machine["machine"],
                "--out", d / f"edge_{name}", "--no-twin") == 0
-    sp = json.loads((d / f"sim_{name}" / "truth.json").read_text())["machine"]["spindle"]
-    noise = (sp["current_noise_a"] ** 2 + sp["ripple_amplitude_a"] ** 2 / 2) ** 0.5
-    return rec, d / f"edge_{name}" / "results.jsonl", noise
+    return (rec, d / f"edge_{name}" / "results.jsonl",
+            current_noise_a(d / f"sim_{name}" / "truth.json"))
 
 
 def test_milling_plunge_is_no_hole_and_braking_no_torque(machine: dict[str, Any]) -> None:

@@ -23,7 +23,7 @@ import numpy as np
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import Recording
 
-__all__ = ["SoakTally", "air_torque_bound_nm", "tally_run"]
+__all__ = ["SoakTally", "air_torque_bound_nm", "current_noise_a", "tally_run"]
 
 
 @dataclass(frozen=True)
@@ -110,6 +110,25 @@ def air_torque_bound_nm(machine_file: str | PathLike[str], *, current_a: float,
     u = math.sqrt(u_tf**2 + (speed_rpm * u_b) ** 2 + (current_a * u_kt) ** 2
                   + (kt * noise_a) ** 2)
     return k * u
+
+
+def current_noise_a(truth: str | PathLike[str]) -> float:
+    """Standard deviation of one spindle current sample of a simulated run [A].
+
+    White noise and the stator-frequency ripple (a sine of amplitude ``a`` has the standard
+    deviation ``a / sqrt(2)``), from the run's ``truth.json``.
+
+    Parameters
+    ----------
+    truth : path
+        The simulator's ``truth.json``.
+
+    Returns
+    -------
+    float
+    """
+    sp = json.loads(Path(truth).read_text(encoding="utf-8"))["machine"]["spindle"]
+    return math.sqrt(sp["current_noise_a"] ** 2 + sp["ripple_amplitude_a"] ** 2 / 2.0)
 
 
 def tally_run(results: str | PathLike[str], rec: Recording, *, holes_expected: int,
