@@ -654,7 +654,6 @@ def production_program(seed: int, *, operations: int = 8, tapping: bool = True
             size = int(rng.choice([6, 8, 10]))
             sst = float(rng.choice([300.0, 400.0, 500.0]))
             pos = [free.pop() for _ in range(n)]
-            tool = 2
             lines += ["T2 M6", f"S{_fmt(sst)} M3",
                       f"G0 X{_fmt(pos[0][0])} Y{_fmt(pos[0][1])} Z10",
                       f"MCALL CYCLE84(10, 0, 2, -12, , 0, 3, , "
