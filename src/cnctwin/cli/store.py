@@ -45,6 +45,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--machine", metavar="NAME", help="override the machine name of every file")
     p.add_argument("--salvage", action="store_true",
                    help="keep what can be read from damaged files (stored as partial)")
+    p.add_argument("--wait", metavar="S", type=float, default=60.0,
+                   help="wait up to S seconds for an embedded store that another process is "
+                   "writing (another ingest, edge run --store; default 60)")
     p.set_defaults(func=_ingest)
 
     q = sub.add_parser(
@@ -75,7 +78,9 @@ def _ingest(args: argparse.Namespace) -> int:
     from cnctwin.store import open as open_store
 
     err = Console(stderr=True)
-    with open_store(args.store) as st, Progress(
+    with open_store(args.store, lock_timeout_s=args.wait):  # made (or found) before reading
+        pass
+    with Progress(
         TextColumn("[progress.description]{task.description}"), BarColumn(),
         MofNCompleteColumn(), console=err, transient=True,
     ) as progress:
@@ -85,7 +90,10 @@ def _ingest(args: argparse.Namespace) -> int:
             rec = read_recording(f, salvage=args.salvage)
             if args.machine:
                 rec.meta.machine = args.machine
-            rid = st.ingest(rec)
+            # an embedded store is held only while this file goes in: a dashboard or an
+            # edge run beside it gets its turn between files
+            with open_store(args.store, lock_timeout_s=args.wait) as st:
+                rid = st.ingest(rec)
             print(f"{rid}\t{f}\t{rec.n_cycles} cycles{' PARTIAL' if rec.meta.partial else ''}")
             progress.advance(task)
     return 0
@@ -96,7 +104,7 @@ def _query(args: argparse.Namespace) -> int:
 
     if args.sql and args.signals:
         raise ConfigError("give either --sql or --signals, not both")
-    with open_store(args.store, create=False) as st:
+    with open_store(args.store, create=False, read_only=True, lock_timeout_s=30.0) as st:
         if args.sql:
             result = st.sql(args.sql)
         elif args.signals:

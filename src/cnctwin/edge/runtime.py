@@ -127,15 +127,8 @@ class EdgeRuntime:
             results = self._not_yet_emitted(results)
         self._reserve(len(results))
         out = []
-        for r in results:
-            msg: dict[str, Any] = {"seq": self._seq, "kind": r.kind, "machine": self.machine,
-                                   "cycle": r.cycle}
-            if chunk is not None and len(chunk):
-                t_ns = int(chunk.time_ns[0]) + round(
-                    (r.cycle - chunk.first_cycle) * chunk.cycle_time_s * 1e9)
-                msg["time"] = _iso(t_ns)
-            msg.update(r.payload)
-            out.append(msg)
+        for r, plain in zip(results, self._plain_messages(results, chunk), strict=True):
+            out.append({"seq": self._seq, **plain})
             self._seq += 1
             if r.kind == "hole":
                 self.c.holes += 1
@@ -145,9 +138,27 @@ class EdgeRuntime:
         return out
 
     def _emit(self, results: list[Result], chunk: Chunk | None) -> None:
+        repeats: MessageBatch | None = None
+        if self._suppress and any(getattr(s, "replays", False) for s in self.sinks):
+            # a resumed run repeats cycles: sinks that write by id (the store) get the
+            # repeated results too (no seq: nothing is published twice)
+            repeats = MessageBatch(self._plain_messages(results, chunk))
         msgs = MessageBatch(self._messages(results, chunk))  # JSON encoded once for all sinks
         for s in self.sinks:
-            s.write(msgs, chunk)
+            s.write(repeats if repeats is not None and getattr(s, "replays", False) else msgs,
+                    chunk)
+
+    def _plain_messages(self, results: list[Result], chunk: Chunk | None
+                        ) -> list[dict[str, Any]]:
+        out = []
+        for r in results:
+            msg: dict[str, Any] = {"kind": r.kind, "machine": self.machine, "cycle": r.cycle}
+            if chunk is not None and len(chunk):
+                msg["time"] = _iso(int(chunk.time_ns[0]) + round(
+                    (r.cycle - chunk.first_cycle) * chunk.cycle_time_s * 1e9))
+            msg.update(r.payload)
+            out.append(msg)
+        return out
 
     # ------------------------------------------------------------------ one chunk
     def process(self, chunk: Chunk) -> None:
@@ -222,6 +233,10 @@ class EdgeRuntime:
                 (last - self._ckpt_cycle) * cycle_time_s < self.checkpoint_every_s:
             return  # (the first chunk is checkpointed at once: a crash after it resumes)
         self._ckpt_cycle = last
+        for s in self.sinks:  # what the checkpoint covers is written before it
+            flush = getattr(s, "checkpoint", None)
+            if flush is not None:
+                flush()
         write_checkpoint(self.state_dir, {
             "version": CHECKPOINT_VERSION, "source": source_identity(self.source),
             "cycle": last, "tracker": self.tracker, "processors": self.processors,
@@ -299,6 +314,10 @@ class EdgeRuntime:
                     hook(last["torque"])
         if seek is not None:
             seek(info["after_cycle"])
+        for s in self.sinks:  # a sink that writes blocks continues the one left open
+            cont = getattr(s, "resume", None)
+            if cont is not None:
+                cont(int(info["after_cycle"]), results=self.state_dir / "results.jsonl")
         return info
 
     def _not_yet_emitted(self, results: list[Result]) -> list[Result]:

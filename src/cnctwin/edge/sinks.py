@@ -489,6 +489,15 @@ class StoreSink:
     block's recording id), where ``store.holes(machine=...)`` finds them; a replay of the same
     stream writes the same ids, so each hole is stored once.
 
+    Nothing is lost across a crash (``kill -9``): at every runtime checkpoint the open block
+    is written as it stands (the same id, replaced when it grows), and a resumed runtime
+    (:meth:`resume`) reloads it, fills what the crash cut off from the runtime's
+    ``results.jsonl`` and continues it under the same id; the cycles the resumed runtime
+    repeats reach this sink again (:attr:`replays`), so every cycle and hole is stored once.
+    An embedded store is opened only while a block is written (``lock_timeout_s`` wait), so
+    a dashboard, ``cnctwin ingest`` or a query can use it beside the runtime; a block that
+    could not be written stays in memory and is written with the next one.
+
     Parameters
     ----------
     url : str or path-like
@@ -497,17 +506,24 @@ class StoreSink:
         Machine name of the recordings.
     block_cycles : int, default 30000
         Cycles per stored block (60 s at 2 ms).
+    lock_timeout_s : float, default 30
+        How long a write waits for an embedded store another process holds [s].
     """
 
     name = "store"
+    replays = True
+    """The runtime hands this sink the results a resumed run repeats (writes are by id)."""
 
     def __init__(self, url: str | PathLike[str], *, machine: str,
-                 block_cycles: int = 30_000) -> None:
+                 block_cycles: int = 30_000, lock_timeout_s: float = 30.0) -> None:
         import cnctwin.store
 
         if block_cycles < 1:
             raise ConfigError(f"block_cycles must be >= 1, not {block_cycles}")
-        self.store = cnctwin.store.open(url)
+        self.url = url
+        self.lock_timeout_s = float(lock_timeout_s)
+        with cnctwin.store.open(url, lock_timeout_s=self.lock_timeout_s) as st:
+            self.store_url = str(st.url)  # made (or found) now: a wrong URL fails at start
         self.machine = machine or "machine"
         self.block_cycles = block_cycles
         self._cyc: list[np.ndarray] = []
@@ -519,84 +535,251 @@ class StoreSink:
         self._n = 0
         self._holes: list[dict[str, Any]] = []
         self._alarms: list[dict[str, Any]] = []
+        self._issues: list[str] = []
+        self._first: int | None = None  # first cycle of the open block (its id)
+        self._dirty = False
         self.blocks: list[str] = []
+        self._hole_keys: set[tuple[str, int]] = set()
         self.holes_written = 0
+        self.write_errors = 0
+        self.last_error: str | None = None
         self._cycle_time_s = 0.002
+
+    @property
+    def _prefix(self) -> str:
+        safe = "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in self.machine)
+        return f"edge-{safe}-"
 
     def write(self, messages: list[dict[str, Any]], chunk: Chunk | None) -> None:
         for m in messages:
             if m["kind"] == "hole":
-                self._holes.append(m)
+                self._holes = [h for h in self._holes if h["cycle"] != m["cycle"]] + [m]
+                self._dirty = True
             elif m["kind"] == "alarm":
                 self._alarms.append(m)
+                self._dirty = True
             elif m["kind"] == "torque":
                 c0 = int(m["first_cycle"])
                 self._tq_cyc.append(np.arange(c0, c0 + int(m["n"]), dtype=np.int64))
                 self._tq_val.append(np.asarray(m["torque_nm"], dtype=np.float64))
         if chunk is not None and len(chunk):
             self._cycle_time_s = chunk.cycle_time_s
+            if self._first is None:
+                self._first = int(chunk.cycles[0])
             self._cyc.append(chunk.cycles)
             self._t.append(chunk.time_ns)
             self._der.append({c: v for c, v in chunk.derived.items()
                               if not c.startswith("CUT_TORQUE")})
             self._n += len(chunk)
+            self._dirty = True
             if self._n >= self.block_cycles:
                 self._ingest(final=False)
 
-    def _ingest(self, *, final: bool) -> None:
-        if not self._n and not self._holes:
+    def checkpoint(self) -> None:
+        """Write the open block as it stands (called before the runtime's checkpoint)."""
+        if self._dirty:
+            self._ingest(final=False, whole=True)
+
+    def _torque(self) -> tuple[np.ndarray, np.ndarray]:
+        """Torque cycles (sorted, unique) and values received so far."""
+        if not self._tq_cyc:
+            return np.empty(0, dtype=np.int64), np.empty(0)
+        c = np.concatenate(self._tq_cyc)
+        v = np.concatenate(self._tq_val)
+        c, first = np.unique(c, return_index=True)  # a resumed run repeats a few cycles
+        return c, v[first]
+
+    def _ingest(self, *, final: bool, whole: bool = False) -> None:
+        """Write the open block; with ``final`` or ``whole`` all of it, else (a full block)
+        up to the newest torque value, the rest starting the next block."""
+        if not self._n and not self._holes and not self._alarms:
             return
         cyc = np.concatenate(self._cyc) if self._cyc else np.empty(0, dtype=np.int64)
         t = np.concatenate(self._t) if self._t else np.empty(0, dtype=np.int64)
+        order = np.argsort(cyc, kind="stable")
+        if cyc.size > 1 and np.any(np.diff(cyc) <= 0):  # rows restored after a restart
+            cyc, t = cyc[order], t[order]
         cols = sorted({c for d in self._der for c in d})
         data = {c: np.concatenate([d.get(c, np.full(len(k), np.nan))
                                    for d, k in zip(self._der, self._cyc, strict=True)])
                 for c in cols}
-        tq_c = np.concatenate(self._tq_cyc) if self._tq_cyc else np.empty(0, dtype=np.int64)
-        tq_v = np.concatenate(self._tq_val) if self._tq_val else np.empty(0)
-        # the torque of the newest cycle comes with the next chunk: store a block only up to
-        # the newest torque value and carry the rest (no NaN at block ends)
+        if cyc.size > 1 and not np.array_equal(order, np.arange(cyc.size)):
+            data = {c: v[order] for c, v in data.items()}
+        tq_c, tq_v = self._torque()
+        # the torque of the newest cycle comes with the next chunk: a full block ends at the
+        # newest torque value and the rest starts the next one (no NaN at block ends)
         n_block = cyc.size
-        if tq_c.size and not final:
+        if tq_c.size and not (final or whole):
             n_block = int(np.searchsorted(cyc, tq_c[-1], side="right"))
-        rest = slice(n_block, None)
         blk = slice(0, n_block)
-        if tq_c.size:
-            pos = np.searchsorted(tq_c, cyc[blk])
-            pos_ok = pos < tq_c.size
-            tq = np.full(n_block, np.nan)
-            hit = pos_ok.copy()
-            hit[pos_ok] = tq_c[pos[pos_ok]] == cyc[blk][pos_ok]
-            tq[hit] = tq_v[pos[hit]]
-            data[self._tq_column] = np.concatenate([tq, np.empty(0)])
+        pos = np.searchsorted(tq_c, cyc[blk])
+        ok = pos < tq_c.size
+        tq = np.full(n_block, np.nan)
+        hit = ok.copy()
+        hit[ok] = tq_c[pos[ok]] == cyc[blk][ok]
+        tq[hit] = tq_v[pos[hit]]
         block = {c: v[blk] for c, v in data.items()}
+        if tq_c.size or self._tq_column in cols:
+            block[self._tq_column] = tq
         hf = pd.DataFrame(block, index=pd.Index(cyc[blk], name="cycle"))
         hf.insert(0, "time", pd.to_datetime(t[blk], unit="ns", utc=True))
         meta = RecordingMeta(machine=self.machine, cycle_time_s=self._cycle_time_s,
                              source_format="edge", gaps=find_gaps(cyc[blk]),
                              units={c: ("Nm" if c.startswith("CUT_TORQUE") else "-")
                                     for c in block},
+                             issues=list(self._issues),
                              attrs={"holes": self._holes, "alarms": self._alarms})
-        first = int(cyc[0]) if cyc.size else int(self._holes[0]["cycle"])
-        safe = "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in self.machine)
-        rid = self.store.ingest(Recording(hf, meta=meta), recording_id=f"edge-{safe}-{first}")
-        self.blocks.append(rid)
-        if self._holes:
-            self.holes_written += self.store.append_holes(rid, [m["row"] for m in self._holes])
+        first = self._first if self._first is not None else (
+            int(cyc[0]) if cyc.size else int(self._holes[0]["cycle"]))
+        rid = f"{self._prefix}{first}"
+        if not self._write(rid, Recording(hf, meta=meta), final=final):
+            return
+        if whole and not final:
+            self._dirty = False
+            return
+        # the block is complete: the rest (cycles after the newest torque) starts the next
+        rest = slice(n_block, None)
         keep_tq = tq_c > (cyc[n_block - 1] if n_block else -1)
         self._cyc = [cyc[rest]] if cyc[rest].size else []
         self._t = [t[rest]] if cyc[rest].size else []
-        self._der = [{c: v[rest] for c, v in data.items() if c != self._tq_column}] \
-            if cyc[rest].size else []
+        self._der = [{c: v[rest] for c, v in data.items()}] if cyc[rest].size else []
         self._tq_cyc = [tq_c[keep_tq]] if keep_tq.any() else []
         self._tq_val = [tq_v[keep_tq]] if keep_tq.any() else []
         self._n = int(cyc[rest].size)
-        self._holes, self._alarms = [], []
+        self._first = int(cyc[rest][0]) if cyc[rest].size else None
+        self._holes, self._alarms, self._issues = [], [], []
+        self._dirty = bool(self._n)
+
+    def _write(self, rid: str, rec: Recording, *, final: bool) -> bool:
+        """Ingest one block (and its holes); False (kept for the next try) when the store
+        is held by another process beyond the wait and this is not the last write."""
+        import cnctwin.store
+        from cnctwin.exceptions import StoreError
+
+        try:
+            with cnctwin.store.open(self.url, lock_timeout_s=self.lock_timeout_s) as st:
+                st.ingest(rec, recording_id=rid)
+                if self._holes:
+                    st.append_holes(rid, [m["row"] for m in self._holes])
+        except StoreError as exc:
+            self.write_errors += 1
+            self.last_error = str(exc)
+            if final:
+                raise
+            return False
+        if rid not in self.blocks:
+            self.blocks.append(rid)
+        self._hole_keys |= {(rid, int(m["row"]["hole"])) for m in self._holes}
+        self.holes_written = len(self._hole_keys)
+        return True
+
+    def resume(self, after_cycle: int, *, results: str | PathLike[str] | None = None) -> None:
+        """Continue the block a crashed run left open, up to ``after_cycle``.
+
+        The newest stored block of this machine that starts at or before ``after_cycle`` is
+        reloaded (cycles, derived values, holes, alarms up to ``after_cycle``) and continued
+        under its id; what the crash kept from the store but ``results`` (the runtime's JSON
+        lines file) holds (torque, holes, alarms up to ``after_cycle``) is added from there,
+        flagged in the block's issues (derived values other than the torque are not in that
+        file and stay NaN on those cycles).
+        """
+        import cnctwin.store
+
+        with cnctwin.store.open(self.url, lock_timeout_s=self.lock_timeout_s) as st:
+            cat = st.recordings(machine=self.machine)
+            ids = [str(r) for r in cat["recording_id"]] if len(cat) else []
+            firsts = sorted(int(r[len(self._prefix):]) for r in ids
+                            if r.startswith(self._prefix)
+                            and r[len(self._prefix):].lstrip("-").isdigit())
+            firsts = [f for f in firsts if f <= after_cycle]
+            rec = st.load(f"{self._prefix}{firsts[-1]}") if firsts else None
+        stored_last = torque_last = -1
+        if rec is not None:
+            keep = rec.cycles <= after_cycle
+            cyc = rec.cycles[keep]
+            self._first = firsts[-1]
+            self._cycle_time_s = rec.meta.cycle_time_s
+            if cyc.size:
+                hf = rec.hf[keep]
+                self._cyc = [cyc]
+                self._t = [hf["time"].to_numpy(dtype="datetime64[ns]").view(np.int64)]
+                self._der = [{c: hf[c].to_numpy(dtype=np.float64) for c in rec.columns
+                              if c != self._tq_column}]
+                self._n = int(cyc.size)
+                if self._tq_column in rec.columns:
+                    tq = hf[self._tq_column].to_numpy(dtype=np.float64)
+                    known = ~np.isnan(tq)
+                    self._tq_cyc, self._tq_val = [cyc[known]], [tq[known]]
+                    torque_last = int(cyc[known][-1]) if known.any() else -1
+                stored_last = int(cyc[-1])
+            self._holes = [m for m in rec.meta.attrs.get("holes", [])
+                           if int(m["cycle"]) <= after_cycle]
+            self._alarms = [m for m in rec.meta.attrs.get("alarms", [])
+                            if int(m["cycle"]) <= after_cycle]
+            self._issues = list(rec.meta.issues)
+        if results is not None:
+            self._fill_from_results(Path(results), stored_last, torque_last, after_cycle)
+        self._dirty = True
+
+    def _fill_from_results(self, path: Path, stored_last: int, torque_last: int,
+                           after_cycle: int) -> None:
+        """Torque after ``torque_last``, holes and alarms after ``stored_last``, up to
+        ``after_cycle``, from the runtime's results file (what the crash kept from the
+        store)."""
+        import json
+
+        cyc_l: list[np.ndarray] = []
+        t_l: list[np.ndarray] = []
+        held = {int(m["cycle"]) for m in self._holes}
+        alarms = {(int(m["cycle"]), m.get("detector")) for m in self._alarms}
+        for f in [*rotated_files(path)[-1:], path]:
+            for line in tail_lines(f, tail_bytes=64 << 20):
+                try:
+                    m = json.loads(line)
+                    kind = m["kind"]
+                except (json.JSONDecodeError, KeyError, TypeError):
+                    continue  # the line a crash cut short
+                if kind == "torque":
+                    c0, n = int(m["first_cycle"]), int(m["n"])
+                    c = np.arange(c0, c0 + n, dtype=np.int64)
+                    sel = (c > torque_last) & (c <= after_cycle)
+                    if not sel.any():
+                        continue
+                    self._tq_cyc.append(c[sel])
+                    self._tq_val.append(np.asarray(m["torque_nm"], dtype=np.float64)[sel])
+                    t0 = pd.Timestamp(m["time"]).value if m.get("time") else 0
+                    cyc_l.append(c[sel])
+                    t_l.append(t0 + np.round((c[sel] - c0) * self._cycle_time_s * 1e9)
+                               .astype(np.int64))
+                elif kind == "hole" and stored_last < int(m["cycle"]) <= after_cycle \
+                        and int(m["cycle"]) not in held:
+                    self._holes.append(m)
+                    held.add(int(m["cycle"]))
+                elif kind == "alarm" and stored_last < int(m["cycle"]) <= after_cycle \
+                        and (int(m["cycle"]), m.get("detector")) not in alarms:
+                    self._alarms.append(m)
+        if cyc_l:
+            cyc = np.concatenate(cyc_l)
+            cyc, first = np.unique(cyc, return_index=True)
+            t = np.concatenate(t_l)[first]
+            have = np.concatenate(self._cyc) if self._cyc else np.empty(0, dtype=np.int64)
+            new = ~np.isin(cyc, have)
+            if new.any():
+                self._cyc.append(cyc[new])
+                self._t.append(t[new])
+                self._der.append({})
+                self._n += int(new.sum())
+                if self._first is None:
+                    self._first = int(cyc[new][0])
+                self._issues.append(
+                    f"cycles {int(cyc[new][0])}-{int(cyc[new][-1])}: restored from "
+                    f"{path.name} after a restart (the store missed them); only "
+                    f"{self._tq_column} is known there")
 
     def status(self) -> dict[str, Any]:
-        return {"store": str(self.store.url), "blocks": len(self.blocks),
-                "pending_cycles": self._n, "holes": self.holes_written}
+        return {"store": self.store_url, "blocks": len(self.blocks),
+                "pending_cycles": self._n, "holes": self.holes_written,
+                "write_errors": self.write_errors}
 
     def close(self) -> None:
         self._ingest(final=True)
-        self.store.close()

@@ -37,7 +37,8 @@ __all__ = [
 
 
 def open(
-    url_or_path: str | os.PathLike[str], *, create: bool = True, read_only: bool = False
+    url_or_path: str | os.PathLike[str], *, create: bool = True, read_only: bool = False,
+    lock_timeout_s: float = 0.0,
 ) -> Store:
     """Open (and by default create) a store.
 
@@ -52,6 +53,9 @@ def open(
     read_only : bool, default False
         Open an embedded store's catalog read-only, so that several processes (the fleet's
         workers) can read it at once; PostgreSQL serves concurrent readers anyway.
+    lock_timeout_s : float, default 0
+        How long to wait [s] for an embedded store that another process holds (DuckDB allows
+        one writer or several readers per catalog, never both); PostgreSQL does not need it.
 
     Returns
     -------
@@ -65,27 +69,23 @@ def open(
     StoreError
         If the store is missing (``create=False``) or the server cannot be reached.
     """
-    if isinstance(url_or_path, os.PathLike):
-        return DuckDBStore(url_or_path, create=create and not read_only, read_only=read_only)
-    text = str(url_or_path)
+    text = os.fspath(url_or_path)
     scheme = text.split("://", 1)[0].lower() if "://" in text else ""
     if scheme in ("postgresql", "postgres"):
         from cnctwin.store.postgres_store import PostgresStore
 
         return PostgresStore(text, create=create)
     if scheme == "duckdb":
-        return DuckDBStore(text[len("duckdb://"):], create=create and not read_only,
-                           read_only=read_only)
-    if scheme == "file":
-        parsed = urllib.parse.urlparse(text)
-        return DuckDBStore(urllib.request.url2pathname(parsed.path),
-                           create=create and not read_only, read_only=read_only)
-    if scheme:
+        text = text[len("duckdb://"):]
+    elif scheme == "file":
+        text = urllib.request.url2pathname(urllib.parse.urlparse(text).path)
+    elif scheme:
         raise ConfigError(
             f"store URL scheme {scheme!r} is not supported; use a directory path, "
             "file:///path, duckdb:///path or postgresql://user@host:port/db"
         )
-    return DuckDBStore(text, create=create and not read_only, read_only=read_only)
+    return DuckDBStore(text, create=create and not read_only, read_only=read_only,
+                       lock_timeout_s=lock_timeout_s)
 
 
 def __getattr__(name: str) -> object:

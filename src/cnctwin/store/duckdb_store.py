@@ -24,14 +24,18 @@ Reads of HF values go through pyarrow (exact ns times, column pruning, row-group
 characters other than letters, digits and ``._-`` percent-encoded (the ``hf``, ``lf`` and
 ``events`` views decode it back to the machine name).
 
-DuckDB allows one writing process per catalog file: open a store for writing from one process
-at a time (readers of the Parquet files themselves are not restricted).
+DuckDB lets one process at a time hold a catalog file: one writer, or any number of read-only
+openers, never both. Processes that share a store therefore hold it briefly (the dashboard per
+request, the edge's store sink per block, ``cnctwin ingest`` per file) and wait a bounded time
+for it (``lock_timeout_s``) instead of failing at once.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
+import time
 import urllib.parse
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -306,6 +310,9 @@ class DuckDBStore(Store):
         Parquet compression codec.
     read_only : bool, default False
         Open the catalog read-only (several processes may then read at once).
+    lock_timeout_s : float, default 0
+        While another process holds the catalog, retry the open for up to this long [s]
+        (backing off from 20 ms to 0.5 s) before raising.
     """
 
     def __init__(
@@ -316,6 +323,7 @@ class DuckDBStore(Store):
         row_group_cycles: int = 65_536,
         compression: str = "zstd",
         read_only: bool = False,
+        lock_timeout_s: float = 0.0,
     ) -> None:
         self.root = Path(root).expanduser().resolve()
         self.url = f"duckdb://{self.root}"
@@ -325,19 +333,13 @@ class DuckDBStore(Store):
         if not catalog.exists():
             if not create or read_only:
                 raise StoreError(
-                    f"no cnctwin store at {self.root} (missing catalog.duckdb); "
-                    "open it with create=True to make one"
+                    f"no cnctwin store at {self.root} (missing catalog.duckdb); make one with "
+                    f"`cnctwin ingest FILE... --store {self.root}` (in Python: "
+                    "cnctwin.store.open(path) creates it)"
                 )
             self.root.mkdir(parents=True, exist_ok=True)
-        try:
-            self._con: duckdb.DuckDBPyConnection | None = duckdb.connect(
-                str(catalog), read_only=read_only
-            )
-        except duckdb.Error as exc:
-            raise StoreError(
-                f"cannot open the catalog {catalog}: {exc}. Another process may hold it open "
-                "for writing; close that store or open this one with read_only=True"
-            ) from exc
+        self._con: duckdb.DuckDBPyConnection | None = _connect(
+            catalog, read_only=read_only, lock_timeout_s=lock_timeout_s)
         _run(self._con, "SET TimeZone = 'UTC'")
         if not read_only:
             _run(self._con, _SCHEMA)
@@ -700,6 +702,33 @@ class DuckDBStore(Store):
         if self._con is not None:
             self._con.close()
             self._con = None
+
+
+def _connect(catalog: Path, *, read_only: bool, lock_timeout_s: float
+             ) -> duckdb.DuckDBPyConnection:
+    """Connect to the catalog, retrying while another process holds its lock."""
+    deadline = time.monotonic() + max(float(lock_timeout_s), 0.0)
+    delay = 0.02
+    while True:
+        try:
+            return duckdb.connect(str(catalog), read_only=read_only)
+        except duckdb.Error as exc:
+            locked = "lock" in str(exc).lower()
+            if locked and time.monotonic() + delay <= deadline:
+                time.sleep(delay)
+                delay = min(delay * 2, 0.5)
+                continue
+            if not locked:
+                raise StoreError(f"cannot open the catalog {catalog}: {exc}") from exc
+            pid = re.search(r"PID (\d+)", str(exc))
+            who = f"process {pid.group(1)}" if pid else "another process"
+            waited = f"; waited {lock_timeout_s:g} s" if lock_timeout_s > 0 else ""
+            raise StoreError(
+                f"the store catalog {catalog} is held by {who}{waited}. cnctwin's own "
+                "commands hold it only while they write, so try again (or wait longer); a "
+                "script that keeps cnctwin.store.open(...) open blocks everyone else until "
+                "it closes the store"
+            ) from exc
 
 
 def _run(con: duckdb.DuckDBPyConnection, query: str, params: Any = None) -> list[Any]:

@@ -9,11 +9,12 @@ keeps the most recently used ones in memory.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import threading
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,6 +28,9 @@ from cnctwin.recording import Recording, RecordingMeta
 from cnctwin.web.quality import SignalQuality, signal_quality, signal_quality_of
 
 __all__ = ["RECORDING_SUFFIXES", "Catalog", "Entry", "SignalData", "expand_recording_paths"]
+
+STORE_WAIT_S = 10.0
+"""How long a dashboard request waits for an embedded store that a writer holds [s]."""
 
 RECORDING_SUFFIXES: tuple[str, ...] = (".json", ".zip", ".xml", ".parquet", ".tdms")
 """File suffixes taken as recordings when a directory is given (CSV is left out: a directory
@@ -192,8 +196,10 @@ class Catalog:
     Parameters
     ----------
     store_url : str, optional
-        A cnctwin store (directory or ``postgresql://`` URL), opened with
-        ``cnctwin.store.open(store_url, create=False)``.
+        A cnctwin store (directory or ``postgresql://`` URL). The dashboard only reads it: an
+        embedded (DuckDB) store is opened read-only for each request and closed after it, so
+        ``cnctwin ingest``, ``edge run --store`` and other dashboards work beside it; a
+        PostgreSQL store keeps one connection.
     recordings : sequence of path-like
         Recording files or directories of them (read with ``cnctwin.read_recording``).
     cache_size : int, default 4
@@ -212,17 +218,10 @@ class Catalog:
                  salvage: bool = False) -> None:
         self._lock = threading.RLock()
         self.store_url = store_url
-        self.store: Any = None
+        self.store: Any = None  # a PostgreSQL store's connection, kept open
         if store_url is not None:
-            import cnctwin.store as store_mod
-
-            try:
-                self.store = store_mod.open(store_url, create=False)
-            except StoreError as exc:
-                raise StoreError(
-                    f"{exc}. Create the store and fill it with `cnctwin ingest FILE... --store "
-                    f"{store_url}`, or start the dashboard on files with --recording PATH"
-                ) from exc
+            with self._stored():  # it must exist (the error says how to make one)
+                pass
         self.paths = expand_recording_paths(recordings)
         self.salvage = salvage
         self.cache_size = max(1, int(cache_size))
@@ -230,13 +229,41 @@ class Catalog:
         self._signals: OrderedDict[tuple[str, str], SignalData] = OrderedDict()
         self._file_entries: dict[str, Entry] = {}
 
+    @contextlib.contextmanager
+    def _stored(self) -> Iterator[Any]:
+        """The store for one request (an embedded one opened read-only, then closed)."""
+        if self.store is not None:
+            yield self.store
+            return
+        import cnctwin.store as store_mod
+        from cnctwin.store.duckdb_store import DuckDBStore
+
+        assert self.store_url is not None
+        try:
+            st = store_mod.open(self.store_url, create=False, read_only=True,
+                                lock_timeout_s=STORE_WAIT_S)
+        except StoreError as exc:
+            raise StoreError(
+                f"{exc}. Create the store and fill it with `cnctwin ingest FILE... --store "
+                f"{self.store_url}`, or start the dashboard on files with --recording PATH"
+            ) from exc
+        if not isinstance(st, DuckDBStore):  # a server serves readers beside writers
+            self.store = st
+            yield st
+            return
+        try:
+            yield st
+        finally:
+            st.close()
+
     # ------------------------------------------------------------------ listing
     def entries(self) -> list[Entry]:
         """Every recording: stored ones by start time, then the files in the order given."""
         out: list[Entry] = []
         with self._lock:
-            if self.store is not None:
-                cat = self.store.recordings()
+            if self.store_url is not None:
+                with self._stored() as st:
+                    cat = st.recordings()
                 out.extend(_entry_from_catalog(row) for _, row in cat.iterrows())
             for k, p in enumerate(self.paths):
                 out.append(self._file_entry(f"file:{k}", p))
@@ -321,8 +348,9 @@ class Catalog:
             if entry_id.startswith("file:"):
                 k = self._file_index(entry_id)
                 return self._load_file(entry_id, self.paths[k])
-            if entry_id.startswith("store:") and self.store is not None:
-                return self._remember(entry_id, self.store.load(entry_id[len("store:"):]))
+            if entry_id.startswith("store:") and self.store_url is not None:
+                with self._stored() as st:
+                    return self._remember(entry_id, st.load(entry_id[len("store:"):]))
         raise self._unknown(entry_id)
 
     def signal(self, entry_id: str, name: str) -> SignalData:
@@ -352,7 +380,8 @@ class Catalog:
                 data = SignalData(name, e.units.get(name, ""), rec.cycles,
                                   s.to_numpy(dtype=np.float64), rec.meta.cycle_time_s)
             else:
-                df = self.store.query_signals([name], recording_id=entry_id[len("store:"):])
+                with self._stored() as st:
+                    df = st.query_signals([name], recording_id=entry_id[len("store:"):])
                 data = SignalData(name, e.units.get(name, ""),
                                   df.index.to_numpy(dtype=np.int64),
                                   df[name].to_numpy(dtype=np.float64), e.cycle_time_s)
