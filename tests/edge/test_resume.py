@@ -131,8 +131,16 @@ def test_resume_without_state_flags_the_open_hole_partial(
     # from a guess; the third hole is whole again
     assert holes[0]["row"] == ref_holes[0]["row"] and "partial" not in holes[0]
     assert holes[1]["partial"] is True and "restarted" in holes[1]["partial_reason"]
-    assert holes[1]["row"]["depth_mm"] < ref_holes[1]["row"]["depth_mm"]
+    # issue 24, pt 6: the numbers go on (0, 1, 2, not 0, 0, 1) and the NC events read again
+    # from the file give the drilling cycle's geometry, so the depths are the program's
+    assert [h["hole"] for h in holes] == [0, 1, 2]
+    assert [h["row"]["depth_mm"] for h in holes] == pytest.approx(
+        [h["row"]["depth_mm"] for h in ref_holes], abs=1e-9)
     assert "partial" not in holes[-1]
+    # the whole third hole as in the uninterrupted run (times relative to the stream's
+    # start, *_s, count from the restart)
+    same = {k: v for k, v in holes[-1]["row"].items() if not k.endswith("_s")}
+    assert same == {k: v for k, v in ref_holes[-1]["row"].items() if not k.endswith("_s")}
 
 
 def test_a_finished_run_is_not_resumed(wear_recording: Any, tmp_path: Path) -> None:
@@ -273,3 +281,33 @@ def test_store_resume_without_checkpoint_keeps_every_cycle(
     with cnctwin.store.open(store, read_only=True) as st:
         issues = [i for rid in st.recordings()["recording_id"] for i in st.load(rid).meta.issues]
     assert any("restored from results.jsonl" in i for i in issues)
+
+
+def test_a_resumed_replay_catches_up_at_full_speed(wear_recording: Any, tmp_path: Path,
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 24, pt 6: a replay at ``--speed`` resumed from a checkpoint repeats the cycles
+    between the checkpoint and the crash without waiting (it was there already); the pace
+    holds after them. The source's waits are recorded instead of slept."""
+    import cnctwin.edge.sources as sources
+
+    waits: list[tuple[int, float]] = []  # (index of the chunk the wait precedes, s)
+    ends: list[int] = []  # last cycle of each chunk
+    monkeypatch.setattr(sources.time, "sleep", lambda s: waits.append((len(ends), s)))
+    out = tmp_path / "state"
+    _crash_at(wear_recording, out, 2000, checkpoint_s=2.0)  # checkpoints every 1000 cycles
+    src = ReplaySource(wear_recording, chunk_cycles=50, speed=1.0)
+    rt = EdgeRuntime(src, [TorqueProcessor(MODEL)], [JsonLinesSink(out / "results.jsonl")],
+                     state_dir=out, checkpoint_every_s=2.0, status_every_s=0.0)
+    info = rt.resume()
+    assert info["from_checkpoint"] and info["after_cycle"] < info["last_emitted"]["torque"]
+    caught = src.catch_up_cycle
+    assert caught == info["last_emitted"]["torque"]
+    for chunk in src.chunks():
+        ends.append(int(chunk.cycles[-1]))
+        rt.process(chunk)
+    assert not [w for k, w in waits if ends[k] <= caught]  # no wait before it caught up
+    # then real time again: with the clock standing still (sleep recorded, not slept) the
+    # wait before the last chunk is the stream time from the catch-up point to the end
+    paced = max(w for k, w in waits if ends[k] > caught)
+    left_s = (int(wear_recording.cycles[-1]) - caught) * wear_recording.meta.cycle_time_s
+    assert paced == pytest.approx(left_s, rel=0.1)

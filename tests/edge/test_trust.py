@@ -109,3 +109,65 @@ def test_varied_production_gives_no_false_result(machine: dict[str, Any], seed: 
     assert t.alarms == 0
     assert t.holes_found == t.holes_expected == 12 and t.plunge_holes == 0
     assert t.air_over_bound == 0, t
+
+
+def test_restart_without_checkpoint_stays_right(machine: dict[str, Any], tmp_path: Path
+                                                ) -> None:
+    """Issue 24, pt 6: ``edge run`` on draw 102, killed twice (SIGKILL) mid-job, its
+    checkpoint deleted after the first kill and corrupted after the second (an upgrade, a full
+    disk): the holes are numbered on (before: 0,1,2,0,1,2,3,4), the holes after a restart have
+    the program's geometry (the NC events are read again from the file), and no alarm.
+    Truth: the uninterrupted run of the same file."""
+    import os
+    import random
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    prog = production_program(102, operations=8)
+    rec, ref_results, _noise = _run(machine, "draw102r", prog.text, 102)
+    ref = [json.loads(x) for x in ref_results.read_text().splitlines()]
+    ref_holes = [m for m in ref if m["kind"] == "hole"]
+    out = tmp_path / "edge"
+    cmd = [sys.executable, "-m", "cnctwin", "edge", "run", "--source", str(rec), "--machine",
+           str(machine["machine"]), "--out", str(out), "--no-twin", "--quiet", "--speed", "8",
+           "--checkpoint-s", "1"]
+    rng = random.Random(24)
+    for kill in range(2):
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        holes_before = _holes_in(out)
+        deadline = time.monotonic() + 120
+        while _holes_in(out) < holes_before + 2:  # well into the job, between holes
+            assert proc.poll() is None, proc.communicate()[1].decode()
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        time.sleep(rng.uniform(0.0, 0.8))
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+        ck = out / "checkpoint.pkl"
+        if kill == 0:
+            ck.unlink(missing_ok=True)
+        else:
+            ck.write_bytes(b"not a pickle")
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    assert res.returncode == 0, res.stderr
+    msgs = [json.loads(x) for x in (out / "results.jsonl").read_text().splitlines()
+            if x.strip().endswith("}")]
+    holes = [m for m in msgs if m["kind"] == "hole"]
+    assert [h["hole"] for h in holes] == list(range(prog.holes))
+    assert not [m for m in msgs if m["kind"] == "alarm"]
+    whole = [(h, r) for h, r in zip(holes, ref_holes, strict=True) if not h.get("partial")]
+    assert len(whole) >= prog.holes - 2  # at most the hole open at each kill is partial
+    for h, r in whole:
+        for key in ("x_mm", "y_mm", "depth_mm", "cycle", "start_cycle"):
+            assert h["row"][key] == r["row"][key], (h["hole"], key)
+
+
+def _holes_in(out: Path) -> int:
+    p = out / "results.jsonl"
+    if not p.exists():
+        return 0
+    return sum(1 for x in p.read_text().splitlines() if '"kind": "hole"' in x
+               or '"kind":"hole"' in x)

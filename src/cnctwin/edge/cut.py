@@ -172,6 +172,13 @@ class CutTracker:
         if isinstance(h, int | float) and math.isfinite(h) and self.hole <= int(h):
             self.next_hole = int(h) + 1
 
+    def restore_modal(self, events: pd.DataFrame | HoleEvents) -> None:
+        """Set the modal drilling cycle from past NC events (a restart without state)."""
+        evs = self._events(events)
+        if evs:
+            self.nc_geometry = evs[-1][1]
+            self.nc_cancelled = evs[-1][1] is None
+
     def gap(self) -> None:
         """Missing cycles: the Z step across them is unknown; the cut (if any) ends."""
         self._prev_z = None

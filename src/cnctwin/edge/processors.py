@@ -253,6 +253,7 @@ class HoleProcessor:
         self.live_context = live_context
         self.cut: CutTracker | None = None
         self._resumed_after: int | None = None
+        self._modal: HoleEvents | None = None
 
     def _z(self, chunk: Chunk) -> NDArray[np.float64] | None:
         for c in (f"DES_POS|{self.z_axis}", f"ENC_POS|{self.z_axis}"):
@@ -323,6 +324,9 @@ class HoleProcessor:
             self.cut = CutTracker(cycle_time_s=chunk.cycle_time_s,
                                   min_speed_mm_s=self.min_speed_mm_s, settle_s=self.settle_s,
                                   first_hole=self.holes)
+            if self._modal is not None:
+                self.cut.restore_modal(self._modal)
+                self._modal = None
         s = chunk.signals
         enc = s.get(f"ENC_POS|{self.z_axis}", z)
         nan = np.full(len(chunk), np.nan)
@@ -464,11 +468,23 @@ class HoleProcessor:
             self.cut.gap()
         return []  # hole_record works on the cycle base; a gap inside a hole stays visible
 
-    def resumed_without_state(self, after_cycle: int) -> None:
-        """The runtime restarted after ``after_cycle`` without this processor's state: a hole
-        whose plunge began at or before the restart is flagged partial (its start is not in
-        the data this run sees), never completed from a guess."""
+    def resumed_without_state(self, after_cycle: int, *, next_hole: int | None = None,
+                              events: pd.DataFrame | None = None) -> None:
+        """The runtime restarted after ``after_cycle`` without this processor's state.
+
+        A hole whose plunge began at or before the restart is flagged partial (its start is
+        not in the data this run sees), never completed from a guess. Holes are numbered on
+        from ``next_hole`` (the previous run's last hole + 1), and ``events`` (the NC events
+        up to the restart, read again from a replayed file) restore the modal drilling cycle,
+        so the holes after the restart get the program's geometry.
+        """
         self._resumed_after = int(after_cycle)
+        if next_hole is not None:
+            self.holes = max(self.holes, int(next_hole))
+        if events is not None and not events.empty:
+            self._modal = HoleEvents.from_frame(events)
+            self._events.append(self._modal)
+            self.cut = None  # made with the first chunk, from these events
 
     def finish(self) -> list[Result]:
         return self._evaluate(final=True)

@@ -307,11 +307,20 @@ class EdgeRuntime:
             if redelivers:  # the broker repeats what followed the checkpoint: process it
                 setattr(self.source, "resume_after_cycle", int(ck["cycle"]))  # noqa: B010
         else:
-            info["after_cycle"] = last["torque"]
+            after = int(last["torque"])
+            info["after_cycle"] = after
+            # what the lost state knew: the hole numbers used, the NC events before the
+            # restart (modal drilling cycle, tool) where the source can read them again
+            numbered = last_hole_number(self.state_dir / "results.jsonl")
+            events_until = getattr(self.source, "events_until", None)
+            events = events_until(after) if events_until is not None else None
+            info["next_hole"] = None if numbered is None else numbered + 1
             for p in self.processors:
                 hook = getattr(p, "resumed_without_state", None)
                 if hook is not None:
-                    hook(last["torque"])
+                    hook(after, next_hole=info["next_hole"], events=events)
+        if hasattr(self.source, "catch_up_cycle"):  # as fast as possible to where it was
+            self.source.catch_up_cycle = int(last["torque"])
         if seek is not None:
             seek(info["after_cycle"])
         for s in self.sinks:  # a sink that writes blocks continues the one left open
@@ -682,6 +691,40 @@ def last_emitted(results: str | PathLike[str], *, tail_bytes: int = 1 << 20
         if "torque" in out:
             break
     return out
+
+
+def last_hole_number(results: str | PathLike[str], *, tail_bytes: int = 1 << 20
+                     ) -> int | None:
+    """The highest hole number a runtime emitted into ``results`` (its newest rotated file
+    too, when the current one has none), or None.
+
+    Parameters
+    ----------
+    results : str or path-like
+        The runtime's ``results.jsonl``.
+    tail_bytes : int, default 1048576
+        How much of the end of each file is read [bytes].
+
+    Returns
+    -------
+    int or None
+        The hole number, or None when no hole was emitted.
+    """
+    p = Path(results)
+    for f in [p, *reversed(rotated_files(p))]:
+        best: int | None = None
+        for line in tail_lines(f, tail_bytes=tail_bytes):
+            if b'"hole"' not in line:
+                continue
+            try:
+                m = json.loads(line)
+                if m.get("kind") == "hole":
+                    best = max(best if best is not None else -1, int(m["hole"]))
+            except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+                continue
+        if best is not None:
+            return best
+    return None
 
 
 def last_emitted_cycle(results: str | PathLike[str], *, tail_bytes: int = 1 << 20

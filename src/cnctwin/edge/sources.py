@@ -148,6 +148,9 @@ class ReplaySource:
     ----------
     scheduled_ns : int
         Wall-clock time at which the last chunk was due (for the lag).
+    catch_up_cycle : int or None
+        Cycles up to this one are replayed as fast as possible, the pace applies after it
+        (a resumed run catches up to where the previous one was; set by the runtime).
     """
 
     counter_modulus = 0
@@ -167,6 +170,7 @@ class ReplaySource:
             recording = read_recording(recording)
         self.recording = recording
         self.start_after_cycle: int | None = None
+        self.catch_up_cycle: int | None = None
         self.chunk_cycles = int(chunk_cycles)
         self.speed = speed or None
         self.machine = recording.meta.machine
@@ -189,6 +193,14 @@ class ReplaySource:
         """Start (the next :meth:`chunks`) at the first cycle after ``after_cycle``."""
         self.start_after_cycle = after_cycle
 
+    def events_until(self, cycle: int) -> pd.DataFrame:
+        """The recording's NC events at or before ``cycle`` (what a run that resumes after
+        it without its state needs to know: the modal drilling cycle, the tool)."""
+        ev = self.recording.events
+        if ev.empty:
+            return ev
+        return ev[ev["cycle"].to_numpy(dtype=np.int64) <= cycle]
+
     def chunks(self) -> Iterator[Chunk]:
         """Chunks of ``chunk_cycles`` rows (a chunk can contain a recorded gap)."""
         rec = self.recording
@@ -206,7 +218,11 @@ class ReplaySource:
         k = self.chunk_cycles
         for lo in range(begin, cyc.size, k):
             hi = min(lo + k, cyc.size)
-            if self.speed:
+            if self.catch_up_cycle is not None and int(cyc[hi - 1]) <= self.catch_up_cycle:
+                first = int(cyc[hi - 1]) + 1  # caught up to here: the pace starts after it
+                start_wall = time.perf_counter_ns()
+                self.scheduled_ns = time.time_ns()
+            elif self.speed:
                 due = start_wall + int((int(cyc[hi - 1]) + 1 - first) * step_ns / self.speed)
                 wait = due - time.perf_counter_ns()
                 if wait > 0:
