@@ -277,3 +277,12 @@ def test_no_camera_beside_a_recording_is_said(tmp_path: Path, wear12: dict[str, 
     with TestClient(create_app(recordings=[alone], model=model_file)) as c:
         t = c.get("/api/recordings/file:0/trends").json()
     assert t["temperature"] is None and any("thermal-camera" in n for n in t["notes"])
+
+
+def test_static_names_that_are_no_file_are_404(client: Any) -> None:
+    """Issue 24, pt 7: a name longer than the file system allows answered 500."""
+    for name in ("x" * 300, "x" * 5000, "..%2Fapp.py", ".hidden", "app.js.bak"):
+        r = client.get(f"/static/{name}")
+        assert r.status_code == 404, name
+        assert len(r.json()["detail"]) < 200
+    assert client.get("/static/app.js").status_code == 200

@@ -71,6 +71,58 @@ def test_login_form_sets_the_cookie() -> None:
         assert client.get("/api/recordings").status_code == 200  # the cookie is sent now
 
 
+def test_the_cookie_is_a_session_that_expires_not_the_token(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 24, pt 8: the login cookie was the raw long-lived token."""
+    import cnctwin.web.auth as auth
+
+    app = create_app(recordings=[TRACE], token=TOKEN)
+    with TestClient(app) as client:
+        good = client.post("/login", data={"token": TOKEN}, follow_redirects=False)
+        cookie = good.headers["set-cookie"]
+        assert TOKEN not in cookie and f"Max-Age={int(auth.SESSION_S)}" in cookie
+        assert client.get("/api/recordings").status_code == 200
+        now = time.monotonic()
+        monkeypatch.setattr(auth.time, "monotonic", lambda: now + auth.SESSION_S + 1)
+        assert client.get("/api/recordings").status_code == 401  # expired
+
+
+def test_wrong_tokens_are_throttled() -> None:
+    """Five wrong tokens from one address within a minute: the sixth try waits (429), even
+    with the right token; other clients (the bearer header) are not affected."""
+    import cnctwin.web.auth as auth
+
+    app = create_app(recordings=[TRACE], token=TOKEN)
+    with TestClient(app) as client:
+        for _ in range(auth.LOGIN_FAILURES):
+            assert client.post("/login", data={"token": "guess"}).status_code == 401
+        r = client.post("/login", data={"token": TOKEN}, follow_redirects=False)
+        assert r.status_code == 429 and int(r.headers["Retry-After"]) >= 1
+        assert "try again in" in r.text
+        ok = {"Authorization": f"Bearer {TOKEN}"}
+        assert client.get("/api/recordings", headers=ok).status_code == 200
+
+
+def test_login_reads_a_few_kb_at_most() -> None:
+    """Issue 24, pt 7: a 300 MB login body raised the process to 1.75 GB. A body over 4 kB is
+    refused unread (declared length) or after 4 kB (streamed without a length)."""
+    app = create_app(recordings=[TRACE], token=TOKEN)
+    with TestClient(app) as client:
+        big = client.post("/login", content=b"token=" + b"x" * 10_000_000,
+                          headers={"Content-Type": "application/x-www-form-urlencoded"})
+        assert big.status_code == 413
+
+        def chunks():  # no Content-Length: chunked transfer
+            for _ in range(1000):
+                yield b"x" * 10_000
+
+        streamed = client.post("/login", content=chunks(),
+                               headers={"Content-Type": "application/x-www-form-urlencoded"})
+        assert streamed.status_code == 413
+        assert client.post("/login", data={"token": TOKEN},
+                           follow_redirects=False).status_code == 303
+
+
 def test_short_tokens_are_refused() -> None:
     from cnctwin.exceptions import ConfigError
 

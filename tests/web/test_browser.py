@@ -97,7 +97,8 @@ def test_overview_page(server: str, tmp_path: Path) -> None:
 def test_live_page_receives_events(server: str, tmp_path: Path, live_dir: Path) -> None:
     # limit = every line of the finished run: the stream then ends with an `end` event and
     # the page closes its EventSource (an open stream would keep the headless page loading)
-    n = len((live_dir / "results.jsonl").read_text().splitlines())
+    # (the last line, the final status, is left out: that one ends the stream as finished)
+    n = len((live_dir / "results.jsonl").read_text().splitlines()) - 1
     dom = _dump_dom(server + f"/live?limit={n}", tmp_path)
     assert "stream ended" in dom
     # the drawn x axis (plotly's tick labels) shows the last 30 s of the 52 s run
@@ -106,6 +107,20 @@ def test_live_page_receives_events(server: str, tmp_path: Path, live_dir: Path) 
     assert ticks and min(ticks) >= 22.0 and 45.0 <= max(ticks) <= 52.4
     table = re.search(r'<table id="live-holes">(.*?)</table>', dom, re.S).group(1)  # type: ignore[union-attr]
     assert table.count("<tr>") == 1 + 12  # header + the 12 holes of the run
+
+
+def test_live_page_of_a_finished_run_shows_its_final_counts(server: str, tmp_path: Path,
+                                                            live_dir: Path) -> None:
+    """Issue 24, pt 7/8: without ``limit`` the page of a finished run loaded forever (the
+    docs' screenshot recipe hung) and did not show the final counts. Now the stream ends
+    after the run's final status and the page shows it."""
+    dom = _dump_dom(server + "/live", tmp_path)
+    assert re.search(r'id="live-state"[^>]*data-finished="true"', dom), dom[-3000:]
+    assert "run finished" in dom
+    status = re.search(r'<dl id="live-status"[^>]*>(.*?)</dl>', dom, re.S).group(1)  # type: ignore[union-attr]
+    assert "<dt>state</dt><dd>finished</dd>" in status
+    assert "<dt>holes</dt><dd>12</dd>" in status
+    assert "e+" not in status  # 127031 cycles/s, not 1.2703e+5
 
 
 def test_api_docs_page_renders_without_a_cdn(server: str, tmp_path: Path) -> None:
@@ -139,7 +154,7 @@ def test_live_page_starts_a_new_view_for_a_new_run(wear12: dict[str, Any], model
     n_points_one_run = sum(m["n"] for m in lines[starts[1]:] if m["kind"] == "torque")
     with _serve(["--live", str(live)], tmp_path / "server.log") as url:
         dom = _dump_dom(url + f"/live?limit={len(lines)}", tmp_path)
-    assert "stream ended" in dom
+    assert "run finished" in dom  # the last line is the second run's final status
     assert dom.count("run started") == 2
     table = re.search(r'<table id="live-holes">(.*?)</table>', dom, re.S).group(1)  # type: ignore[union-attr]
     assert table.count("<tr>") == 1 + 12  # the second run's 12 holes, not 24

@@ -38,7 +38,7 @@ def test_stream_replays_results(edge_out: Path) -> None:
         r = c.get("/api/live/stream", params={"from_start": "true", "limit": 40})
         assert r.status_code == 200 and r.headers["content-type"].startswith("text/event-stream")
         *ev, end = _events(r.text)
-        assert end == ("end", "", '{"events": 40}')  # the browser closes on it
+        assert end == ("end", "", '{"events": 40, "finished": false}')  # the browser closes on it
         assert [e[2] for e in ev] == lines[:40]  # every line, in order, unchanged
         assert all(e[0] == json.loads(e[2])["kind"] for e in ev)
         assert [e[1] for e in ev] == [str(json.loads(x)["seq"]) for x in lines[:40]]

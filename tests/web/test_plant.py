@@ -113,3 +113,50 @@ def test_plant_api_page_and_tiles(tmp_path: Path, live_dir: Path) -> None:
         assert bad.status_code == 422 and "known: M1, M2" in bad.json()["detail"]
         overview = client.get("/").text
         assert "Plant now" in overview and "<h2>Recordings</h2>" not in overview
+
+
+def test_a_malformed_state_directory_degrades_one_tile(tmp_path: Path, live_dir: Path) -> None:
+    """Issue 24, pt 7: a malformed value in one machine's state directory (a hand-edited or
+    half-migrated file) made `/`, `/plant` and `/plant/tiles` answer 500 for the whole plant.
+    Now that machine's tile says what is wrong with which file; the others are untouched."""
+    from fastapi.testclient import TestClient
+
+    from cnctwin.web import create_app
+
+    good = _state_dir(tmp_path, "good", status={**RUNNING, "updated": _iso(time.time())},
+                      messages=[_torque(time.time(), 10, 0.05)])
+    cases: dict[str, tuple[Any, list[Any]]] = {
+        "list-status": ([1, 2], []),
+        "text-numbers": ({**RUNNING, "cycles": "many", "holes": {"a": 1}, "alarms": [1],
+                          "updated": 12, "data_age_s": "slow"}, []),
+        "bad-messages": ({**RUNNING, "updated": _iso(time.time())},
+                         [{"kind": "run", "cycle": -1},
+                          {"kind": "torque", "cycle": 5, "time": "yesterday",
+                           "torque_nm": ["abc", {}], "speed_rpm": "fast"},
+                          {"kind": "hole", "cycle": "x", "hole": "three", "row": "nope"},
+                          {"kind": "hole_start", "cycle": "later"},
+                          {"kind": "alarm", "cycle": 7, "time": 5, "score": "high",
+                           "detector": ["x"]},
+                          [1, 2, 3], "a string"]),
+    }
+    dirs = {"good": good.directory}
+    for name, (status, messages) in cases.items():
+        d = tmp_path / name
+        d.mkdir()
+        (d / "status.json").write_text(json.dumps(status))
+        (d / "results.jsonl").write_text("".join(json.dumps(m) + "\n" for m in messages))
+        dirs[name] = d
+    app = create_app(live={**dirs, "M1": live_dir})
+    with TestClient(app) as client:
+        for path in ("/", "/plant", "/plant/tiles", "/api/plant"):
+            r = client.get(path)
+            assert r.status_code == 200, (path, r.text[:500])
+        rows = {r["label"]: r for r in client.get("/api/plant").json()}
+        assert rows["good"]["state"] == "running" and rows["M1"]["state"] == "finished"
+        for name in cases:
+            assert rows[name]["state"] in ("error", "running", "stale"), rows[name]
+        assert rows["list-status"]["state"] == "error"
+        assert "status.json" in rows["list-status"]["reason"]
+        for name in cases:
+            live = client.get("/live", params={"machine": name})
+            assert live.status_code == 200, name

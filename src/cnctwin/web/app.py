@@ -40,6 +40,7 @@ from cnctwin.machine import MachineFile
 from cnctwin.recording import Recording
 from cnctwin.spindle import SpindleModel
 from cnctwin.web import analyses, pages
+from cnctwin.web.auth import add_token_auth
 from cnctwin.web.decimate import envelope_decimate
 from cnctwin.web.live import LiveSource, directory_labels
 from cnctwin.web.plant import PlantStatusOptions, plant_state
@@ -316,77 +317,6 @@ def _json_response_class() -> Any:
     return OrjsonResponse
 
 
-TOKEN_COOKIE = "cnctwin_token"
-"""Cookie the login form sets (HttpOnly, SameSite=Strict)."""
-
-
-def _add_token_auth(app: Any, token: str, title: str) -> None:
-    """401 for every request without the token (header or login cookie); ``/login`` form."""
-    import hmac
-    import html
-
-    from fastapi import Request
-    from fastapi.responses import HTMLResponse, RedirectResponse, Response
-
-    if len(token) < 16:
-        raise ConfigError("the dashboard token must have at least 16 characters "
-                          "(e.g. python -c 'import secrets; print(secrets.token_urlsafe(24))')")
-    expected = token.encode("utf-8")
-
-    def ok(value: str | None) -> bool:
-        return value is not None and hmac.compare_digest(value.encode("utf-8"), expected)
-
-    def login_page(message: str = "") -> str:
-        note = f"<p style='color:#b3261e'>{html.escape(message)}</p>" if message else ""
-        return (f"<!doctype html><html lang='en'><head><meta charset='utf-8'>"
-                f"<title>{html.escape(title)}: sign in</title></head>"
-                "<body style='font-family:system-ui,sans-serif;max-width:28em;margin:4em auto'>"
-                f"<h1>{html.escape(title)}</h1><p>This dashboard needs its access token "
-                "(<code>--token-file</code> / <code>CNCTWIN_WEB_TOKEN</code> of "
-                f"<code>cnctwin web</code>).</p>{note}"
-                "<form method='post' action='/login'><label>token "
-                "<input name='token' type='password' autocomplete='current-password' "
-                "autofocus></label> <button type='submit'>sign in</button></form>"
-                "</body></html>")
-
-    @app.middleware("http")
-    async def _auth(request: Request, call_next: Any) -> Any:
-        if request.url.path == "/login":
-            return await call_next(request)
-        auth = request.headers.get("authorization", "")
-        bearer = auth[7:].strip() if auth.lower().startswith("bearer ") else None
-        if ok(bearer) or ok(request.cookies.get(TOKEN_COOKIE)):
-            return await call_next(request)
-        if request.url.path.startswith("/api/") or "text/html" not in request.headers.get(
-                "accept", ""):
-            return Response(b'{"detail":"authentication required: send Authorization: '
-                            b'Bearer TOKEN"}', status_code=401, media_type="application/json",
-                            headers={"WWW-Authenticate": "Bearer"})
-        return HTMLResponse(login_page(), status_code=401,
-                            headers={"WWW-Authenticate": "Bearer"})
-
-    @app.get("/login", response_class=HTMLResponse, include_in_schema=False)
-    def _login_form() -> Any:
-        return HTMLResponse(login_page())
-
-    async def _login(request: Request) -> Any:
-        from urllib.parse import parse_qs
-
-        body = (await request.body()).decode("utf-8", "replace")
-        given = parse_qs(body).get("token", [""])[0]
-        if not ok(given):
-            return HTMLResponse(login_page("wrong token"), status_code=401)
-        resp = RedirectResponse("/", status_code=303)
-        resp.set_cookie(TOKEN_COOKIE, token, httponly=True, samesite="strict",
-                        secure=request.url.scheme == "https")
-        return resp
-
-    # the annotations are strings here (postponed evaluation) and Request is a local name:
-    # give FastAPI the class itself, or it takes ``request`` for a query parameter
-    _login.__annotations__["request"] = Request
-    app.post("/login", include_in_schema=False)(_login)
-
-
 def _live_sources(live: Any) -> dict[str, LiveSource]:
     """Label -> live source from one directory, a list of them or a mapping."""
     if live is None:
@@ -508,7 +438,7 @@ def create_app(
     swagger = _swagger_dir()
     app.state.dashboard = dash
     if token is not None:
-        _add_token_auth(app, token, title)
+        add_token_auth(app, token, title)
 
     @app.exception_handler(CnctwinError)
     async def _cnctwin_error(request: Request, exc: CnctwinError) -> Any:
@@ -541,11 +471,13 @@ def create_app(
         return FileResponse(swagger / name, media_type=files[name],
                             headers={"Cache-Control": "max-age=86400"})
 
+    static_files = {p.name for p in STATIC_DIR.iterdir() if p.is_file()}
+
     @app.get("/static/{name}", include_in_schema=False)
     def _static(name: str) -> Any:
+        if name not in static_files:  # (a name too long for the file system is a 404 too)
+            raise StoreError(f"no static file {name[:80]!r}")
         p = STATIC_DIR / name
-        if "/" in name or name.startswith(".") or not p.is_file():
-            raise StoreError(f"no static file {name!r}")
         media = {".js": "application/javascript", ".css": "text/css"}.get(p.suffix)
         return FileResponse(p, media_type=media)
 
@@ -683,10 +615,12 @@ def create_app(
 
     @app.get("/api/live/stream")
     async def api_live_stream(from_start: bool = False, limit: int | None = None,
-                              kinds: str | None = None, machine: str | None = None) -> Any:
+                              kinds: str | None = None, machine: str | None = None,
+                              until_finished: bool = False) -> Any:
         live = dash.live_source(machine)
         wanted = {k.strip() for k in kinds.split(",")} if kinds else None
-        gen = live.events(from_start=from_start, limit=limit, kinds=wanted)
+        gen = live.events(from_start=from_start, limit=limit, kinds=wanted,
+                          until_finished=until_finished)
         return StreamingResponse(gen, media_type="text/event-stream",
                                  headers={"Cache-Control": "no-cache",
                                           "X-Accel-Buffering": "no"})

@@ -169,30 +169,42 @@ class LiveSource:
             return {"note": f"no {f.name} yet in {self.directory} (is `cnctwin edge run` "
                             "running with this --out?)", "results": str(self.results)}
         except json.JSONDecodeError as exc:  # written atomically; still say what happened
-            return {"note": f"{f} is not valid JSON: {exc}"}
+            return {"note": f"{f} is not valid JSON: {exc}", "error": True}
+        except (OSError, UnicodeDecodeError) as exc:
+            return {"note": f"{f} cannot be read: {exc}", "error": True}
+        if not isinstance(doc, dict):
+            return {"note": f"{f} holds a JSON {type(doc).__name__}, not the runtime's status "
+                            "object (written by another program?)", "error": True}
         doc["results"] = str(self.results)
         return doc
 
     async def events(self, *, from_start: bool = False, limit: int | None = None,
                      kinds: set[str] | None = None, poll_s: float = 0.2,
-                     heartbeat_s: float = 15.0) -> AsyncIterator[str]:
+                     heartbeat_s: float = 15.0, until_finished: bool = False
+                     ) -> AsyncIterator[str]:
         """SSE events of the new result lines (all kinds, or only ``kinds``).
 
         Each event is named after the message ``kind`` and carries the line as data; its id is
         the message ``seq``. ``limit`` ends the stream after that many events with an ``end``
         event (tests, one-shot clients: a browser's EventSource would otherwise reconnect and
-        replay). A comment line is sent every ``heartbeat_s`` without data so proxies keep
-        the connection.
+        replay); so does ``until_finished`` once the run's final status (``state``
+        ``finished``) is the newest line (the end event then says ``"finished": true``). A
+        comment line is sent every ``heartbeat_s`` without data so proxies keep the
+        connection.
         """
         n = 0
+        finished = False
         lines = tail_lines(self.results, from_start=from_start, poll_s=poll_s)
         pending: asyncio.Task[str] | None = None
         try:
             while limit is None or n < limit:
                 if pending is None:
                     pending = asyncio.ensure_future(lines.__anext__())
-                done, _ = await asyncio.wait({pending}, timeout=heartbeat_s)
+                done, _ = await asyncio.wait(
+                    {pending}, timeout=min(heartbeat_s, 2 * poll_s) if finished else heartbeat_s)
                 if not done:
+                    if finished:  # the run's last line was its final status: nothing follows
+                        break
                     yield ": keep-alive\n\n"
                     continue
                 line = pending.result()
@@ -203,11 +215,13 @@ class LiveSource:
                     seq = msg.get("seq")
                 except (json.JSONDecodeError, AttributeError):
                     kind, seq = "invalid", None
+                finished = until_finished and kind == "status" and \
+                    isinstance(msg, dict) and msg.get("state") == "finished"
                 if kinds is not None and kind not in kinds:
                     continue
                 n += 1
                 yield sse_event(line, event=kind, event_id=None if seq is None else str(seq))
-            yield sse_event(json.dumps({"events": n}), event="end")
+            yield sse_event(json.dumps({"events": n, "finished": finished}), event="end")
         finally:
             # the client went away: the tail generator may be inside __anext__ in the pending
             # task; cancel that task and let it finish before closing the generator, else

@@ -127,6 +127,11 @@ def _tile(m: dict[str, Any]) -> str:
 {_e(m.get('alarms') or 0)} alarms</dd><dt>seen</dt><dd>{seen}</dd></dl></div>"""
 
 
+def _plural(n: int, word: str) -> str:
+    """``1 machine``, ``2 machines``."""
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
 def plant_tiles(rows: Sequence[dict[str, Any]]) -> str:
     """One status tile per machine (:func:`cnctwin.web.plant.plant_state` rows).
 
@@ -162,13 +167,14 @@ def plant_page(title: str, rows: Sequence[dict[str, Any]]) -> str:
         HTML.
     """
     counts = {st: sum(1 for m in rows if m.get("state") == st) for st in
-              ("running", "cutting", "alarm", "stale", "finished", "waiting")}
+              ("running", "cutting", "alarm", "stale", "finished", "waiting", "error")}
     summary = ", ".join(f"{n} {st}" for st, n in counts.items() if n) or "no machines"
     body = f"""
 <h1>{_e(title)}: plant</h1>
-<p class="muted" id="plant-summary">{len(rows)} machines: {_e(summary)}. States: running (data
-flows, no cut), cutting, alarm (an anomaly alarm in the last minute of machine time), stale (no
-status or no data for 10 s), finished, waiting (not started).</p>
+<p class="muted" id="plant-summary">{_plural(len(rows), "machine")}: {_e(summary)}. States:
+running (data flows, no cut), cutting, alarm (an anomaly alarm in the last minute of machine
+time), stale (no status or no data for 10 s), finished, waiting (not started), error (the
+state directory cannot be read: the tile says why).</p>
 <div id="plant" class="tiles">{plant_tiles(rows)}</div>
 """
     return _page(f"{title}: plant", body, page="plant", plotly=False)

@@ -9,6 +9,8 @@ of its history.
 
 State rules, first match wins:
 
+0. ``error``: ``status.json`` is unreadable or not the runtime's status object (the reason
+   names the file); a malformed value elsewhere shows as missing, never as an error page.
 1. ``waiting``: no ``status.json`` yet (the runtime has not started).
 2. ``finished``: the runtime ended cleanly (a replayed file at its end, a stopped runtime).
 3. ``stale``: the runtime has not written its status for ``stale_s`` (it hangs or died), or
@@ -36,7 +38,7 @@ from cnctwin.web.live import LiveSource
 
 __all__ = ["STATES", "PlantStatusOptions", "machine_state", "plant_state"]
 
-STATES: tuple[str, ...] = ("waiting", "finished", "stale", "alarm", "cutting", "running")
+STATES: tuple[str, ...] = ("error", "waiting", "finished", "stale", "alarm", "cutting", "running")
 """The states of :func:`machine_state`, in the order their rules are tried."""
 
 _KINDS = ("torque", "hole", "hole_start", "alarm")
@@ -94,9 +96,32 @@ def _seconds(text: Any) -> float | None:
         return None
 
 
+def _number(v: Any) -> float | None:
+    """A finite number, or None (a malformed value is not a number)."""
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        return None
+    f = float(v)
+    return f if math.isfinite(f) else None
+
+
+def _count(v: Any) -> int | None:
+    f = _number(v)
+    return int(f) if f is not None and f == int(f) else None
+
+
+def _numbers(values: Any) -> list[float]:
+    if not isinstance(values, list):
+        return []
+    return [f for f in (_number(v) for v in values) if f is not None]
+
+
 def _finite_mean(values: Any) -> float | None:
-    vals = [float(v) for v in values or [] if v is not None and math.isfinite(float(v))]
+    vals = _numbers(values)
     return sum(vals) / len(vals) if vals else None
+
+
+def _text(v: Any) -> str | None:
+    return v if isinstance(v, str) else None
 
 
 def machine_state(live: LiveSource, *, options: PlantStatusOptions | None = None,
@@ -127,33 +152,39 @@ def machine_state(live: LiveSource, *, options: PlantStatusOptions | None = None
     now = time.time() if now_s is None else now_s
     status = live.status()
     newest = _newest_messages(live.results, opt.tail_bytes)
-    name = str(status.get("machine") or live.directory.name)
+    name = _text(status.get("machine")) or live.directory.name
+    # every value is checked for its type: a malformed one shows as missing, never breaks
+    # the page of the whole plant
     out: dict[str, Any] = {"machine": name, "directory": str(live.directory),
-                           "updated": status.get("updated"), "status_age_s": None,
-                           "data_age_s": status.get("data_age_s"),
-                           "cycles": status.get("cycles"), "holes": status.get("holes"),
-                           "alarms": status.get("alarms"),
+                           "updated": _text(status.get("updated")), "status_age_s": None,
+                           "data_age_s": _number(status.get("data_age_s")),
+                           "cycles": _count(status.get("cycles")),
+                           "holes": _count(status.get("holes")),
+                           "alarms": _count(status.get("alarms")),
                            "torque": None, "hole": None, "alarm": None}
     tq = newest.get("torque")
     if tq is not None:
-        out["torque"] = {"time": tq.get("time"), "cycle": tq.get("cycle"),
+        out["torque"] = {"time": _text(tq.get("time")), "cycle": _count(tq.get("cycle")),
                          "torque_mean_nm": _finite_mean(tq.get("torque_nm")),
-                         "torque_max_nm": max((abs(float(v)) for v in tq.get("torque_nm") or []
-                                               if v is not None and math.isfinite(float(v))),
+                         "torque_max_nm": max((abs(v) for v in _numbers(tq.get("torque_nm"))),
                                               default=None),
                          "speed_rpm": _finite_mean(tq.get("speed_rpm"))}
     hole = newest.get("hole")
     if hole is not None:
-        row = hole.get("row") or {}
-        out["hole"] = {"time": hole.get("time"), "hole": hole.get("hole"),
-                       "depth_mm": row.get("depth_mm"),
-                       "torque_mean_nm": row.get("torque_mean_nm"),
+        row: dict[str, Any] = hole["row"] if isinstance(hole.get("row"), dict) else {}
+        out["hole"] = {"time": _text(hole.get("time")), "hole": _count(hole.get("hole")),
+                       "depth_mm": _number(row.get("depth_mm")),
+                       "torque_mean_nm": _number(row.get("torque_mean_nm")),
                        "partial": bool(hole.get("partial") or row.get("partial") or False)}
     alarm = newest.get("alarm")
     if alarm is not None:
-        out["alarm"] = {k: alarm.get(k) for k in ("time", "detector", "score", "threshold",
-                                                   "message", "hole")}
-    updated = _seconds(status.get("updated"))
+        out["alarm"] = {"time": _text(alarm.get("time")),
+                        "detector": _text(alarm.get("detector")),
+                        "score": _number(alarm.get("score")),
+                        "threshold": _number(alarm.get("threshold")),
+                        "message": _text(alarm.get("message")),
+                        "hole": _count(alarm.get("hole"))}
+    updated = _seconds(out["updated"])
     if updated is not None:
         out["status_age_s"] = max(now - updated, 0.0)
     out["state"], out["reason"] = _state(status, newest, out, opt)
@@ -162,6 +193,8 @@ def machine_state(live: LiveSource, *, options: PlantStatusOptions | None = None
 
 def _state(status: dict[str, Any], newest: dict[str, dict[str, Any]], out: dict[str, Any],
            opt: PlantStatusOptions) -> tuple[str, str]:
+    if status.get("error"):
+        return "error", str(status.get("note"))
     if "state" not in status:
         return "waiting", str(status.get("note") or "no status.json yet")
     if status.get("state") == "finished":
@@ -170,17 +203,19 @@ def _state(status: dict[str, Any], newest: dict[str, dict[str, Any]], out: dict[
     if age is None or age > opt.stale_s:
         return "stale", (f"no status for {age:.0f} s (runtime stopped or hung?)"
                          if age is not None else "status without a time")
-    data_age = status.get("data_age_s")
-    if data_age is not None and math.isfinite(float(data_age)) and data_age > opt.stale_s:
-        return "stale", f"newest data {float(data_age):.0f} s old (machine or link silent?)"
-    t_torque = _seconds((newest.get("torque") or {}).get("time"))
-    t_alarm = _seconds((newest.get("alarm") or {}).get("time"))
+    data_age = out["data_age_s"]
+    if data_age is not None and data_age > opt.stale_s:
+        return "stale", f"newest data {data_age:.0f} s old (machine or link silent?)"
+    t_torque = _seconds((out["torque"] or {}).get("time"))
+    t_alarm = _seconds((out["alarm"] or {}).get("time"))
     if t_alarm is not None and (t_torque is None or t_torque - t_alarm <= opt.alarm_hold_s):
-        det = (newest.get("alarm") or {}).get("detector", "detector")
+        det = (out["alarm"] or {}).get("detector") or "detector"
         return "alarm", f"{det} alarm"
     hole_start = newest.get("hole_start")
-    if hole_start is not None and (newest.get("hole") is None or int(
-            hole_start.get("cycle", 0)) > int(newest["hole"].get("cycle", 0))):
+    started = _count((hole_start or {}).get("cycle"))
+    ended = _count((newest.get("hole") or {}).get("cycle"))
+    if started is not None and (newest.get("hole") is None or ended is None
+                                or started > ended):
         return "cutting", "a hole is being drilled"
     mean = (out["torque"] or {}).get("torque_mean_nm")
     if mean is not None and abs(mean) > opt.cutting_nm:
@@ -208,7 +243,15 @@ def plant_state(lives: dict[str, LiveSource], *, options: PlantStatusOptions | N
     """
     rows = []
     for label, live in lives.items():
-        row = machine_state(live, options=options, now_s=now_s)
+        try:
+            row = machine_state(live, options=options, now_s=now_s)
+        except (OSError, ValueError, TypeError, KeyError, AttributeError) as exc:
+            # the last line of defence: one machine's tile says so, the plant page stays up
+            row = {"machine": label, "directory": str(live.directory), "state": "error",
+                   "reason": f"state directory {live.directory}: {type(exc).__name__}: {exc}",
+                   "updated": None, "status_age_s": None, "data_age_s": None,
+                   "cycles": None, "holes": None, "alarms": None, "torque": None,
+                   "hole": None, "alarm": None}
         row["label"] = label
         rows.append(row)
     return rows

@@ -4,7 +4,17 @@ const cnctwin = (() => {
   const cfg = () => JSON.parse(document.getElementById("cfg").textContent || "{}");
   const $ = (id) => document.getElementById(id);
   const esc = (v) => String(v ?? "–").replace(/[&<>"]/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;"}[c]));
-  const fmt = (v) => (typeof v === "number" ? (Number.isInteger(v) ? String(v) : v.toPrecision(5)) : esc(v));
+  // numbers as an engineer reads them: integers whole, no exponent between 1e-3 and 1e9
+  // (100 810.5 s, not 1.0081e+5), five significant digits, trailing zeros dropped
+  const fmt = (v) => {
+    if (typeof v !== "number") return esc(v);
+    if (Number.isInteger(v)) return String(v);
+    if (!Number.isFinite(v)) return String(v);
+    const a = Math.abs(v);
+    if (a !== 0 && (a < 1e-3 || a >= 1e9)) return v.toPrecision(4);
+    const digits = Math.max(0, Math.min(6, 4 - Math.floor(Math.log10(a || 1))));
+    return String(Number(v.toFixed(digits)));
+  };
 
   async function getJSON(url) {
     const r = await fetch(url);
@@ -163,15 +173,20 @@ const cnctwin = (() => {
       const label = ev.target.selectedOptions[0].textContent;
       Plotly.relayout(plot, {"title.text": `cutting torque [Nm] (${label})`});
     };
-    const q = new URLSearchParams({from_start: "true"});
+    // a finished run's stream ends after its final status (the page shows the final counts
+    // and stops loading); a running one is followed
+    const q = new URLSearchParams({from_start: "true", until_finished: "true"});
     const limit = new URLSearchParams(location.search).get("limit");
     if (limit) q.set("limit", limit);
     if (c.machine) q.set("machine", c.machine);
     const es = new EventSource(`/api/live/stream?${q}`);
-    es.addEventListener("end", () => {
+    es.addEventListener("end", (ev) => {
       es.close();
       redraw();  // the last data now, not on a next animation frame that may never come
-      state.textContent = "stream ended (limit reached)";
+      const m = JSON.parse(ev.data);
+      state.textContent = m.finished ? `run finished: ${m.events} results (reload to follow a new run)`
+        : "stream ended (limit reached)";
+      state.dataset.finished = m.finished ? "true" : "false";
     });
     es.onopen = () => { state.textContent = "connected"; };
     es.onerror = () => { state.textContent = "disconnected – retrying"; };
@@ -214,7 +229,7 @@ const cnctwin = (() => {
     });
     es.addEventListener("status", (ev) => {
       const s = JSON.parse(ev.data);
-      $("live-status").innerHTML = ["cycles", "cycles_per_s_recent", "lag_s", "holes", "alarms", "gaps", "missing_cycles", "late_rows"]
+      $("live-status").innerHTML = ["state", "cycles", "cycles_per_s_recent", "lag_s", "holes", "alarms", "gaps", "missing_cycles", "late_rows"]
         .filter((k) => k in s).map((k) => `<dt>${esc(k)}</dt><dd>${fmt(s[k])}</dd>`).join("");
       state.textContent = `connected – last status seq ${s.seq ?? ""}`;
     });
