@@ -34,9 +34,11 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--model", type=Path, metavar="FILE",
                    help="calibrated spindle model (JSON/TOML, cnctwin.edge.save_spindle_model) "
                    "for the cutting torque")
-    p.add_argument("--machine", type=Path, metavar="FILE",
-                   help="machine file (cnctwin calibrate): its calibrated spindle for the "
-                   "cutting torque and the twin comparison of every recording")
+    p.add_argument("--machine", type=Path, action="append", default=[], metavar="FILE",
+                   help="machine file (cnctwin calibrate) for the machine it names: its "
+                   "calibrated spindle for the cutting torque and the twin comparison of that "
+                   "machine's recordings (repeatable: one per machine of a fleet store; a "
+                   "machine without one is shown uncalibrated)")
     p.add_argument("--live", type=Path, action="append", default=[], metavar="DIR",
                    help="--out directory of `cnctwin edge run` to follow (repeatable: the "
                    "plant page /plant shows a status tile per machine)")
@@ -95,10 +97,10 @@ def _cmd_web(args: argparse.Namespace) -> int:
     from cnctwin.web.app import create_app
 
     machine = None
-    if args.machine is not None:
+    if args.machine:
         from cnctwin.machine import load_machine
 
-        machine = load_machine(args.machine)
+        machine = [load_machine(f) for f in args.machine]
     app = create_app(store_url=args.store, recordings=args.recording, model=args.model,
                      machine=machine, live=lives or None, fleet=args.fleet, salvage=args.salvage,
                      token=token)

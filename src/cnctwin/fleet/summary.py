@@ -22,9 +22,9 @@ FLEET_TABLES = ("health", "alarms", "holes", "wear", "quality", "compare")
 """The tables a fleet result directory may hold (``<name>.parquet``)."""
 
 SORT_KEYS = {
-    "alarms": (["n_alarms", "wear_rise", "max_drift"], [False, False, False]),
+    "alarms": (["n_alarms", "wear_rise", "drift_size"], [False, False, False]),
     "wear": (["wear_rise", "n_alarms"], [False, False]),
-    "drift": (["max_drift", "n_alarms"], [False, False]),
+    "drift": (["drift_size", "n_alarms"], [False, False]),
     "quality": (["coverage_min", "missing_cycles"], [True, False]),
 }
 """Ranking orders of :func:`fleet_summary` (columns, ascending flags)."""
@@ -60,14 +60,20 @@ def read_fleet_tables(directory: str | os.PathLike[str]) -> dict[str, pd.DataFra
     return out
 
 
-def _max_drift(health: pd.DataFrame) -> pd.Series:
+def _max_drift(health: pd.DataFrame) -> pd.DataFrame:
+    """Per machine the largest relative change of a loop or friction parameter from its
+    first day, with its sign (a Kv drop is negative) and what drifted."""
     keep = health[health["parameter"].isin(["kv_1_s", "coulomb_a", "friction_current_a"])]
     if keep.empty:
-        return pd.Series(dtype=float)
+        return pd.DataFrame(columns=["max_drift", "drift_of"])
     keep = keep.sort_values("day")
     first = keep.groupby(["machine", "component", "parameter"])["value"].transform("first")
-    rel = (keep["value"] / first - 1.0).abs()
-    return rel.groupby(keep["machine"]).max()
+    rel = keep["value"] / first - 1.0
+    biggest = rel.abs().groupby(keep["machine"]).idxmax().dropna()
+    return pd.DataFrame({
+        "max_drift": rel.loc[biggest.to_numpy()].to_numpy(),
+        "drift_of": [f"{keep['component'].loc[i]!s} {keep['parameter'].loc[i]!s}"
+                     for i in biggest.to_numpy()]}, index=biggest.index)
 
 
 def fleet_summary(
@@ -87,7 +93,9 @@ def fleet_summary(
     pandas.DataFrame
         ``machine``, ``days``, ``n_alarms``, ``alarm_kinds`` (comma-separated), ``first_alarm``
         (day), ``wear_rise`` (largest torque-per-hole rise over the tool's first day [-]),
-        ``max_drift`` (largest relative change of Kv, Coulomb or spindle friction [-]),
+        ``max_drift`` (the largest relative change of Kv, Coulomb or spindle friction from
+        the first day, signed: a Kv drop is negative [-]), ``drift_of`` (its component and
+        parameter), ``drift_size`` (``|max_drift|``, the ranking key),
         ``coverage_min`` [-], ``missing_cycles``, ``jitter_ms_max``, ``partial_partitions``.
     """
     if sort not in SORT_KEYS:
@@ -98,7 +106,8 @@ def fleet_summary(
             machines |= set(map(str, t["machine"]))
     rows: dict[str, dict[str, Any]] = {
         m: {"machine": m, "days": 0, "n_alarms": 0, "alarm_kinds": "", "first_alarm": None,
-            "wear_rise": math.nan, "max_drift": math.nan, "coverage_min": math.nan,
+            "wear_rise": math.nan, "max_drift": math.nan, "drift_of": "",
+            "drift_size": math.nan, "coverage_min": math.nan,
             "missing_cycles": 0, "jitter_ms_max": math.nan, "partial_partitions": 0}
         for m in machines}
     for t in tables.values():
@@ -124,8 +133,9 @@ def fleet_summary(
             for m, v in (tq["value"] / first - 1.0).groupby(tq["machine"]).max().items():
                 rows[str(m)]["wear_rise"] = float(v)
     if health is not None and len(health):
-        for m, v in _max_drift(health).items():
-            rows[str(m)]["max_drift"] = float(v)
+        for m, d in _max_drift(health).iterrows():
+            rows[str(m)].update(max_drift=float(d["max_drift"]), drift_of=str(d["drift_of"]),
+                                drift_size=abs(float(d["max_drift"])))
     partial: dict[str, set[str]] = {}
     for t in tables.values():
         if {"machine", "day", "partial"} <= set(t.columns):

@@ -25,6 +25,7 @@ import contextlib
 import itertools
 import os
 import threading
+import time
 from collections.abc import AsyncIterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -146,12 +147,15 @@ class Dashboard:
 
     catalog: Catalog
     model: SpindleModel | None = None
+    """A spindle model given for every recording (``model=``), else None."""
     model_source: str = ""
-    machine_file: MachineFile | None = None
+    machine_files: dict[str, MachineFile] = field(default_factory=dict)
+    """Machine files by the machine they name (``name``)."""
     lives: dict[str, LiveSource] = field(default_factory=dict)
     title: str = "cnctwin"
     _lock: threading.RLock = field(default_factory=threading.RLock)
     _cache: dict[tuple[str, ...], Any] = field(default_factory=dict)
+    _known: tuple[float, set[str]] | None = None
 
     @property
     def live(self) -> LiveSource | None:
@@ -168,6 +172,42 @@ class Dashboard:
         if machine not in self.lives:
             raise ConfigError(f"no live machine {machine!r}; known: {', '.join(self.lives)}")
         return self.lives[machine]
+
+    # ------------------------------------------------------------------ machine files
+    def machine_file_for(self, machine: str | None) -> MachineFile | None:
+        """The machine file of ``machine``: the one that names it; a single file that names
+        no machine of this dashboard is every machine's (a one-machine dashboard whose file
+        was named differently); otherwise None (the machine is uncalibrated)."""
+        files = self.machine_files
+        if machine is not None and machine in files:
+            return files[machine]
+        if len(files) == 1:
+            only = next(iter(files.values()))
+            if only.machine.name not in self._known_machines():
+                return only
+        return None
+
+    def _known_machines(self) -> set[str]:
+        """Machine names of the recordings (looked up at most every 5 s)."""
+        now = time.monotonic()
+        with self._lock:
+            if self._known is None or now - self._known[0] > 5.0:
+                self._known = (now, {e.machine or "?" for e in self.catalog.entries()
+                                     if not e.error})
+            return self._known[1]
+
+    def spindle_for(self, machine: str | None) -> tuple[SpindleModel | None, str]:
+        """The spindle model for ``machine``'s cutting torque and where it comes from."""
+        if self.model is not None:
+            return self.model, self.model_source
+        mf = self.machine_file_for(machine)
+        if mf is not None and mf.is_identified("spindle.kt_nm_per_a"):
+            return (SpindleModel.from_machine(mf),
+                    f"{mf.path or 'machine file'} (machine file of {mf.machine.name})")
+        return None, ""
+
+    def _machine_of(self, ids: Sequence[str]) -> str | None:
+        return self.catalog.entry(ids[0]).machine if ids else None
 
     # ------------------------------------------------------------------ helpers
     def _cached(self, key: tuple[str, ...], make: Any) -> Any:
@@ -191,6 +231,11 @@ class Dashboard:
                 "machine": e.machine or "?", "n_recordings": 0, "duration_s": 0.0,
                 "n_cycles": 0, "n_gaps": 0, "missing_s": 0.0, "partial": 0,
                 "first_activity": None, "last_activity": None, "recordings": []})
+            if m["n_recordings"] == 0:
+                mf = self.machine_file_for(e.machine or "?")
+                spindle, _ = self.spindle_for(e.machine or "?")
+                m["machine_file"] = str(mf.path or mf.machine.name) if mf is not None else None
+                m["calibrated"] = spindle is not None
             m["n_recordings"] += 1
             m["duration_s"] += e.duration_s
             m["n_cycles"] += e.n_cycles
@@ -223,24 +268,32 @@ class Dashboard:
 
     def holes(self, ids: Sequence[str]) -> pd.DataFrame:
         """Per-hole record of the recordings ``ids`` (time order), cached."""
+        spindle, _ = self.spindle_for(self._machine_of(ids))
         return self._cached(("holes", *ids), lambda: analyses.hole_table(
-            self.recordings(ids), model=self.model))
+            self.recordings(ids), model=spindle))
 
     def holes_payload(self, ids: Sequence[str]) -> dict[str, Any]:
         holes = self.holes(ids)
+        spindle, source = self.spindle_for(self._machine_of(ids))
         return {"ids": list(ids), "n_holes": len(holes), "columns": [str(c) for c in holes.columns],
                 "rows": analyses.records(holes),
                 "spindle_model": str(holes.attrs.get("spindle_model", "")),
-                "calibrated": self.model is not None, "model_source": self.model_source,
+                "calibrated": spindle is not None, "model_source": source,
                 "thrust_source": str(holes.attrs.get("thrust_source", "")),
                 "issues": [str(i) for i in holes.attrs.get("issues", [])]}
 
     def compare_payload(self, entry_id: str) -> dict[str, Any]:
         """The recording against the machine file's twin (``compare.json`` of the CLI)."""
-        if self.machine_file is None:
-            raise ConfigError("no machine file: start the dashboard with --machine FILE "
-                              "(cnctwin calibrate writes it) to compare recordings with the twin")
-        mf = self.machine_file
+        machine = self.catalog.entry(entry_id).machine
+        found = self.machine_file_for(machine)
+        if found is None:
+            raise ConfigError(
+                f"no machine file for machine {machine!r}: it is uncalibrated here. Start the "
+                "dashboard with --machine FILE for it (cnctwin calibrate writes it; its name "
+                f"must be {machine!r})" if self.machine_files else
+                "no machine file: start the dashboard with --machine FILE (cnctwin calibrate "
+                "writes it) to compare recordings with the twin")
+        mf = found
 
         def make() -> dict[str, Any]:
             from cnctwin.compare import compare_recording
@@ -257,7 +310,7 @@ class Dashboard:
 
     def signal_names(self, entry: Entry) -> list[str]:
         names = list(entry.columns)
-        if self.model is not None and "CURRENT|SP1" in names:
+        if self.spindle_for(entry.machine)[0] is not None and "CURRENT|SP1" in names:
             names.append(DERIVED_TORQUE)
         return names
 
@@ -267,17 +320,20 @@ class Dashboard:
             raise ConfigError(f"px must be between 1 and {MAX_PX} (the plot width in pixels), "
                               f"not {px}")
         if name == DERIVED_TORQUE:
-            if self.model is None:
+            machine = self.catalog.entry(entry_id).machine
+            spindle, model_source = self.spindle_for(machine)
+            if spindle is None:
                 raise SignalNotFoundError(
-                    f"signal {name!r} needs a calibrated spindle model: start the dashboard "
-                    "with --model spindle.json (see docs/edge.md, save_spindle_model)")
+                    f"signal {name!r} needs a calibrated spindle model, and machine "
+                    f"{machine!r} has none here: start the dashboard with --machine FILE "
+                    "naming it or --model spindle.json (see docs/web.md)")
             rec = self.catalog.recording(entry_id)
             torque, source = self._cached(
-                ("torque", entry_id), lambda: analyses.cutting_torque(rec, self.model))
+                ("torque", entry_id), lambda: analyses.cutting_torque(rec, spindle))
             cycles = rec.cycles
             time_s = rec.time_s
             unit, values = "Nm", torque
-            note = f"SpindleModel.cutting_torque ({self.model_source or 'calibrated model'}; " \
+            note = f"SpindleModel.cutting_torque ({model_source or 'calibrated model'}; " \
                    f"speed from {source})"
         else:
             sig = self.catalog.signal(entry_id, name)
@@ -332,7 +388,8 @@ def create_app(
     store_url: str | None = None,
     recordings: Sequence[str | os.PathLike[str]] = (),
     model: SpindleModel | str | os.PathLike[str] | None = None,
-    machine: MachineFile | str | os.PathLike[str] | None = None,
+    machine: MachineFile | str | os.PathLike[str]
+    | Sequence[MachineFile | str | os.PathLike[str]] | None = None,
     live: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]
     | Mapping[str, str | os.PathLike[str]] | None = None,
     fleet: str | os.PathLike[str] | None = None,
@@ -354,10 +411,12 @@ def create_app(
         Calibrated spindle twin (or its JSON/TOML file, ``cnctwin.edge.save_spindle_model``)
         for the cutting torque; without it the hole torques use the library default
         (thesis parameters, flagged "not calibrated") and no torque signal is offered.
-    machine : MachineFile or path-like, optional
-        The machine file (``cnctwin calibrate``): its calibrated spindle is the torque model
-        where ``model`` is not given, and every recording gets a comparison with the twin
-        (``/recordings/ID/compare``, ``/api/recordings/ID/compare``).
+    machine : MachineFile, path-like or a sequence of them, optional
+        Machine files (``cnctwin calibrate``), each for the machine it names (its ``name``):
+        its calibrated spindle is that machine's torque model where ``model`` is not given,
+        and its recordings get a comparison with the twin (``/recordings/ID/compare``,
+        ``/api/recordings/ID/compare``). A machine without a file is shown uncalibrated; a
+        single file that names no machine of the dashboard is taken for every recording.
     live : path-like, sequence of path-like or mapping, optional
         ``--out`` directory of a ``cnctwin edge run`` (or its ``results.jsonl``) to follow
         on the live page; several (a plant: label -> directory, or a list labelled by the
@@ -405,15 +464,20 @@ def create_app(
                           "state directory (--live DIR)")
     spindle: SpindleModel | None
     model_source = ""
-    mfile: MachineFile | None = None
+    files: dict[str, MachineFile] = {}
     if machine is not None:
         from cnctwin.machine import load_machine
 
-        mfile = machine if isinstance(machine, MachineFile) else load_machine(machine)
-    if model is None and mfile is not None and mfile.is_identified("spindle.kt_nm_per_a"):
-        spindle = SpindleModel.from_machine(mfile)
-        model_source = f"{mfile.path or 'machine file'} (machine file)"
-    elif model is None or isinstance(model, SpindleModel):
+        given = [machine] if isinstance(machine, MachineFile | str | os.PathLike) \
+            else list(machine)
+        for m in given:
+            mf = m if isinstance(m, MachineFile) else load_machine(m)
+            if mf.machine.name in files:
+                raise ConfigError(f"two machine files name machine {mf.machine.name!r}: "
+                                  f"{files[mf.machine.name].path} and {mf.path}; give one "
+                                  "per machine")
+            files[mf.machine.name] = mf
+    if model is None or isinstance(model, SpindleModel):
         spindle = model
         model_source = "SpindleModel given" if model is not None else ""
     else:
@@ -424,7 +488,7 @@ def create_app(
     dash = Dashboard(
         catalog=Catalog(store_url=store_url, recordings=recordings, cache_size=cache_size,
                         salvage=salvage),
-        model=spindle, model_source=model_source, machine_file=mfile,
+        model=spindle, model_source=model_source, machine_files=files,
         lives=lives, title=title)
     plotly_js = _plotly_js()
     JsonResponse = _json_response_class()
@@ -507,16 +571,18 @@ def create_app(
     @app.get("/recordings/{entry_id}", response_class=HTMLResponse, include_in_schema=False)
     def _recording_page(entry_id: str) -> Any:
         e = dash.catalog.entry(entry_id)
-        return HTMLResponse(pages.recording_page(dash.title, e, dash.signal_names(e),
-                                                 calibrated=dash.model is not None,
-                                                 twin=dash.machine_file is not None))
+        return HTMLResponse(pages.recording_page(
+            dash.title, e, dash.signal_names(e),
+            calibrated=dash.spindle_for(e.machine)[0] is not None,
+            twin=dash.machine_file_for(e.machine) is not None))
 
     @app.get("/machines/{machine}", response_class=HTMLResponse, include_in_schema=False)
     def _machine_page(machine: str) -> Any:
         ids = dash.machine_ids(machine)
         return HTMLResponse(pages.machine_page(dash.title, machine,
                                                [dash.catalog.entry(i) for i in ids],
-                                               calibrated=dash.model is not None))
+                                               calibrated=dash.spindle_for(machine)[0]
+                                               is not None))
 
     @app.get("/recordings/{entry_id}/compare", response_class=HTMLResponse,
              include_in_schema=False)
@@ -571,7 +637,9 @@ def create_app(
         e = dash.catalog.entry(entry_id)
         d = e.to_dict()
         d["signals"] = dash.signal_names(e)
-        d["units"] = {**e.units, **({DERIVED_TORQUE: "Nm"} if dash.model else {})}
+        calibrated = dash.spindle_for(e.machine)[0] is not None
+        d["units"] = {**e.units, **({DERIVED_TORQUE: "Nm"} if calibrated else {})}
+        d["calibrated"] = calibrated
         return JsonResponse(analyses.jsonable(d))
 
     @app.get("/api/recordings/{entry_id}/signals/{name}")

@@ -180,6 +180,17 @@ state directory cannot be read: the tile says why).</p>
     return _page(f"{title}: plant", body, page="plant", plotly=False)
 
 
+def _calibration(m: dict[str, Any]) -> str:
+    """The machine's calibration cell: its machine file, or a plain 'uncalibrated'."""
+    if m.get("machine_file"):
+        name = str(m["machine_file"]).replace("\\", "/").rsplit("/", 1)[-1]
+        return f'<span title="{_e(m["machine_file"])}">{_e(name)}</span>'
+    if m.get("calibrated"):
+        return "spindle model given"
+    return ('<span class="warn" title="no machine file names this machine: torques use the '
+            'library default (thesis parameters)">uncalibrated</span>')
+
+
 def overview_page(title: str, machines: Sequence[dict[str, Any]], entries: Sequence[Entry], *,
                   live: bool, store_url: str | None,
                   plant: Sequence[dict[str, Any]] = ()) -> str:
@@ -210,7 +221,8 @@ def overview_page(title: str, machines: Sequence[dict[str, Any]], entries: Seque
         f"<tr><td><a href=\"/machines/{_q(m['machine'])}\">{_e(m['machine'])}</a></td>"
         f"<td>{m['n_recordings']}</td><td>{_num(m['duration_s'], '{:.1f}', 's')}</td>"
         f"<td>{m['n_cycles']}</td><td>{_gaps(m['n_gaps'], m['missing_s'])}</td>"
-        f"<td>{m['partial']}</td><td>{_time(m['last_activity'])}</td></tr>"
+        f"<td>{m['partial']}</td><td>{_time(m['last_activity'])}</td>"
+        f"<td>{_calibration(m)}</td></tr>"
         for m in machines)
     r_rows = []
     for e in entries:
@@ -229,7 +241,8 @@ def overview_page(title: str, machines: Sequence[dict[str, Any]], entries: Seque
              if plant else "")
     machines_html = f"""<h2>Machines</h2>
 <table id="machines"><thead><tr><th>machine</th><th>recordings</th><th>duration</th>
-<th>cycles</th><th>gaps (missing)</th><th>partial</th><th>last activity (UTC)</th></tr></thead>
+<th>cycles</th><th>gaps (missing)</th><th>partial</th><th>last activity (UTC)</th>
+<th>calibration</th></tr></thead>
 <tbody>{m_rows}</tbody></table>""" if machines else ""
     recordings_html = f"""<h2>Recordings</h2>
 <p class="muted">Rate: nominal = 1 / cycle time; effective = recorded cycles per second of the
@@ -530,7 +543,9 @@ cnctwin web --store STORE --fleet RES</pre>"""
             f"<tr{warn}><td><a href=\"/machines/{_q(r['machine'])}\">{_e(r['machine'])}</a>"
             f"</td><td>{r['days']}</td><td>{r['n_alarms']}</td><td>{_e(r['alarm_kinds'])}</td>"
             f"<td>{_e(r['first_alarm'] or '–')}</td><td>{pct(r['wear_rise'])}</td>"
-            f"<td>{pct(r['max_drift'])}</td><td{cov_cls}>{_num(cov, '{:.4f}')}</td>"
+            f"<td title=\"{_e(r.get('drift_of', ''))}\">{pct(r['max_drift'])}"
+            f"{' ' + _e(r['drift_of']) if r.get('drift_of') else ''}</td>"
+            f"<td{cov_cls}>{_num(cov, '{:.4f}')}</td>"
             f"<td>{r['missing_cycles']}</td><td>{_num(r['jitter_ms_max'], '{:.3g}', 'ms')}</td>"
             f"<td>{r['partial_partitions']}</td></tr>")
     body = f"""
