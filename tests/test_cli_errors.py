@@ -85,3 +85,27 @@ def test_fleet_job_on_a_folder_that_is_no_store(tmp_path: Path,
     err = capsys.readouterr().err
     assert code == 2 and "cnctwin fleet ingest DIR --store" in err
     assert "create=True" not in err and "Traceback" not in err
+
+
+def test_help_imports_only_the_command_line() -> None:
+    """Issue 24, pt 8: ``cnctwin --help`` took 3.5 s (every subcommand imported pandas, scipy,
+    the simulator and the edge runtime to register its options). The parser imports none of
+    them now; a command imports what it uses when it runs."""
+    import subprocess
+    import sys
+
+    code = ("import sys, cnctwin.cli as c; c.build_parser(); "
+            "print(','.join(sorted(m for m in ('numpy', 'pandas', 'scipy', 'numba', "
+            "'cnctwin.sim', 'cnctwin.edge', 'cnctwin.iotools', 'matplotlib') "
+            "if m in sys.modules)))")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == ""
+
+
+def test_the_simulate_choices_are_the_scenarios() -> None:
+    from cnctwin.cli.sim import SCENARIO_NAMES
+    from cnctwin.sim.scenarios import SCENARIOS
+
+    assert tuple(sorted(SCENARIOS)) == SCENARIO_NAMES

@@ -26,7 +26,6 @@ reported in its own section and does not stop the demo.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import io
 import math
@@ -50,7 +49,7 @@ if TYPE_CHECKING:
     from cnctwin.sim.scenarios import ScenarioResult
     from cnctwin.twin import TwinChain
 
-__all__ = ["DEMO_SECTIONS", "THESIS_TABLE_4_1", "DemoContext", "register", "run_demo"]
+__all__ = ["DEMO_SECTIONS", "THESIS_TABLE_4_1", "DemoContext", "run_demo"]
 
 REAL_C4A = Path("tests/data/real/capture4analysis/"
                 "example_data_ff429d74-6482-4d4f-80e1-31419d9bd56c.json")
@@ -620,29 +619,3 @@ def run_demo(out_dir: str | Path = "out/demo", *, seed: int = 0, quick: bool = F
                           "make test, which installs every extra)")
     con.print(summary)
     return path
-
-
-def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``demo`` to the ``cnctwin`` command line.
-
-    Parameters
-    ----------
-    sub : argparse._SubParsersAction[argparse.ArgumentParser]
-        The ``cnctwin`` subcommand parsers; the module adds its commands to them.
-    """
-    p = sub.add_parser(
-        "demo",
-        help="simulate the thesis campaign, calibrate, estimate and write the HTML report",
-        description="Simulate the air-cut sweep, warm-up and drilling validation, calibrate "
-        "the spindle twin (thesis and improved method), print the validation beside thesis "
-        "Table 4.1 and write a self-contained HTML report.",
-    )
-    p.add_argument("--out", type=Path, default=Path("out/demo"), help="output directory")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--quick", action="store_true", help="fewer speeds, shorter runs (< 1 min)")
-    p.set_defaults(func=_cmd_demo)
-
-
-def _cmd_demo(args: argparse.Namespace) -> int:
-    run_demo(args.out, seed=args.seed, quick=args.quick)
-    return 0

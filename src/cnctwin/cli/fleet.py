@@ -19,9 +19,10 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import pandas as pd
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["register", "run_cluster_tasks"]
 
@@ -166,6 +167,8 @@ def _write(df: pd.DataFrame, path: Path) -> Path:
 
 
 def _cmd_job(args: argparse.Namespace) -> int:
+    import pandas as pd
+
     from cnctwin.exceptions import StoreError
     from cnctwin.fleet import (
         compare_partition,
@@ -182,7 +185,7 @@ def _cmd_job(args: argparse.Namespace) -> int:
     try:
         parts = partitions(args.store, machines=args.machines)
     except StoreError as exc:
-        if "create=True" not in str(exc):
+        if "no cnctwin store at" not in str(exc):
             raise
         # the library's hint names its own argument; here the store comes from ingest
         raise StoreError(f"--store {args.store}: no cnctwin store there; make it with "
@@ -235,6 +238,7 @@ def _cmd_job(args: argparse.Namespace) -> int:
 
 
 def _print_alarms(alarms: pd.DataFrame) -> None:
+    import pandas as pd
     from rich.table import Table
 
     if alarms.empty:

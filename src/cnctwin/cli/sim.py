@@ -17,6 +17,13 @@ from cnctwin.exceptions import ConfigError
 __all__ = ["register"]
 
 
+SCENARIO_NAMES: tuple[str, ...] = ("air_cut_sweep", "axis_test", "drilling_validation",
+                                   "loose_tap", "milling_square_circle", "tool_wear_run",
+                                   "warm_up")
+"""The names of :data:`cnctwin.sim.scenarios.SCENARIOS` (sorted; a test keeps them equal),
+written out so that ``cnctwin --help`` does not import the simulator."""
+
+
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add ``simulate`` to the ``cnctwin`` command line.
 
@@ -25,15 +32,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     sub : argparse._SubParsersAction[argparse.ArgumentParser]
         The ``cnctwin`` subcommand parsers; the module adds its commands to them.
     """
-    from cnctwin.sim.scenarios import SCENARIOS
-
     p = sub.add_parser(
         "simulate",
         help="run a simulator scenario and write recordings + truth.json",
         description="Run a thesis scenario of the physics simulator. Writes Capture4Analysis "
         "JSON, external-sensor CSVs and truth.json (every true parameter) to --out.",
     )
-    p.add_argument("name", nargs="?", choices=[*sorted(SCENARIOS), "fleet"],
+    p.add_argument("name", nargs="?", choices=[*SCENARIO_NAMES, "fleet"],
                    help="scenario (or --program for your own part program); 'fleet' writes a "
                    "synthetic fleet (--machines, --days, --cycles-per-day) with hidden faults")
     p.add_argument("--program", type=Path, metavar="PART.mpf",

@@ -18,12 +18,12 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
-from typing import Any
-
-import numpy as np
-import pandas as pd
+from typing import TYPE_CHECKING, Any
 
 from cnctwin.exceptions import ConfigError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["register"]
 
@@ -147,6 +147,9 @@ def _table(df: pd.DataFrame, title: str) -> None:
 
 
 def _fmt(v: object) -> str:
+    import numpy as np
+    import pandas as pd
+
     if isinstance(v, float | np.floating):
         if not math.isfinite(float(v)):
             return "-"
@@ -157,6 +160,8 @@ def _fmt(v: object) -> str:
 
 
 def _cmd_holes(args: argparse.Namespace) -> int:
+    import pandas as pd
+
     from cnctwin.usecases.figures import plot_deviation_paths, plot_hole_means
     from cnctwin.usecases.quality import deviation_paths
 
@@ -194,6 +199,9 @@ def _parse_measured(text: str) -> dict[int, float]:
 
 
 def _cmd_wear(args: argparse.Namespace) -> int:
+    import numpy as np
+    import pandas as pd
+
     from cnctwin.usecases.figures import plot_hole_means
     from cnctwin.usecases.wear import (
         WearEstimator,
@@ -248,6 +256,8 @@ def _cmd_wear(args: argparse.Namespace) -> int:
 
 
 def _cmd_anomalies(args: argparse.Namespace) -> int:
+    import pandas as pd
+
     from cnctwin.usecases.figures import plot_anomaly_scores
     from cnctwin.usecases.holes import hole_records
     from cnctwin.usecases.replay import replay_detector

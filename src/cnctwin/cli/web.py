@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cnctwin.edge.listen import check_bindable, is_loopback
 from cnctwin.exceptions import ConfigError
 
 __all__ = ["register"]
@@ -83,6 +82,8 @@ def _cmd_web(args: argparse.Namespace) -> int:
         raise ConfigError(f"model file {args.model} does not exist; write one with "
                           "cnctwin.edge.save_spindle_model (docs/edge.md)")
     token = _token(args)
+    from cnctwin.edge.listen import check_bindable, is_loopback
+
     if token is None and not is_loopback(args.host) and not args.insecure:
         raise ConfigError(f"--host {args.host} faces the network: give an access token "
                           "(--token-file FILE or CNCTWIN_WEB_TOKEN), or --insecure to serve "

@@ -84,7 +84,27 @@ class _Sessions:
 
 def add_token_auth(app: Any, token: str, title: str) -> None:
     """401 for every request without the token (header) or a login session (cookie);
-    ``/login`` form (body read up to :data:`LOGIN_BODY_BYTES`, failures throttled)."""
+    ``/login`` form (body read up to :data:`LOGIN_BODY_BYTES`, failures throttled).
+
+    Parameters
+    ----------
+    app : fastapi.FastAPI
+        The dashboard app; gets the middleware, ``GET``/``POST /login`` and
+        ``app.state.sessions``.
+    token : str
+        The access token (at least 16 characters).
+    title : str
+        The dashboard's name on the login form.
+
+    Returns
+    -------
+    None
+
+    Raises
+    ------
+    ConfigError
+        For a token shorter than 16 characters.
+    """
     import hmac
     import html
 
