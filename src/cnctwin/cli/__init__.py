@@ -53,7 +53,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     Returns
     -------
     int
-        Exit code: 0 done, 1 failed, 2 bad input (file, option or value named on stderr).
+        Exit code: 0 done, 1 failed (also: a service such as the Dask scheduler cannot be
+        reached, a job finished only in part), 2 bad input (file, option or value named on
+        stderr).
     """
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -64,7 +66,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         code = args.func(args)
     except CnctwinError as exc:
         print(f"cnctwin {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        # a service that cannot be reached (a Dask scheduler) is a failure, not bad input
+        return 1 if isinstance(exc, ConnectionError) else 2
     except KeyboardInterrupt:
         print(f"cnctwin {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -144,17 +144,29 @@ def run_cluster_tasks(args: argparse.Namespace, label: str, fn: Callable[..., An
 
 
 def _cmd_ingest(args: argparse.Namespace) -> int:
+    from cnctwin.exceptions import ConfigError
     from cnctwin.fleet import find_recordings, ingest_recordings
+    from cnctwin.fleet.ingest import RECORDING_SUFFIXES
 
     found = find_recordings(args.paths)
+    if not found:
+        raise ConfigError(f"no recordings under {', '.join(map(str, args.paths))}: looked for "
+                          f"files ending in {' '.join(RECORDING_SUFFIXES)} and Parquet "
+                          "recording directories (holding hf.parquet)")
     print(f"{len(found)} recordings found", file=sys.stderr)
     with _client(args) as client, _progress("ingest") as progress:
         report = ingest_recordings(found, store_url=args.store, client=client,
                                    machine=args.machine, progress=progress)
     for o in report.failed:
         print(f"skipped {o.path}: {o.reason}", file=sys.stderr)
+    failed = report.count("failed")
     print(f"{report.count('ingested')} ingested, {report.count('already')} already stored, "
-          f"{report.count('failed')} failed (of {len(report.outcomes)}) into {args.store}")
+          f"{failed} failed (of {len(report.outcomes)}) into {args.store}")
+    if failed:
+        print(f"cnctwin fleet ingest: {failed} of {len(report.outcomes)} recordings were not "
+              "stored (reasons above); the others are. Fix or remove those files and run the "
+              "same command again (stored files are recognised and skipped)", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -40,7 +40,7 @@ __all__ = [
     "stored_hashes",
 ]
 
-RECORDING_SUFFIXES = (".json", ".zip", ".csv", ".tsv", ".txt", ".tdms")
+RECORDING_SUFFIXES = (".json", ".zip", ".csv", ".tsv", ".txt", ".tdms", ".parquet")
 """File suffixes taken as recordings when a directory is searched (besides Parquet recording
 directories, which hold ``hf.parquet``)."""
 
