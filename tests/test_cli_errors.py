@@ -109,3 +109,22 @@ def test_the_simulate_choices_are_the_scenarios() -> None:
     from cnctwin.sim.scenarios import SCENARIOS
 
     assert tuple(sorted(SCENARIOS)) == SCENARIO_NAMES
+
+
+@pytest.mark.parametrize(("content", "said"), [
+    (b"", "the file is empty (0 bytes)"),
+    (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", "a PNG image"),
+    (b"[1, 2, 3]", "a JSON array"),
+    (b'{"machine": "m1", "values": []}', "a JSON object with the keys machine, values"),
+    (b"time;current\n0;1\n", "text that is not JSON"),
+])
+def test_a_json_that_is_no_recording_says_what_it_is(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], content: bytes, said: str) -> None:
+    """Issue 24, pt 8: an empty file or a PNG named .json got "JSON without Header/Payload"
+    and a 600-character format list."""
+    f = tmp_path / "run.json"
+    f.write_bytes(content)
+    assert main(["info", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert str(f) in err and said in err and "Traceback" not in err
+    assert len(err) - len(str(f)) < 420  # one readable message, not a format catalogue

@@ -63,7 +63,60 @@ SUPPORTED_FORMATS: dict[str, tuple[str, str, str]] = {
 
 
 def _supported() -> str:
-    return "; ".join(desc for _, _, desc in SUPPORTED_FORMATS.values())
+    """The formats in one line (the details are in docs/real-data.md)."""
+    return ("Capture4Analysis / Data Recorder .json or .zip, Edge dataobject .json, servo "
+            "trace .xml, .parquet, CSV exports (*_hfdata.csv, UMich, KIT), dynamometer .tdms "
+            "(docs/real-data.md)")
+
+
+_MAGIC: tuple[tuple[bytes, str], ...] = (
+    (b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"GIF8", "a GIF image"),
+    (b"%PDF", "a PDF document"), (b"PK\x03\x04", "a zip archive"), (b"\x1f\x8b", "a gzip file"),
+    (b"PAR1", "a Parquet file"), (b"SQLite format 3", "an SQLite database"),
+    (b"TDSm", "a TDMS file"), (b"\x7fELF", "a program"))
+
+
+def describe_content(head: bytes, *, size: int | None = None) -> str:
+    """What the first bytes of a file that is not the expected recording are, in words.
+
+    Parameters
+    ----------
+    head : bytes
+        The first bytes (up to 64 kB) of the file.
+    size : int, optional
+        The file's size [bytes].
+
+    Returns
+    -------
+    str
+        E.g. ``"the file is empty (0 bytes)"``, ``"a PNG image"``, ``"a JSON array"``,
+        ``"a JSON object with the keys a, b"``.
+    """
+    if size == 0 or not head:
+        return "the file is empty (0 bytes)"
+    for magic, what in _MAGIC:
+        if head.startswith(magic):
+            return what
+    text = head.lstrip(b"\xef\xbb\xbf \t\r\n")
+    if not text:
+        return "the file holds only white space"
+    if b"\x00" in head[:4096]:
+        return "a binary file, not text"
+    first = text[:1]
+    if first == b"[":
+        return "a JSON array, not an object"
+    if first == b"{":
+        import json
+
+        try:
+            doc = json.loads(head.decode("utf-8", "replace"))
+        except ValueError:
+            return "JSON-like text that does not parse (cut short or broken)"
+        keys = [str(k) for k in doc][:8] if isinstance(doc, dict) else []
+        return (f"a JSON object with the keys {', '.join(keys)}" if keys
+                else "an empty JSON object")
+    sample = text[:40].decode("utf-8", "replace").splitlines()[0] if text else ""
+    return f"text that is not JSON (it starts with {sample!r})"
 
 
 def _sniff_json(head: bytes) -> str | None:
@@ -126,8 +179,10 @@ def detect_format(path: str | PathLike[str]) -> str:
             return kind
         if suffix == ".json":
             raise FormatError(
-                "JSON without Header/Payload (Capture4Analysis) or header/body.datapoint "
-                f"(Edge dataobject); supported: {_supported()}", path=str(p))
+                f"not a recording: {describe_content(head, size=p.stat().st_size)}; a JSON "
+                "recording has Header/Payload (Capture4Analysis, Data Recorder) or "
+                f"header/body.datapoint (Edge dataobject). cnctwin reads {_supported()}",
+                path=str(p))
     if suffix == ".csv":
         if name.endswith(("_hfdata.csv", "_header.csv", "_hfblockevent.csv",
                           "_hfcallevent.csv")):
