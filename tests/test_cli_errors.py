@@ -128,3 +128,21 @@ def test_a_json_that_is_no_recording_says_what_it_is(
     err = capsys.readouterr().err
     assert str(f) in err and said in err and "Traceback" not in err
     assert len(err) - len(str(f)) < 420  # one readable message, not a format catalogue
+
+
+def test_program_errors_name_the_file_and_point_to_the_subset_once(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 24, pt 8: G-code errors pointed to the subset twice (a module and a document);
+    the overspeed error named no file."""
+    bad = tmp_path / "bad.mpf"
+    bad.write_text("G1 X10 F100\nG5 X1\nM30\n")
+    assert main(["simulate", "--program", str(bad), "--out", str(tmp_path / "o1")]) == 2
+    err = capsys.readouterr().err
+    assert f"{bad}: line 2: 'G5 X1': G5 is not supported" in err
+    assert err.count("subset") == 1 and "docs/simulator.md" in err
+    fast = tmp_path / "fast.mpf"
+    fast.write_text("S30000 M3\nG1 X10 F100\nM30\n")
+    assert main(["simulate", "--program", str(fast), "--out", str(tmp_path / "o2")]) == 2
+    err = capsys.readouterr().err
+    assert f"{fast}: line 1: 'S30000 M3': spindle speed 30000 rpm exceeds" in err
+    assert "Traceback" not in err

@@ -648,7 +648,7 @@ def _parse_block(
         if g in ("18", "19"):
             raise _err(f"G{g}: only G17 supported (XY working plane)", line, text)
         if g not in _G_KNOWN:
-            raise _err(f"G{g} is not supported (see cnctwin.sim.gcode for the subset)", line, text)
+            raise _err(f"G{g} is not supported", line, text)
     for m in mcodes:
         if m not in _M_KNOWN:
             raise _err(f"M{m} is not supported (supported: M2 M3 M4 M5 M6 M8 M9 M17 M30)",

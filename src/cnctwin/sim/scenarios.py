@@ -2033,9 +2033,13 @@ def part_program(
         "process": kind, "material": material})
     _write_program(o, path.name, text, res.paths)
     sink, rpath = _make_sink(o, stem, fmt, max_file_mb)
-    sim = simulate(prog, cfg.machine, seed=seed, start_cycle=START_CYCLE,
-                   start_time=START_TIME if start_time is None else start_time, cutting=hook,
-                   sink=sink, chunk_cycles=chunk_cycles)
+    try:
+        sim = simulate(prog, cfg.machine, seed=seed, start_cycle=START_CYCLE,
+                       start_time=START_TIME if start_time is None else start_time,
+                       cutting=hook, sink=sink, chunk_cycles=chunk_cycles)
+    except GCodeError as exc:  # found while running it (a speed above the machine's limit)
+        raise ConfigError(f"{path}: {exc} (the machine's limits: --machine FILE, or the "
+                          "thesis machine without one)") from None
     _collect(res, sim, sink, rpath, None, None)
     rec = res.recording
     res.truth["limits"] = drive_limits_check(rec, cfg.machine, text)
