@@ -58,3 +58,23 @@ def test_edge_run_status_interval(tmp_path: Path, wear_run: dict[str, Any],
     assert main([*args, "--out", str(tmp_path / "b"), "--status-s", "5"]) == 0
     status = json.loads((tmp_path / "b" / "status.json").read_text())
     assert status["state"] == "finished" and status["cpu_s"] > 0
+
+
+def test_status_table_reads_as_an_engineer_writes() -> None:
+    """Issue 24, pt 8: ``overload │ NONEinput dropped 0`` and ``1.78e+04 ms`` beside seconds."""
+    import io
+
+    from rich.console import Console
+
+    from cnctwin.cli.edge import status_table
+
+    st = {"machine": "m", "state": "running", "cycles": 10, "last_cycle": 9,
+          "cycles_per_s": 500.0, "lag_s": 17.8, "latency_ms": {"p99": 17_800.0},
+          "data_age_s": 0.25, "overload": {"input_dropped": 0, "forward_dropped": 0},
+          "updated": "2026-11-27T07:00:00Z"}
+    buf = io.StringIO()
+    Console(file=buf, width=120).print(status_table(st))
+    text = buf.getvalue()
+    assert "17.8 s (arrival to publish; p99 17.8 s), data age 250 ms" in text
+    assert "none (input dropped 0, forward dropped 0)" in text
+    assert "e+" not in text and "NONE" not in text

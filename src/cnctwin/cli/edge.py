@@ -359,12 +359,30 @@ def _supervise(runner: Any, on_tick: Any) -> dict[str, Any]:
         return dict(runner.run())
 
 
+def _ms_to_s(v: Any) -> float | None:
+    return float(v) / 1e3 if isinstance(v, int | float) else None
+
+
 def _fmt(v: Any, spec: str = ".3g") -> str:
     if v is None:  # not known yet (null in status.json)
         return "-"
     if isinstance(v, float):
         return "-" if math.isnan(v) else format(v, spec)
     return str(v)
+
+
+def _duration(seconds: Any) -> str:
+    """A time as a person reads it: ms below 1 s, s below 2 min, then min and h."""
+    if seconds is None or not isinstance(seconds, int | float) or math.isnan(seconds):
+        return "-"
+    v = float(seconds)
+    if abs(v) < 1.0:
+        return f"{v * 1e3:.3g} ms"
+    if abs(v) < 120.0:
+        return f"{v:.1f} s"
+    if abs(v) < 7200.0:
+        return f"{v / 60:.1f} min"
+    return f"{v / 3600:.1f} h"
 
 
 def status_table(st: dict[str, Any]) -> Any:
@@ -381,9 +399,9 @@ def status_table(st: dict[str, Any]) -> Any:
         ("cycles", f"{st.get('cycles', 0)} (last {st.get('last_cycle')})"),
         ("cycles/s", f"{_fmt(rate, '.0f')} (machine needs {_fmt(need, '.0f')}; "
                      f"busy {_fmt(st.get('cycles_per_busy_s', float('nan')), '.0f')}/s)"),
-        ("lag", f"{_fmt(st.get('lag_s', float('nan')))} s (arrival to publish, p99 "
-                f"{_fmt((st.get('latency_ms') or {}).get('p99'))} ms); data age "
-                f"{_fmt(st.get('data_age_s', float('nan')))} s"),
+        ("lag", f"{_duration(st.get('lag_s'))} (arrival to publish; p99 "
+                f"{_duration(_ms_to_s((st.get('latency_ms') or {}).get('p99')))}), data age "
+                f"{_duration(st.get('data_age_s'))}"),
         ("holes", str(st.get("holes", 0))),
         ("alarms", str(st.get("alarms", 0))),
         ("gaps", f"{st.get('gaps', 0)} ({st.get('missing_cycles', 0)} cycles missing), "
@@ -406,8 +424,8 @@ def status_table(st: dict[str, Any]) -> Any:
     ov = st.get("overload") or {}
     if ov:
         lost = sum(int(v) for v in ov.values())
-        rows.append(("overload", ("NONE" if lost == 0 else "LOSSES: ")
-                     + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in ov.items())))
+        counts = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in ov.items())
+        rows.append(("overload", f"none ({counts})" if lost == 0 else f"LOSSES: {counts}"))
     for msg in (st.get("issues") or [])[-3:]:
         rows.append(("issue", str(msg)[:120]))
     for k, v in rows:
@@ -656,6 +674,7 @@ def _run(args: argparse.Namespace) -> int:
             with Live(console=console, refresh_per_second=2, transient=False) as live:
                 final = rt.run(on_status=lambda st: live.update(status_table(st)))
                 live.update(status_table(final))
+            console.line()  # the summary line below starts on its own line
     except KeyboardInterrupt:  # run() has already finished the processors and sinks
         final = rt.final_status or rt.status()
     finally:
