@@ -179,6 +179,10 @@ def test_trends(client: Any, wear12_rec: Recording) -> None:
     np.testing.assert_allclose(t["relative_increase"],
                                relative_increase(torque, baseline=12, set_size=6), rtol=1e-12)
     assert t["set_pattern"]["n_sets"] == 2
+    # issue 24, pt 8: a 15-hole moving average over 12 holes is one flat line: left out, said
+    assert "torque_ma_nm" not in t and t["window"] == 15
+    assert any("15-hole moving average needs at least 15 holes (this has 12)" in n
+               for n in t["notes"])
     # the camera readings the simulator writes beside the recording (thermal_camera.csv) are
     # found and calibrate the soft sensor (issue 16, point 3); camera noise 4 °C (simulator
     # ThermalCamera), so a fit of 12 readings within 8 °C RMS

@@ -215,7 +215,8 @@ def test_plant_page_in_the_browser(plant_server: str, tmp_path: Path) -> None:
     dom = _dump_dom(plant_server + "/plant", tmp_path)
     tiles = dict((m, st) for st, m in re.findall(
         r'class="tile state-(\w+)" data-machine="([^"]+)"', dom))
-    assert sorted(tiles.values()) == ["finished", "stale"] and tiles["M2-silent"] == "stale"
+    # labelled by the machine each status.json names (issue 24, pt 8: not the folder name)
+    assert sorted(tiles.values()) == ["finished", "stale"] and tiles["DMU-2"] == "stale"
     text = _visible_text(dom)
     assert "no status for" in text  # the stale machine says why
     assert not _REPRS.search(text), _REPRS.search(text)

@@ -160,3 +160,18 @@ def test_a_malformed_state_directory_degrades_one_tile(tmp_path: Path, live_dir:
         for name in cases:
             live = client.get("/live", params={"machine": name})
             assert live.status_code == 200, name
+
+
+def test_tiles_are_labelled_by_machine_not_by_a_generic_folder(tmp_path: Path) -> None:
+    """Issue 24, pt 8: a plant tile was labelled "state" (the folder of --out .../state)."""
+    from cnctwin.web.live import directory_labels
+
+    a = tmp_path / "mill-7" / "state"
+    b = tmp_path / "mill-8" / "state"
+    c = tmp_path / "lathe" / "out"
+    for d in (a, b, c):
+        d.mkdir(parents=True)
+    (a / "status.json").write_text(json.dumps({"machine": "DMC-7", "state": "running"}))
+    (c / "status.json").write_text("[broken")
+    labels = directory_labels([a, b, c])
+    assert list(labels) == ["DMC-7", "mill-8/state", "lathe/out"]

@@ -116,9 +116,14 @@ def trends(holes: pd.DataFrame, recs: Sequence[Recording], *, set_size: int = 6,
     current = holes["current_mean_a"].to_numpy(dtype=np.float64)
     out["hole"] = holes["hole"].to_numpy().tolist()
     out["torque_mean_nm"] = torque
-    out["torque_ma_nm"] = moving_average(torque, window=window)
     out["current_mean_a"] = current
-    out["current_ma_a"] = moving_average(current, window=window)
+    out["window"] = window
+    if len(holes) >= window:
+        out["torque_ma_nm"] = moving_average(torque, window=window)
+        out["current_ma_a"] = moving_average(current, window=window)
+    else:  # a centred window over all of them is one flat line: not a trend
+        notes.append(f"{window}-hole moving average needs at least {window} holes "
+                     f"(this has {len(holes)})")
     out["energy_j"] = holes["energy_j"].to_numpy(dtype=np.float64)
     base = min(baseline, len(holes))
     try:

@@ -116,7 +116,9 @@ async def tail_lines(path: Path, *, from_start: bool, poll_s: float = 0.2,
 
 
 def directory_labels(paths: Iterable[str | os.PathLike[str]]) -> dict[str, Path]:
-    """A label for each edge state directory: its folder name, primed when two share one.
+    """A label for each edge state directory: the machine its ``status.json`` names (the
+    ``--machine`` of the run), else its folder name (a folder with a generic name such as
+    ``state`` or ``out`` with its parent's: ``mill-7/state``); primed when two share one.
 
     Parameters
     ----------
@@ -131,11 +133,32 @@ def directory_labels(paths: Iterable[str | os.PathLike[str]]) -> dict[str, Path]
     out: dict[str, Path] = {}
     for item in paths:
         p = Path(item)
-        label = (p.parent if p.suffix.lower() == ".jsonl" else p).name or str(p)
+        d = p.parent if p.suffix.lower() == ".jsonl" else p
+        label = _machine_named(d) or _folder_label(d)
         while label in out:  # two state directories of one name in different folders
             label += "'"
         out[label] = p
     return out
+
+
+_GENERIC = {"state", "out", "edge", "output", "results", "run", "data", "live", "tmp"}
+
+
+def _folder_label(d: Path) -> str:
+    name = d.name or str(d)
+    if name.lower() in _GENERIC and d.parent.name:
+        return f"{d.parent.name}/{name}"
+    return name
+
+
+def _machine_named(d: Path) -> str | None:
+    """The machine name in ``d/status.json`` (None when there is none or it is unreadable)."""
+    try:
+        doc = json.loads((d / "status.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    m = doc.get("machine") if isinstance(doc, dict) else None
+    return m.strip() if isinstance(m, str) and m.strip() else None
 
 
 class LiveSource:

@@ -118,8 +118,8 @@ const cnctwin = (() => {
       $("trend-notes").innerHTML = t.notes.map((n) => `<li>${esc(n)}</li>`).join("");
       const traces = [
         {x: t.hole, y: t.torque_mean_nm, mode: "markers", name: "torque per hole [Nm]", marker: {size: 4}},
-        {x: t.hole, y: t.torque_ma_nm, mode: "lines", name: "15-hole moving average [Nm]"},
       ];
+      if (t.torque_ma_nm) traces.push({x: t.hole, y: t.torque_ma_nm, mode: "lines", name: `${t.window}-hole moving average [Nm]`});
       if (t.relative_increase) traces.push({x: t.hole, y: t.relative_increase.map((v) => v === null ? null : 100 * v),
         mode: "lines", name: `increase over the first ${t.baseline_holes} holes [%]`, yaxis: "y2"});
       await Plotly.react($("trend-plot"), traces, {margin: {l: 60, r: 60, t: 30, b: 40}, title: {text: "cutting torque per hole (wear indicator)", font: {size: 13}},
