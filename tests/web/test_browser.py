@@ -92,6 +92,9 @@ def test_recording_page_draws_the_plot(server: str, tmp_path: Path) -> None:
 def test_overview_page(server: str, tmp_path: Path) -> None:
     dom = _dump_dom(server + "/", tmp_path)
     assert "sinumerik_adapter_840Dsl" in dom and "1 (7.72 s)" in dom
+    # issue 24, pt 8: the recordings table was wider than a 1400 px window
+    width = int(re.search(r'data-scroll-width="(\d+)"', dom).group(1))  # type: ignore[union-attr]
+    assert width <= 1400, width
 
 
 def test_live_page_receives_events(server: str, tmp_path: Path, live_dir: Path) -> None:

@@ -42,6 +42,20 @@ def _time(v: Any) -> str:
     return _e(text.replace("+00:00", "Z"))
 
 
+def _short_time(v: Any, *, same_day_as: Any = None) -> str:
+    """``2023-12-22 13:23:41`` (to the second; the full time in the tooltip), only the time of
+    day when ``same_day_as`` is on the same day."""
+    if v is None:
+        return "–"
+    full = _time(v)
+    text = full.replace("T", " ")
+    if len(text) >= 19:
+        day, clock = text[:10], text[11:19]
+        ref = _time(same_day_as)[:10] if same_day_as is not None else None
+        text = clock if ref == day else f"{day} {clock}"
+    return f'<span title="{full}">{_e(text)}</span>'
+
+
 def _page(title: str, body: str, *, page: str, config: dict[str, Any] | None = None,
           plotly: bool = True) -> str:
     cfg = json.dumps(config or {}).replace("</", "<\\/")
@@ -231,9 +245,10 @@ def overview_page(title: str, machines: Sequence[dict[str, Any]], entries: Seque
                           f"cannot be read: {_e(e.error)}</td></tr>")
             continue
         r_rows.append(
-            f"<tr><td><a href=\"/recordings/{_q(e.id)}\" title=\"{_e(e.id)}\">{_e(e.label)}</a>"
-            f"</td><td>{_e(e.machine or '?')}</td><td>{_e(e.source_format)}</td>"
-            f"<td>{_time(e.start_time)}</td><td>{_time(e.end_time)}</td>"
+            f"<tr><td class=\"label\"><a href=\"/recordings/{_q(e.id)}\" title=\"{_e(e.id)}\">"
+            f"{_e(e.label)}</a></td><td>{_e(e.machine or '?')}</td>"
+            f"<td>{_e(e.source_format)}</td><td>{_short_time(e.start_time)}</td>"
+            f"<td>{_short_time(e.end_time, same_day_as=e.start_time)}</td>"
             f"<td>{_num(e.duration_s, '{:.3f}', 's')}</td><td>{e.n_cycles}</td>"
             f"{_quality_cells(e)}</tr>")
     src = f"store {_e(store_url)}" if store_url else "recording files"
@@ -248,10 +263,10 @@ def overview_page(title: str, machines: Sequence[dict[str, Any]], entries: Seque
 <p class="muted">Rate: nominal = 1 / cycle time; effective = recorded cycles per second of the
 counter span (gaps lower it). Jitter: scatter of the source's wall-clock stamps about the cycle
 counter. Issues: what the reader repaired (hover for the list).</p>
-<table id="recordings"><thead><tr><th>recording</th><th>machine</th><th>format</th>
+<div class="wide"><table id="recordings"><thead><tr><th>recording</th><th>machine</th><th>format</th>
 <th>start (UTC)</th><th>end (UTC)</th><th>duration</th><th>cycles</th><th>rate</th>
 <th>effective</th><th>gaps (missing)</th><th>jitter</th><th>partial</th><th>issues</th></tr>
-</thead><tbody>{''.join(r_rows)}</tbody></table>""" if entries else ""
+</thead><tbody>{''.join(r_rows)}</tbody></table></div>""" if entries else ""
     body = f"""
 <h1>{_e(title)}: fleet</h1>
 <p class="muted">Source: {src}. {len(entries)} recordings.

@@ -241,6 +241,8 @@ const cnctwin = (() => {
     else if (page === "machine") useCases(c.api);
     else if (page === "live") livePage(c);
     if ($("plant")) setInterval(refreshPlant, 2000);
+    // the page's own width, for the layout check of the tests (nothing wider than the window)
+    document.body.dataset.scrollWidth = String(document.documentElement.scrollWidth);
   }
 
   // ---------------------------------------------------------------- plant tiles
