@@ -87,6 +87,13 @@ def test_recording_page_draws_the_plot(server: str, tmp_path: Path) -> None:
     # the use-case section filled from the API: 12 holes (the simulated program)
     assert re.search(r'id="holes-info"[^>]*>12 holes', dom)
     assert dom.count("<tr>") > 12
+    # issue 24, pt 8: the wear plot's right axis read 0.399/0.214/0.028 % (ticks synced to
+    # the left axis' grid); now round numbers, and whole hole numbers on the x axis
+    y2 = [float(v) for v in re.findall(
+        r'class="y2tick"><text[^>]*data-unformatted="([-\d.e]+)"', dom)]
+    assert len(y2) >= 3
+    assert all(abs(v * 20 - round(v * 20)) < 1e-6 * max(1.0, abs(v * 20))
+               or abs(v - round(v, 1)) < 1e-9 for v in y2), y2
 
 
 def test_overview_page(server: str, tmp_path: Path) -> None:

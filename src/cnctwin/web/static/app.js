@@ -30,6 +30,10 @@ const cnctwin = (() => {
   }
 
   // ---------------------------------------------------------------- signal plot
+  // hole numbers are whole: no 0.5 or 1.5 ticks on a short run
+  const holeAxis = (holes) => ({title: {text: "hole"}, tickformat: "d",
+    ...((holes || []).length <= 20 ? {dtick: 1} : {})});
+
   function stackedLayout(traces, title) {
     const n = traces.length, gap = 0.04, h = (1 - gap * (n - 1)) / n;
     const layout = {margin: {l: 70, r: 20, t: 30, b: 40}, showlegend: false, title: {text: title, font: {size: 13}},
@@ -123,8 +127,11 @@ const cnctwin = (() => {
       if (t.relative_increase) traces.push({x: t.hole, y: t.relative_increase.map((v) => v === null ? null : 100 * v),
         mode: "lines", name: `increase over the first ${t.baseline_holes} holes [%]`, yaxis: "y2"});
       await Plotly.react($("trend-plot"), traces, {margin: {l: 60, r: 60, t: 30, b: 40}, title: {text: "cutting torque per hole (wear indicator)", font: {size: 13}},
-        xaxis: {title: {text: "hole"}}, yaxis: {title: {text: "torque [Nm]"}},
-        yaxis2: {title: {text: "increase [%]"}, overlaying: "y", side: "right"}, legend: {orientation: "h"}},
+        xaxis: holeAxis(t.hole), yaxis: {title: {text: "torque [Nm]"}},
+        // its own round ticks (plotly's default for an overlaying axis follows the left one's
+        // grid: 1.184/0.671/0.159 %), no second grid
+        yaxis2: {title: {text: "increase [%]"}, overlaying: "y", side: "right", tickmode: "auto",
+          nticks: 6, showgrid: false, zeroline: false}, legend: {orientation: "h"}},
         {responsive: true, displaylogo: false});
       if (t.temperature) {
         const T = t.temperature;
@@ -132,7 +139,7 @@ const cnctwin = (() => {
           {x: T.hole, y: T.camera_c, mode: "markers", name: "thermal camera [°C]"},
           {x: T.hole, y: T.predicted_c, mode: "lines", name: `soft sensor [°C] (rmse ${fmt(T.rmse_c)} °C)`}],
           {margin: {l: 60, r: 20, t: 30, b: 40}, title: {text: "tool temperature", font: {size: 13}},
-            xaxis: {title: {text: "hole"}}, yaxis: {title: {text: "°C"}}, legend: {orientation: "h"}},
+            xaxis: holeAxis(T.hole), yaxis: {title: {text: "°C"}}, legend: {orientation: "h"}},
           {responsive: true, displaylogo: false});
       } else { $("temperature-plot").style.display = "none"; }
       if (t.quality && t.quality.length) table($("quality-table"), Object.keys(t.quality[0]), t.quality, 500);
