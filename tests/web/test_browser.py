@@ -259,3 +259,20 @@ def test_pages_show_no_python_reprs_and_a_time_range(plant_server: str, tmp_path
     assert re.search(r'id="holes-info"[^>]*>0 holes', dom)
     for name in ("holes-table", "trend-plot", "temperature-plot"):
         assert re.search(rf'id="{name}"[^>]*style="display: none;"', dom), name
+
+
+def test_compare_page_draws_the_twin_curves(wear12: dict[str, Any], tmp_path: Path) -> None:
+    """Issue 24, pt 8: the web compare page had only the table; the CLI's compare.html has
+    the following-error and current curves of machine and twin per axis. Now the page draws
+    them (plotly in Chromium)."""
+    from cnctwin.machine import MachineFile, save_machine
+
+    machine = save_machine(MachineFile(), tmp_path / "machine.toml")
+    with _serve(["--recording", str(wear12["path"]), "--machine", str(machine)],
+                tmp_path / "server.log") as url:
+        dom = _dump_dom(url + "/recordings/file:0/compare", tmp_path)
+    plots = re.findall(r'class="plot compare-plot[^"]*" data-axis="(\w+)"[^>]*'
+                       r'data-points="(\d+)"', dom)
+    assert {a for a, _ in plots} == {"X1", "Y1", "Z1"}, plots
+    assert all(int(n) > 1000 for _, n in plots)
+    assert dom.count('class="main-svg"') >= 3

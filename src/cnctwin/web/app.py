@@ -298,8 +298,28 @@ class Dashboard:
         def make() -> dict[str, Any]:
             from cnctwin.compare import compare_recording
 
-            doc = compare_recording(self.catalog.recording(entry_id), mf).to_dict()
-            return dict(analyses.jsonable({"machine_file": str(mf.path or ""), **doc}))
+            cmp = compare_recording(self.catalog.recording(entry_id), mf)
+            doc = cmp.to_dict()
+            # the curves of the CLI's compare.html, min/max-decimated to a plot's width
+            plots: dict[str, dict[str, Any]] = {}
+            for name, a in cmp.axes.items():
+                s = a.series
+                if "time_s" not in s or not len(s["time_s"]):
+                    continue
+                t = np.asarray(s["time_s"], dtype=np.float64) - float(s["time_s"][0])
+                curves = {"fe_meas_um": s["fe_meas"] * 1e3, "fe_pred_um": s["fe_pred"] * 1e3,
+                          "fe_diff_um": (s["fe_meas"] - s["fe_pred"]) * 1e3}
+                if "i_meas" in s:
+                    curves.update(i_meas_a=s["i_meas"], i_pred_a=s["i_pred"])
+                plot: dict[str, Any] = {"spans_s": [
+                    [sp["start_s"] - float(s["time_s"][0]), sp["end_s"] - float(s["time_s"][0])]
+                    for sp in a.spans]}
+                for key, y in curves.items():
+                    env = envelope_decimate(t, np.asarray(y, dtype=np.float64), px=1500)
+                    plot[key] = {"x": env.x, "y": env.y}
+                plots[name] = plot
+            return dict(analyses.jsonable({"machine_file": str(mf.path or ""), **doc,
+                                           "plots": plots}))
 
         return dict(self._cached(("compare", entry_id), make))
 

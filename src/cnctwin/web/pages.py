@@ -263,8 +263,8 @@ def overview_page(title: str, machines: Sequence[dict[str, Any]], entries: Seque
 <p class="muted">Rate: nominal = 1 / cycle time; effective = recorded cycles per second of the
 counter span (gaps lower it). Jitter: scatter of the source's wall-clock stamps about the cycle
 counter. Issues: what the reader repaired (hover for the list).</p>
-<div class="wide"><table id="recordings"><thead><tr><th>recording</th><th>machine</th><th>format</th>
-<th>start (UTC)</th><th>end (UTC)</th><th>duration</th><th>cycles</th><th>rate</th>
+<div class="wide"><table id="recordings"><thead><tr><th>recording</th><th>machine</th>
+<th>format</th><th>start (UTC)</th><th>end (UTC)</th><th>duration</th><th>cycles</th><th>rate</th>
 <th>effective</th><th>gaps (missing)</th><th>jitter</th><th>partial</th><th>issues</th></tr>
 </thead><tbody>{''.join(r_rows)}</tbody></table></div>""" if entries else ""
     body = f"""
@@ -420,8 +420,15 @@ cycles; an axis departs where that exceeds {_num(doc.get('limits', {}).get('resi
 <th>current residual ratio [-]</th><th>twin</th><th>why</th></tr></thead>
 <tbody>{''.join(rows)}</tbody></table>
 {f'<h3>Not compared</h3><ul>{skipped}</ul>' if skipped else ''}
+<div id="compare-plots">{"".join(
+    f'<h2>Axis {_e(n)}</h2><div class="plot compare-plot" data-axis="{_e(n)}"></div>'
+    for n in doc.get("plots", {}))}</div>
+<p class="muted">Per axis: the following error of machine and twin, their difference
+(departures shaded) and the motor current (thesis Figs. 3.2/3.3 style), min/max of each pixel
+column.</p>
 <p><a href="/recordings/{_q(e.id)}">back to the recording</a></p>"""
-    return _page(f"{title}: {e.label} vs twin", body, page="compare")
+    return _page(f"{title}: {e.label} vs twin", body, page="compare",
+                 config={"api": f"/api/recordings/{_q(e.id)}/compare"})
 
 
 def machine_page(title: str, machine: str, entries: Sequence[Entry], *, calibrated: bool,

@@ -242,11 +242,40 @@ const cnctwin = (() => {
     });
   }
 
+  // ---------------------------------------------------------------- twin comparison
+  async function comparePage(c) {
+    const doc = await getJSON(c.api);
+    for (const el of document.querySelectorAll(".compare-plot")) {
+      const p = doc.plots[el.dataset.axis];
+      if (!p) continue;
+      const tr = [
+        {x: p.fe_meas_um.x, y: p.fe_meas_um.y, name: "machine", yaxis: "y", axisTitle: "following error [µm]"},
+        {x: p.fe_pred_um.x, y: p.fe_pred_um.y, name: "twin", yaxis: "y", line: {dash: "dash"}},
+        {x: p.fe_diff_um.x, y: p.fe_diff_um.y, name: "machine - twin", yaxis: "y2", axisTitle: "machine - twin [µm]"},
+      ];
+      if (p.i_meas_a) {
+        tr.push({x: p.i_meas_a.x, y: p.i_meas_a.y, name: "current, machine", yaxis: "y3", axisTitle: "current [A]"});
+        tr.push({x: p.i_pred_a.x, y: p.i_pred_a.y, name: "current, twin", yaxis: "y3", line: {dash: "dash"}});
+      }
+      const panels = tr.filter((t) => t.axisTitle);
+      const layout = stackedLayout(panels, "");
+      layout.xaxis.title.text = "time [s]";
+      layout.showlegend = true;
+      layout.legend = {orientation: "h"};
+      layout.shapes = p.spans_s.map(([a, b]) => ({type: "rect", xref: "x", yref: "paper", x0: a, x1: b, y0: 0, y1: 1,
+        fillcolor: "rgba(211,47,47,0.15)", line: {width: 0}}));
+      const traces = tr.map((t) => ({type: "scatter", mode: "lines", line: {width: 1, ...(t.line || {})}, ...t}));
+      await Plotly.react(el, traces, layout, {responsive: true, displaylogo: false});
+      el.dataset.points = String(traces.reduce((n, t) => n + t.x.length, 0));
+    }
+  }
+
   function start() {
     const page = document.body.dataset.page, c = cfg();
     if (page === "recording") recordingPage(c);
     else if (page === "machine") useCases(c.api);
     else if (page === "live") livePage(c);
+    else if (page === "compare") comparePage(c);
     if ($("plant")) setInterval(refreshPlant, 2000);
     // the page's own width, for the layout check of the tests (nothing wider than the window)
     document.body.dataset.scrollWidth = String(document.documentElement.scrollWidth);
