@@ -1,13 +1,15 @@
 """Hidden round trip through the command line (issue 12 acceptance).
 
-20 machines with hidden spindle and loop parameters drawn at random from their seed are
+8 machines with hidden spindle and loop parameters drawn at random from their seed are
 simulated (air cut, one drilling cut with the dynamometer, the axis test program);
 ``cnctwin calibrate spindle`` and ``cnctwin calibrate axes`` recover them from the files:
 
 * accuracy: Kt, viscous and Coulomb friction within 2 %, Kv within 5 %, jerk time within 10 %
   of the hidden values (issue 12), every seed;
 * honesty: each hidden value inside its stated 95 % interval (value +- 1.96 standard
-  uncertainties) in at least 18 of the 20 seeds.
+  uncertainties) in at least 7 of the 8 seeds (the 20-seed campaign with its coverage per
+  parameter is ``scripts/validate_calibration.py``, docs/validation-calibration.md; 8 seeds
+  keep this test at about a minute of the suite's 15).
 
 Two physical referrals are applied to the hidden values before comparing, because the
 machine file states what the recordings can show:
@@ -33,7 +35,8 @@ import pytest
 from cnctwin.machine import Machine, load_machine
 from tests.calibration._campaign import calibrate, hidden_machine, simulate_campaign
 
-N_SEEDS = 20
+N_SEEDS = 8
+MIN_INSIDE = 7
 DT = 0.002
 
 TOLERANCE = {  # relative, issue 12
@@ -90,4 +93,5 @@ def test_hidden_round_trip_through_the_cli(tmp_path: Path) -> None:
                 f"{100 * TOLERANCE[key]:g} %")
             inside[key] += abs(v - h) <= 1.96 * u
     for key, n in inside.items():
-        assert n >= 18, f"{key}: hidden value inside the stated 95 % interval in {n} of 20 seeds"
+        assert n >= MIN_INSIDE, (f"{key}: hidden value inside the stated 95 % interval in {n} "
+                                 f"of {N_SEEDS} seeds")
