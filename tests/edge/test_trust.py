@@ -171,3 +171,35 @@ def _holes_in(out: Path) -> int:
         return 0
     return sum(1 for x in p.read_text().splitlines() if '"kind": "hole"' in x
                or '"kind":"hole"' in x)
+
+
+@pytest.mark.parametrize(("fault", "hole", "kind"), [
+    ({"type": "ToolBreakage", "hole": 2, "depth_fraction": 0.7}, 2, "breakage"),
+    ({"type": "HardnessChange", "hole": 3, "factor": 1.4}, 3, "load_rise"),
+])
+def test_faults_are_found_on_their_hole(machine: dict[str, Any], fault: dict[str, Any],
+                                        hole: int, kind: str) -> None:
+    """Issue 24 acceptance, the faulted runs: draw 102 with a drill breaking at 70 % of hole 2,
+    or the load rising 40 % from hole 3 on (a worn drill, harder stock): the default
+    detectors alarm on that hole first, nothing before it (the healthy run of the same draw
+    gives no alarm, test_varied_production_gives_no_false_result)."""
+    d: Path = machine["dir"]
+    prog = production_program(102, operations=8)
+    part = d / f"fault_{kind}.mpf"
+    part.write_text(prog.text, encoding="utf-8")
+    assert cli("simulate", "--program", part, "--machine", machine["machine"], "--material",
+               "aisi1045", "--seed", 102, *machine["sets"], "--option",
+               f"faults={json.dumps([fault])}", "--out", d / f"sim_fault_{kind}") == 0
+    truth = json.loads((d / f"sim_fault_{kind}" / "truth.json").read_text())
+    assert truth["faults"][0]["hole"] == hole
+    out = d / f"edge_fault_{kind}"
+    assert cli("edge", "run", "--source", d / f"sim_fault_{kind}" / f"fault_{kind}.json",
+               "--machine", machine["machine"], "--out", out, "--no-twin") == 0
+    msgs = [json.loads(x) for x in (out / "results.jsonl").read_text().splitlines()]
+    alarms = [m for m in msgs if m["kind"] == "alarm"]
+    assert alarms, "the fault was not found"
+    first = alarms[0]
+    assert first["detector"] == "HoleLoadJudge" and first["fault"] == kind
+    assert first["hole"] == hole, first["message"]
+    holes = [m for m in msgs if m["kind"] == "hole"]
+    assert len(holes) == prog.holes  # the holes are still counted

@@ -45,7 +45,8 @@ RESULT_KINDS: dict[str, str] = {
     "torque": "cutting torque of a contiguous run of cycles (arrays, one value per cycle)",
     "hole_start": "a plunge of the drilling axis began (first downward Z motion)",
     "hole": "a hole is complete: its row of cnctwin.usecases.holes.hole_record",
-    "alarm": "an anomaly score crossed its threshold upward",
+    "alarm": "an anomaly score crossed its threshold upward, or a hole judged against its cut "
+             "condition (HoleLoadJudge: breakage, no load, load rise or drop)",
     "twin": "a window of the stream against the calibrated twin (cnctwin.compare): residual "
             "ratio and departures per axis",
     "gap": "the CYCLE counter jumped: cycles missing (never invented)",

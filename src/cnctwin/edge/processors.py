@@ -31,6 +31,7 @@ from cnctwin.machine import MachineFile
 from cnctwin.recording import CounterGap, Recording, RecordingMeta
 from cnctwin.spindle import SpeedChangeFlags, SpindleModel, StreamingTorqueEstimator
 from cnctwin.usecases.anomaly import Detector, PhysicsResidualDetector
+from cnctwin.usecases.hole_load import HoleLoadJudge
 from cnctwin.usecases.holes import HOLE_COLUMNS, HoleEvents, holes_from_arrays
 
 __all__ = ["TORQUE_FLAGS", "AnomalyProcessor", "HoleProcessor", "TorqueProcessor",
@@ -217,6 +218,11 @@ class HoleProcessor:
         -1 outside the material), ``CUT_PROGRESS|<z>`` (tip depth / hole depth),
         ``CUT_DEPTH|<z>`` [mm], ``CUT_FEED|<z>`` [mm/min] and ``CUT_SPEED|<spindle>`` [rpm].
         Needs ``CMD_SPEED|<spindle>``; without it no cycle counts as cutting.
+    load_judge : HoleLoadJudge or bool, default True
+        Judges each completed hole against the taught load of its cut condition (tool,
+        cycle, depth, speed, feed; :class:`cnctwin.usecases.hole_load.HoleLoadJudge`, True:
+        its defaults): a broken drill, a hole without load, a load rise or drop give an
+        ``alarm`` (``detector`` ``HoleLoadJudge``, ``fault``, ``message``). False: none.
     """
 
     name = "holes"
@@ -225,7 +231,11 @@ class HoleProcessor:
                  z_axis: str = "Z1", xy_axes: tuple[str, str] = ("X1", "Y1"),
                  window_s: float = 0.6, set_size: int = 6, settle_s: float = 1.0,
                  max_buffer_s: float = 300.0, min_speed_mm_s: float = 0.05,
-                 live_context: bool = True) -> None:
+                 live_context: bool = True,
+                 load_judge: HoleLoadJudge | bool = True) -> None:
+        self.load_judge: HoleLoadJudge | None = (
+            HoleLoadJudge() if load_judge is True else load_judge or None)
+        self.load_alarms = 0
         self.model = model
         self.spindle, self.z_axis, self.xy_axes = spindle, z_axis, xy_axes
         self.window_s, self.set_size, self.settle_s = window_s, set_size, settle_s
@@ -393,6 +403,16 @@ class HoleProcessor:
                         "this run has; the row covers only the part after the restart")
                 self._resumed_after = None
             out.append(Result("hole", int(row["end_cycle"]), msg))
+            if self.load_judge is not None and not msg.get("partial"):
+                verdict = self.load_judge.judge(payload)
+                if verdict is not None:
+                    self.load_alarms += 1
+                    out.append(Result("alarm", int(row["end_cycle"]), {
+                        "detector": "HoleLoadJudge", "fault": verdict.kind,
+                        "cycle": int(row["end_cycle"]), "score": verdict.ratio,
+                        "reference_nm": verdict.reference_nm, "hole": verdict.hole,
+                        "message": verdict.message,
+                        "units": {"score": "-", "reference_nm": "Nm"}}))
             if self.cut is not None:
                 self.cut.hole_done(payload)
             self.holes += 1

@@ -1943,6 +1943,7 @@ def part_program(
     progress: ProgressFn | None = None,
     start_time: pd.Timestamp | str | None = None,
     first_hole: int = 0,
+    faults: Sequence[Fault | Mapping[str, Any]] = (),
 ) -> ScenarioResult:
     """Any part program of the supported G-code subset on a machine description.
 
@@ -1968,6 +1969,12 @@ def part_program(
         UTC time of the first cycle; default the scenarios' common start time.
     first_hole : int, default 0
         Holes the drill has made before this program (its flank wear starts there).
+    faults : sequence, default ()
+        Faults of a drilling program (:class:`~cnctwin.sim.faults.ToolBreakage`,
+        :class:`~cnctwin.sim.faults.HardnessChange`, :class:`~cnctwin.sim.faults.Chatter`,
+        :class:`~cnctwin.sim.faults.LooseTool`, or dicts with ``type``: ``--option
+        faults='[{"type": "ToolBreakage", "hole": 3}]'``); hole numbers count the program's
+        holes from ``first_hole``. In ``truth.json`` under ``faults``.
     fmt : str, default 'c4a'
         Recording format: ``'c4a'`` (Capture4Analysis JSON) or ``'parquet'`` (chunk directory).
     max_file_mb : float, optional
@@ -1999,6 +2006,10 @@ def part_program(
         raise ConfigError(f"{path}: {exc}; the supported subset is listed in "
                           "docs/simulator.md") from None
     cfg = ScenarioConfig.build(overrides, machine=machine)
+    flist = _faults_from(faults)
+    if flist and material is None:
+        raise ConfigError("faults need a cutting load: give --material (a program in air has "
+                          "no process to break or wear)")
     o = _prepare(out)
     stem = path.stem
     upper = text.upper()
@@ -2019,18 +2030,21 @@ def part_program(
             feeds = [float(v) for v in re.findall(r"\bF(\d*\.?\d+)", upper)] or [0.1]
             hook = DrillingProcess(cfg, material=mat, feed_mm_per_rev=feeds[0],
                                    speed_rpm=max(speeds), hole_depth_mm=20.0,
-                                   surface_z_mm=surface_z_mm, faults=(), rng=rng, truth=None,
-                                   daq=None, progress=pf, first_hole=first_hole)
+                                   surface_z_mm=surface_z_mm, faults=flist, rng=rng,
+                                   truth=None, daq=None, progress=pf, first_hole=first_hole)
         else:
             if mat.milling is None:
                 raise ConfigError(f"material {material!r} has no milling coefficients; the "
                                   "program has no drilling cycle, so it mills: choose al7050")
+            if flist:
+                raise ConfigError("faults are simulated in drilling programs (a drilling "
+                                  "cycle); this program mills")
             kind = "milling"
             hook = MillingProcess(cfg, material=mat, surface_z_mm=surface_z_mm, faults=(),
                                   rng=rng, truth=None, daq=None, progress=pf)
     res = ScenarioResult("part_program", truth={
         **_base_truth("part_program", seed, overrides, cfg), "program": str(path),
-        "process": kind, "material": material})
+        "process": kind, "material": material, "faults": [fault_to_dict(f) for f in flist]})
     _write_program(o, path.name, text, res.paths)
     sink, rpath = _make_sink(o, stem, fmt, max_file_mb)
     try:

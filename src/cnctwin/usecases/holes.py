@@ -87,6 +87,8 @@ HOLE_COLUMNS: dict[str, str] = {
     "current_first_a": "mean CURRENT|SP1 over the first window_s of the cut [A]",
     "torque_first_nm": "mean estimated cutting torque over the first window_s [Nm]",
     "torque_mean_nm": "mean estimated cutting torque over the cut [Nm]",
+    "torque_last_nm": "mean estimated cutting torque over the last window_s of the cut, "
+                      "where the drill is fully engaged [Nm]",
     "energy_j": "cutting energy, integral of torque x omega over the cut [J]",
     "thrust_proxy": "Z-axis load in the cut minus its air-feed level (unit in attrs) [-]",
     "dev_{x,y,z}_{mean,maxabs,rms}_mm": "DES_POS - ENC_POS statistics during the cut [mm]",
@@ -658,6 +660,7 @@ min_speed_rpm
         h = len(rows)
         nwin = max(1, round(window_s * fs))
         fw = sl[:nwin]
+        lw = sl[-nwin:]
         omega = speed[sl] * 2.0 * math.pi / 60.0
         energy = float(np.nansum(torque[sl] * omega) * ct)
         thrust = math.nan
@@ -698,6 +701,8 @@ min_speed_rpm
             "current_first_a": float(np.nanmean(current[fw])),
             "torque_first_nm": float(np.nanmean(torque[fw])),
             "torque_mean_nm": float(np.nanmean(torque[sl])),
+            "torque_last_nm": (float(np.nanmean(torque[lw])) if np.isfinite(torque[lw]).any()
+                               else math.nan),
             "energy_j": energy,
             "thrust_proxy": thrust,
         }
