@@ -12,6 +12,13 @@ calibration's stated uncertainty (``cnctwin.validation.soak.air_torque_bound_nm`
 
 Run: ``.venv/bin/python benchmarks/bench_soak.py --draws 40`` (about 1.5 machine-hours;
 ``--draws 200 --operations 12`` gives >= 8 h). Prints one row per draw and the rates.
+
+``--faults``: the same draws with one injected fault each, in turn: ``breakage`` (the drill
+breaks at a random depth fraction 0.3-0.8 of a random hole), ``load_rise`` (worn drill / harder
+stock: cutting load x 1.3-1.6 from a random hole on, the simulator's ``HardnessChange``) and
+``friction_rise`` (spindle Coulomb friction x 1.5-2.5 against the calibrated machine file, from
+the start). Per kind: draws, found (the first alarm on the fault's hole, or any alarm for the
+friction), alarms before the fault's hole (false).
 """
 
 from __future__ import annotations
@@ -72,6 +79,83 @@ def draw(d: Path, machine: Path, sets: list[str], seed: int, operations: int) ->
                      noise_a=current_noise_a(sim / "truth.json"))
 
 
+FAULT_KINDS = ("breakage", "load_rise", "friction_rise")
+
+
+def draw_fault(d: Path, machine: Path, sets: list[str], seed: int, operations: int,
+               kind: str) -> dict[str, object]:
+    """One production draw with one fault: simulate, replay through edge run, judge."""
+    import json
+
+    import numpy as np
+
+    prog = production_program(seed, operations=operations)
+    rng = np.random.default_rng([seed, 24])
+    part = d / f"fpart{seed}.mpf"
+    part.write_text(prog.text, encoding="utf-8")
+    sim = d / f"fsim{seed}"
+    opts: list[object] = []
+    hole: int | None = None
+    if kind == "friction_rise":
+        tau = float(np.exp(rng.uniform(np.log(1.5), np.log(2.5))))
+        key = "spindle.coulomb_friction_nm"
+        values = dict(x.split("=", 1) for x in sets[1::2])  # the hidden machine's --set
+        from cnctwin.sim import Machine
+
+        values[key] = str(float(values.get(key, Machine.thesis_default().spindle
+                                           .coulomb_friction_nm)) * tau)
+        sets = [x for k, v in values.items() for x in ("--set", f"{k}={v}")]
+        detail = f"Coulomb x {tau:.2f}"
+    else:
+        hole = int(rng.integers(1, max(prog.holes, 2)))
+        if kind == "breakage":
+            frac = float(rng.uniform(0.3, 0.8))
+            fault = {"type": "ToolBreakage", "hole": hole, "depth_fraction": frac}
+            detail = f"hole {hole} at {frac:.2f}"
+        else:
+            factor = float(rng.uniform(1.3, 1.6))
+            fault = {"type": "HardnessChange", "hole": hole, "factor": factor}
+            detail = f"x {factor:.2f} from hole {hole}"
+        opts = ["--option", f"faults={json.dumps([fault])}"]
+    cli("simulate", "--program", part, "--machine", machine, "--material", "aisi1045",
+        "--seed", seed, *sets, *opts, "--out", sim)
+    st = d / f"fedge{seed}"
+    cli("edge", "run", "--source", sim / f"fpart{seed}.json", "--machine", machine,
+        "--out", st, "--no-twin")
+    alarms = [m for m in map(json.loads, (st / "results.jsonl").read_text().splitlines())
+              if m["kind"] == "alarm"]
+    if hole is None:
+        found, before = bool(alarms), 0
+    else:
+        before = sum(1 for a in alarms if a.get("hole") is not None and a["hole"] < hole)
+        found = bool(alarms) and alarms[0].get("hole") == hole
+    return {"seed": seed, "kind": kind, "detail": detail, "found": found,
+            "before": before, "alarms": len(alarms),
+            "first": (alarms[0].get("detector"), alarms[0].get("fault"), alarms[0].get("hole"))
+            if alarms else None}
+
+
+def run_faults(draws: int, operations: int, machine_seed: int, first_seed: int
+               ) -> list[dict[str, object]]:
+    out: list[dict[str, object]] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        machine, sets = calibrated_machine(d, machine_seed)
+        for k in range(draws):
+            kind = FAULT_KINDS[k % len(FAULT_KINDS)]
+            r = draw_fault(d, machine, sets, first_seed + k, operations, kind)
+            out.append(r)
+            print(f"{r['seed']:>5} {kind:<14} {r['detail']!s:<22} found {r['found']!s:<5} "
+                  f"alarms {r['alarms']:>3} (before the fault {r['before']}) first {r['first']}",
+                  flush=True)
+    for kind in FAULT_KINDS:
+        rows = [r for r in out if r["kind"] == kind]
+        if rows:
+            print(f"{kind}: found {sum(bool(r['found']) for r in rows)}/{len(rows)}, "
+                  f"alarms before the fault {sum(int(r['before']) for r in rows)}")  # type: ignore[call-overload]
+    return out
+
+
 def run(draws: int, operations: int, machine_seed: int, first_seed: int) -> list[SoakTally]:
     out: list[SoakTally] = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -112,5 +196,10 @@ if __name__ == "__main__":
     ap.add_argument("--operations", type=int, default=8)
     ap.add_argument("--machine-seed", type=int, default=7)
     ap.add_argument("--first-seed", type=int, default=100)
+    ap.add_argument("--faults", action="store_true",
+                    help="inject one fault per draw (breakage, load rise, friction rise)")
     a = ap.parse_args()
-    print(summary(run(a.draws, a.operations, a.machine_seed, a.first_seed)))
+    if a.faults:
+        run_faults(a.draws, a.operations, a.machine_seed, a.first_seed)
+    else:
+        print(summary(run(a.draws, a.operations, a.machine_seed, a.first_seed)))

@@ -170,7 +170,8 @@ def test_ingest_idempotent_crash_consistent_and_bad_input(
     with open_store(store) as st:
         assert st.recordings().empty
 
-    out = cnctwin("fleet", "ingest", str(src), "--store", str(store), *sched)
+    out = cnctwin("fleet", "ingest", str(src), "--store", str(store), *sched, check=False)
+    assert out.returncode == 1  # a partial job says so (issue 24, pt 8)
     assert "4 ingested, 0 already stored, 1 failed (of 5)" in out.stdout
     assert "broken.json" in out.stderr and "skipped" in out.stderr
     assert "Traceback" not in out.stderr
@@ -180,7 +181,8 @@ def test_ingest_idempotent_crash_consistent_and_bad_input(
     assert not list(store.rglob("*.tmp")), "the rerun completes and clears the staged files"
 
     out = cnctwin("fleet", "ingest", str(src), str(src / "M001"), "--store", str(store),
-                  *sched)
+                  *sched, check=False)
+    assert out.returncode == 1
     assert "0 ingested, 4 already stored, 1 failed (of 5)" in out.stdout
     with open_store(store) as st:
         assert len(st.recordings()) == 4

@@ -152,3 +152,25 @@ def test_delete_and_reingest(store_url: str, two: dict[str, str], store: Store) 
     with open_store(store_url) as again:
         assert again.holes()["hole"].tolist() == [0]
         assert int(again.sql("SELECT count(*) AS n FROM holes")["n"].iloc[0]) == 1
+
+
+def test_a_store_made_before_a_hole_column_gets_it(store_url: str, backend: str) -> None:
+    """``torque_last_nm`` came with issue 24: a store whose hole table predates it gets the
+    column when opened for writing (NULL for the holes stored before), and keeps its holes."""
+    with open_store(store_url) as st:
+        rid = st.ingest(make_recording(machine="m1", start="2024-03-02T08:00:00", n=500))
+        st.append_holes(rid, hole_frame(0, 2))
+        if backend == "duckdb":
+            st.con.execute("ALTER TABLE holes DROP COLUMN torque_last_nm")  # type: ignore[attr-defined]
+        else:
+            st.conn.execute("ALTER TABLE holes DROP COLUMN torque_last_nm")  # type: ignore[attr-defined]
+    if backend == "duckdb":  # an old store read as it is: the column reads as NaN
+        with open_store(store_url, read_only=True) as st:
+            old = st.holes()
+        assert len(old) == 2 and old["torque_last_nm"].isna().all()
+    with open_store(store_url) as st:
+        st.append_holes(rid, hole_frame(2, 1))
+        got = st.holes(recording_id=rid)
+    assert got["hole"].tolist() == [0, 1, 2]
+    assert got["torque_last_nm"].isna().tolist() == [True, True, False]
+    assert got["torque_last_nm"].iloc[2] == pytest.approx(2.25)

@@ -344,6 +344,9 @@ class DuckDBStore(Store):
         if not read_only:
             _run(self._con, _SCHEMA)
             _run(self._con, _HOLES_SCHEMA)
+            for c, k in HOLE_TABLE_COLUMNS.items():  # a column added since the store was made
+                _run(self._con, f'ALTER TABLE holes ADD COLUMN IF NOT EXISTS "{c}" '
+                                f"{_HOLE_SQL_TYPES[k]}")
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -505,9 +508,13 @@ class DuckDBStore(Store):
             params.append(int(t1.value))
         where = ("WHERE " + " AND ".join(clauses)) if clauses else ""
         cols = [c for c in _HOLE_DB_COLUMNS if c != "start_time"]
-        select = ", ".join(f'"{c}"' for c in cols)
-        rows = _run(self.con, f"SELECT {select} FROM holes {where}", params) \
-            if self._has_holes_table() else []
+        rows: list[Any] = []
+        if self._has_holes_table():
+            # a store opened read-only may predate a column: NULL there
+            have = {r[0] for r in _run(self.con, "SELECT column_name FROM "
+                                       "information_schema.columns WHERE table_name = 'holes'")}
+            select = ", ".join(f'"{c}"' if c in have else f'NULL AS "{c}"' for c in cols)
+            rows = _run(self.con, f"SELECT {select} FROM holes {where}", params)
         return holes_frame(rows, cols)
 
     # ------------------------------------------------------------------ read

@@ -380,6 +380,10 @@ class PostgresStore(Store):
             with self.conn.transaction():
                 self.conn.execute("SELECT pg_advisory_xact_lock(hashtext('cnctwin.ddl'))")
                 self.conn.execute(psql.SQL(_HOLES_DDL).format(s=s))
+                for c, k in HOLE_TABLE_COLUMNS.items():  # columns added since the store
+                    self.conn.execute(psql.SQL(
+                        "ALTER TABLE {s}.holes ADD COLUMN IF NOT EXISTS {c} " + _HOLE_SQL_TYPES[k]
+                    ).format(s=s, c=psql.Identifier(c)))
         self.conn.execute(
             psql.SQL("SET search_path TO {s}, public").format(s=s)
         )
