@@ -107,14 +107,32 @@ def draw_fault(d: Path, machine: Path, sets: list[str], seed: int, operations: i
         sets = [x for k, v in values.items() for x in ("--set", f"{k}={v}")]
         detail = f"Coulomb x {tau:.2f}"
     else:
-        hole = int(rng.integers(1, max(prog.holes, 2)))
+        # the healthy run first: which simulator hole (every entry at a new X/Y, milling
+        # entries too) is which hole of the edge, so the fault goes on a real hole
+        hsim, hedge = d / f"hsim{seed}", d / f"hedge{seed}"
+        cli("simulate", "--program", part, "--machine", machine, "--material", "aisi1045",
+            "--seed", seed, *sets, "--out", hsim)
+        cli("edge", "run", "--source", hsim / f"fpart{seed}.json", "--machine", machine,
+            "--out", hedge, "--no-twin")
+        truth = json.loads((hsim / "truth.json").read_text())["holes"]
+        rows = [m["row"] for m in map(json.loads, (hedge / "results.jsonl").read_text()
+                                      .splitlines()) if m["kind"] == "hole"]
+        mapped = {}
+        for r in rows:
+            near = [t for t in truth if abs(t["x_mm"] - r["x_mm"]) < 0.05
+                    and abs(t["y_mm"] - r["y_mm"]) < 0.05
+                    and abs(t["cut_first_cycle"] - r["cut_start_cycle"]) < 1500]
+            if near:
+                mapped[int(r["hole"])] = int(near[0]["hole"])
+        hole = int(rng.choice(sorted(mapped)))
+        sim_hole = mapped[hole]
         if kind == "breakage":
             frac = float(rng.uniform(0.3, 0.8))
-            fault = {"type": "ToolBreakage", "hole": hole, "depth_fraction": frac}
+            fault = {"type": "ToolBreakage", "hole": sim_hole, "depth_fraction": frac}
             detail = f"hole {hole} at {frac:.2f}"
         else:
             factor = float(rng.uniform(1.3, 1.6))
-            fault = {"type": "HardnessChange", "hole": hole, "factor": factor}
+            fault = {"type": "HardnessChange", "hole": sim_hole, "factor": factor}
             detail = f"x {factor:.2f} from hole {hole}"
         opts = ["--option", f"faults={json.dumps([fault])}"]
     cli("simulate", "--program", part, "--machine", machine, "--material", "aisi1045",
@@ -124,12 +142,14 @@ def draw_fault(d: Path, machine: Path, sets: list[str], seed: int, operations: i
         "--out", st, "--no-twin")
     alarms = [m for m in map(json.loads, (st / "results.jsonl").read_text().splitlines())
               if m["kind"] == "alarm"]
+    later = False
     if hole is None:
         found, before = bool(alarms), 0
     else:
         before = sum(1 for a in alarms if a.get("hole") is not None and a["hole"] < hole)
         found = bool(alarms) and alarms[0].get("hole") == hole
-    return {"seed": seed, "kind": kind, "detail": detail, "found": found,
+        later = bool(alarms) and not found and before == 0
+    return {"seed": seed, "kind": kind, "detail": detail, "found": found, "later": later,
             "before": before, "alarms": len(alarms),
             "first": (alarms[0].get("detector"), alarms[0].get("fault"), alarms[0].get("hole"))
             if alarms else None}
@@ -146,12 +166,14 @@ def run_faults(draws: int, operations: int, machine_seed: int, first_seed: int
             r = draw_fault(d, machine, sets, first_seed + k, operations, kind)
             out.append(r)
             print(f"{r['seed']:>5} {kind:<14} {r['detail']!s:<22} found {r['found']!s:<5} "
+                  f"later {r['later']!s:<5} "
                   f"alarms {r['alarms']:>3} (before the fault {r['before']}) first {r['first']}",
                   flush=True)
     for kind in FAULT_KINDS:
         rows = [r for r in out if r["kind"] == kind]
         if rows:
-            print(f"{kind}: found {sum(bool(r['found']) for r in rows)}/{len(rows)}, "
+            print(f"{kind}: found on its hole {sum(bool(r['found']) for r in rows)}/{len(rows)}"
+                  f", later {sum(bool(r['later']) for r in rows)}, "
                   f"alarms before the fault {sum(int(r['before']) for r in rows)}")  # type: ignore[call-overload]
     return out
 

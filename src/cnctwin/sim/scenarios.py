@@ -1988,7 +1988,9 @@ def part_program(
     -------
     ScenarioResult
         Truth ``limits``: :func:`drive_limits_check` (cycle time, peaks and the warnings
-        naming the program line where a limit is exceeded).
+        naming the program line where a limit is exceeded); of a drilling program ``holes``:
+        every entry of the tool into the part at a new X/Y (``hole``, the number the
+        ``faults`` use, ``x_mm``, ``y_mm``, ``cut_first_cycle``; milling entries count here).
 
     Raises
     ------
@@ -2056,6 +2058,9 @@ def part_program(
                           "thesis machine without one)") from None
     _collect(res, sim, sink, rpath, None, None)
     rec = res.recording
+    if kind == "drilling":  # every entry of the tool into the part at a new X/Y, with its cycle
+        res.truth["holes"] = [{k: (float(v) if isinstance(v, np.floating) else v)
+                               for k, v in row.items()} for row in hook.hole_rows()]
     res.truth["limits"] = drive_limits_check(rec, cfg.machine, text)
     _write_truth(o, res.truth, res.paths)
     return res
