@@ -152,6 +152,26 @@ def test_a_finished_run_is_not_resumed(wear_recording: Any, tmp_path: Path) -> N
     assert st["cycles"] == wear_recording.n_cycles and st["holes"] == 3
 
 
+def _kill_9(cmd: list[str], out: Path, rng: random.Random, *, kills: int,
+            max_wait_s: float) -> None:
+    """Start ``cmd`` and SIGKILL it ``kills`` times, each a random time (up to
+    ``max_wait_s``) after the run has emitted its first results (the stream at 4x: 1 s of
+    wall time = 2000 cycles)."""
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    for _kill in range(kills):
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                env=env)
+        deadline = time.monotonic() + 60
+        start_lines = len(_messages(out)) if (out / "results.jsonl").exists() else 0
+        while not ((out / "results.jsonl").exists() and len(_messages(out)) > start_lines + 5):
+            assert proc.poll() is None, proc.communicate()[1].decode()
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        time.sleep(rng.uniform(0.1, max_wait_s))
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+
+
 def test_cli_replay_survives_two_kill_9(wear_run: dict[str, Any], reference: list[dict],
                                         wear_recording: Any, tmp_path: Path) -> None:
     """``cnctwin edge run`` on a file, killed with SIGKILL twice at random points and started
@@ -164,20 +184,7 @@ def test_cli_replay_survives_two_kill_9(wear_run: dict[str, Any], reference: lis
            "--speed", "4", "--checkpoint-s", "1", "--no-twin"]
     rng = random.Random(int(os.environ.get("PYTEST_SEED", "14")))
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    for _kill in range(2):
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                env=env)
-        deadline = time.monotonic() + 60
-        # wait until this run has emitted torque, then a random time (stream at 4x: 1 s of
-        # wall time = 2000 cycles of the 6246)
-        start_lines = len(_messages(out)) if (out / "results.jsonl").exists() else 0
-        while not ((out / "results.jsonl").exists() and len(_messages(out)) > start_lines + 5):
-            assert proc.poll() is None, proc.communicate()[1].decode()
-            assert time.monotonic() < deadline
-            time.sleep(0.05)
-        time.sleep(rng.uniform(0.1, 0.6))
-        proc.send_signal(signal.SIGKILL)
-        proc.wait(timeout=10)
+    _kill_9(cmd, out, rng, kills=2, max_wait_s=0.6)
     res = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=120)
     assert res.returncode == 0, res.stderr
     assert "did not finish; resuming after cycle" in res.stderr
@@ -228,18 +235,7 @@ def test_cli_store_survives_three_kill_9(wear_run: dict[str, Any], wear_recordin
 
     out, store = tmp_path / "state", tmp_path / "store"
     rng = random.Random(int(os.environ.get("PYTEST_SEED", "24")))
-    for _kill in range(3):
-        proc = subprocess.Popen(cmd(out, store, "4"), stdout=subprocess.DEVNULL,
-                                stderr=subprocess.PIPE, env=env)
-        deadline = time.monotonic() + 60
-        start_lines = len(_messages(out)) if (out / "results.jsonl").exists() else 0
-        while not ((out / "results.jsonl").exists() and len(_messages(out)) > start_lines + 5):
-            assert proc.poll() is None, proc.communicate()[1].decode()
-            assert time.monotonic() < deadline
-            time.sleep(0.05)
-        time.sleep(rng.uniform(0.1, 0.5))
-        proc.send_signal(signal.SIGKILL)
-        proc.wait(timeout=10)
+    _kill_9(cmd(out, store, "4"), out, rng, kills=3, max_wait_s=0.5)
     res = subprocess.run(cmd(out, store, "0"), capture_output=True, text=True, env=env,
                          timeout=120)
     assert res.returncode == 0, res.stderr

@@ -11,12 +11,13 @@ directory), writes ``status.json`` there and sends a ``status`` message every
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
@@ -676,16 +677,14 @@ def last_emitted(results: str | PathLike[str], *, tail_bytes: int = 1 << 20
     dict
         Message kind -> last cycle emitted (empty on a first run).
     """
-    p = Path(results)
     out: dict[str, int] = {}
-    for f in [p, *reversed(rotated_files(p))]:
-        for line in tail_lines(f, tail_bytes=tail_bytes):
+    for msgs in _tail_messages(results, tail_bytes=tail_bytes):
+        for m in msgs:
             try:
-                m = json.loads(line)
                 kind = str(m["kind"])
                 c = int(m["first_cycle"]) + int(m["n"]) - 1 if kind == "torque" \
                     else int(m["cycle"])
-            except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+            except (KeyError, TypeError, ValueError):
                 continue
             out[kind] = max(out.get(kind, c), c)
         if "torque" in out:
@@ -710,21 +709,32 @@ def last_hole_number(results: str | PathLike[str], *, tail_bytes: int = 1 << 20
     int or None
         The hole number, or None when no hole was emitted.
     """
+    for msgs in _tail_messages(results, tail_bytes=tail_bytes):
+        numbers = []
+        for m in msgs:
+            with contextlib.suppress(KeyError, TypeError, ValueError):
+                if m.get("kind") == "hole":
+                    numbers.append(int(m["hole"]))
+        if numbers:
+            return max(numbers)
+    return None
+
+
+def _tail_messages(results: str | PathLike[str], *, tail_bytes: int
+                   ) -> Iterator[list[dict[str, Any]]]:
+    """The messages in the tail of ``results``, then of each rotated file, newest first (a
+    line a crash cut short, or not a JSON object, is skipped)."""
     p = Path(results)
     for f in [p, *reversed(rotated_files(p))]:
-        best: int | None = None
+        msgs = []
         for line in tail_lines(f, tail_bytes=tail_bytes):
-            if b'"hole"' not in line:
-                continue
             try:
                 m = json.loads(line)
-                if m.get("kind") == "hole":
-                    best = max(best if best is not None else -1, int(m["hole"]))
-            except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+            except json.JSONDecodeError:
                 continue
-        if best is not None:
-            return best
-    return None
+            if isinstance(m, dict):
+                msgs.append(m)
+        yield msgs
 
 
 def last_emitted_cycle(results: str | PathLike[str], *, tail_bytes: int = 1 << 20
