@@ -35,6 +35,7 @@ from cnctwin.cli import main
 from cnctwin.iotools import read_recording
 from cnctwin.sim.programs import production_program
 from cnctwin.sim.scenarios import random_spindle_overrides
+from cnctwin.usecases.hole_load import HoleLoadJudge
 from cnctwin.validation.soak import SoakTally, current_noise_a, tally_run
 
 REFERENCE = "drill_1_aisi1045_2400rpm_0p16"
@@ -96,6 +97,7 @@ def draw_fault(d: Path, machine: Path, sets: list[str], seed: int, operations: i
     sim = d / f"fsim{seed}"
     opts: list[object] = []
     hole: int | None = None
+    judgeable = True
     if kind == "friction_rise":
         tau = float(np.exp(rng.uniform(np.log(1.5), np.log(2.5))))
         key = "spindle.coulomb_friction_nm"
@@ -126,9 +128,18 @@ def draw_fault(d: Path, machine: Path, sets: list[str], seed: int, operations: i
                 mapped[int(r["hole"])] = int(near[0]["hole"])
         hole = int(rng.choice(sorted(mapped)))
         sim_hole = mapped[hole]
+        row = next(r for r in rows if int(r["hole"]) == hole)
+        # the first hole of a cut condition has no taught reference (only a breakage in it
+        # shows, against the cut's own mean): counted apart
+        judgeable = kind == "breakage" or any(
+            HoleLoadJudge.condition(r) == HoleLoadJudge.condition(row)
+            for r in rows if int(r["hole"]) < hole)
         if kind == "breakage":
             frac = float(rng.uniform(0.3, 0.8))
-            fault = {"type": "ToolBreakage", "hole": sim_hole, "depth_fraction": frac}
+            # the simulator's depth fraction is of a 20 mm hole in part programs (its drilling
+            # process has one hole depth): scaled to this hole's depth
+            scaled = frac * min(1.0, float(row["depth_mm"]) / 20.0)
+            fault = {"type": "ToolBreakage", "hole": sim_hole, "depth_fraction": scaled}
             detail = f"hole {hole} at {frac:.2f}"
         else:
             factor = float(rng.uniform(1.3, 1.6))
@@ -150,6 +161,7 @@ def draw_fault(d: Path, machine: Path, sets: list[str], seed: int, operations: i
         found = bool(alarms) and alarms[0].get("hole") == hole
         later = bool(alarms) and not found and before == 0
     return {"seed": seed, "kind": kind, "detail": detail, "found": found, "later": later,
+            "judgeable": judgeable,
             "before": before, "alarms": len(alarms),
             "first": (alarms[0].get("detector"), alarms[0].get("fault"), alarms[0].get("hole"))
             if alarms else None}
@@ -165,12 +177,17 @@ def run_faults(draws: int, operations: int, machine_seed: int, first_seed: int
             kind = FAULT_KINDS[k % len(FAULT_KINDS)]
             r = draw_fault(d, machine, sets, first_seed + k, operations, kind)
             out.append(r)
-            print(f"{r['seed']:>5} {kind:<14} {r['detail']!s:<22} found {r['found']!s:<5} "
-                  f"later {r['later']!s:<5} "
+            print(f"{r['seed']:>5} {kind:<14} {r['detail']!s:<22} "
+                  f"{'' if r['judgeable'] else '(first of its condition) '}"
+                  f"found {r['found']!s:<5} later {r['later']!s:<5} "
                   f"alarms {r['alarms']:>3} (before the fault {r['before']}) first {r['first']}",
                   flush=True)
     for kind in FAULT_KINDS:
-        rows = [r for r in out if r["kind"] == kind]
+        rows = [r for r in out if r["kind"] == kind and r["judgeable"]]
+        first = sum(1 for r in out if r["kind"] == kind and not r["judgeable"])
+        if first:
+            print(f"{kind}: {first} on the first hole of a cut condition (no reference: "
+                  "not judged)")
         if rows:
             print(f"{kind}: found on its hole {sum(bool(r['found']) for r in rows)}/{len(rows)}"
                   f", later {sum(bool(r['later']) for r in rows)}, "

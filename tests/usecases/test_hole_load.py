@@ -81,3 +81,14 @@ def test_bad_options_are_refused() -> None:
         HoleLoadJudge(teach_holes=0)
     with pytest.raises(ConfigError):
         HoleLoadJudge(breakage_ratio=1.2)
+
+
+def test_breakage_in_the_first_hole_of_a_condition() -> None:
+    """No reference yet: the end of the cut against the cut's own mean (a healthy drill
+    ends fully engaged, at or above its mean)."""
+    j = HoleLoadJudge()
+    assert j.judge(_row(0, 3.0, last=3.0 * 0.41)) is None  # just above: taught
+    j = HoleLoadJudge()
+    v = j.judge(_row(0, 3.0, last=3.0 * 0.39))
+    assert v is not None and v.kind == "breakage" and "first hole" in v.message
+    assert j.references == {}  # a broken hole is no reference

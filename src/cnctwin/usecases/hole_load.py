@@ -21,6 +21,9 @@ A hole that alarmed is not learned. Conditions are keyed by ``(tool, cycle, dept
 speed [10 rpm], feed [5 mm/min])``: a change of any of them is a new cut and is taught anew.
 The first hole of a condition is never judged against a reference (there is none), except:
 
+* a drilling-cycle hole whose torque at the end of the cut (the drill fully engaged, where it
+  is at least the cut's mean: the entry cone lowers the mean) falls below ``breakage_ratio``
+  of the cut's own mean broke in that hole;
 * a drilling-cycle hole whose cutting torque stays below ``min_load_nm`` over the whole cut
   cut nothing;
 * after a breakage of tool T, the rubbing of its stub is known (the torque of the holes after
@@ -145,6 +148,16 @@ class HoleLoadJudge:
                     f"({stub:.2f} Nm since its breakage): still no cutting load")
             del self.broken[tool]  # it cuts: the tool was replaced
         if len(refs) < self.teach_holes:
+            if drilling and last is not None and mean >= self.min_load_nm and \
+                    last < self.breakage_ratio * mean:
+                # no reference yet, but a drill is fully engaged at the end of its cut: its
+                # torque there is at least the cut's mean (the entry ramp lowers the mean)
+                self.broken[tool] = last
+                return HoleLoadVerdict(
+                    "breakage", hole, last / mean, mean,
+                    f"hole {hole}: the torque fell to {last:.2f} Nm at the end of the cut, "
+                    f"{100 * last / mean:.0f} % of the cut's mean {mean:.2f} Nm (first hole "
+                    "of its cut condition): the drill broke in this hole")
             if drilling and mean < self.min_load_nm:
                 return HoleLoadVerdict(
                     "no_load", hole, math.nan, math.nan,
