@@ -146,3 +146,15 @@ def test_program_errors_name_the_file_and_point_to_the_subset_once(
     err = capsys.readouterr().err
     assert f"{fast}: line 1: 'S30000 M3': spindle speed 30000 rpm exceeds" in err
     assert "Traceback" not in err
+
+
+@pytest.mark.parametrize("value", ["-1", "0"])
+def test_reference_torque_must_be_positive(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                           value: str) -> None:
+    """Issue 29, pt 5: ``--torque-nm`` took a negative or zero torque."""
+    code = main(["calibrate", "spindle", "--air-cut", str(tmp_path / "a.json"), "--reference",
+                 str(tmp_path / "r.json"), "--torque-nm", value, "--machine",
+                 str(tmp_path / "m.toml")])
+    err = capsys.readouterr().err
+    assert code == 2 and f"--torque-nm {float(value):g}" in err and "positive" in err
+    assert not (tmp_path / "m.toml").exists()

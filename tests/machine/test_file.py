@@ -89,3 +89,22 @@ def test_units_from_key_names() -> None:
     assert parameter_unit("axes.X1.jerk_time_s") == "s"
     assert parameter_unit("spindle.coulomb_friction_nm") == "Nm"
     assert parameter_unit("axes.X1.ffw_weight") == "-"
+
+
+def test_saved_machine_file_has_the_users_permissions(tmp_path: Path) -> None:
+    """Issue 29, pt 5: the machine file was written 0600 (mkstemp's mode) while every other
+    output is 0644: a new file gets the umask, a replaced file keeps its mode."""
+    import os
+    import stat
+
+    from cnctwin.machine import MachineFile, save_machine
+
+    old = os.umask(0o022)
+    try:
+        p = save_machine(MachineFile(), tmp_path / "m.toml")
+        assert stat.S_IMODE(p.stat().st_mode) == 0o644
+        p.chmod(0o640)  # the user restricted it: a recalibration keeps that
+        save_machine(MachineFile(), p)
+        assert stat.S_IMODE(p.stat().st_mode) == 0o640
+    finally:
+        os.umask(old)

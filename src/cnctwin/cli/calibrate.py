@@ -120,6 +120,10 @@ def _cmd_spindle(args: argparse.Namespace) -> int:
     if args.kt_nm_per_a is not None:
         return _spindle_from_motor_kt(args, mf)
     n_ref = len(args.reference)
+    bad = [v for v in args.torque_nm or [] if not v > 0]
+    if bad:
+        raise ConfigError(f"--torque-nm {bad[0]:g}: a reference cut's torque must be positive "
+                          "[Nm] (the mean cutting torque the dynamometer or a force model gives)")
     for opt, vals in (("--dynamometer", args.dynamometer), ("--torque-nm", args.torque_nm)):
         if vals is not None and len(vals) != n_ref:
             raise ConfigError(f"{opt}: {len(vals)} given for {n_ref} --reference cut(s); give "

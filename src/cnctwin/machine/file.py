@@ -618,6 +618,17 @@ def load_machine(path: str | PathLike[str]) -> MachineFile:
     return MachineFile.from_dict(data, source=str(p), path=p)
 
 
+def _umask() -> int:
+    """The process umask, read without changing it (Linux ``/proc``; else the usual 022)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0o022
+
+
 def save_machine(machine_file: MachineFile, path: str | PathLike[str]) -> Path:
     """Write a machine file atomically (a crash leaves the old file or the new, never half).
 
@@ -641,6 +652,9 @@ def save_machine(machine_file: MachineFile, path: str | PathLike[str]) -> Path:
     p.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", dir=p.parent)
     try:
+        # mkstemp makes the file 0600; the machine file is a normal output: it keeps the
+        # mode of the file it replaces, a new one gets the user's umask
+        os.fchmod(fd, p.stat().st_mode & 0o777 if p.exists() else 0o666 & ~_umask())
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
             fh.flush()
