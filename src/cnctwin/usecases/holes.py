@@ -87,8 +87,9 @@ HOLE_COLUMNS: dict[str, str] = {
     "current_first_a": "mean CURRENT|SP1 over the first window_s of the cut [A]",
     "torque_first_nm": "mean estimated cutting torque over the first window_s [Nm]",
     "torque_mean_nm": "mean estimated cutting torque over the cut [Nm]",
-    "torque_last_nm": "mean estimated cutting torque over the last window_s of the cut, "
-                      "where the drill is fully engaged [Nm]",
+    "torque_last_nm": "mean estimated cutting torque over the last window_s of the cut (its "
+                      "last quarter if that is shorter), where the drill is fully engaged "
+                      "[Nm]",
     "energy_j": "cutting energy, integral of torque x omega over the cut [J]",
     "thrust_proxy": "Z-axis load in the cut minus its air-feed level (unit in attrs) [-]",
     "dev_{x,y,z}_{mean,maxabs,rms}_mm": "DES_POS - ENC_POS statistics during the cut [mm]",
@@ -660,7 +661,7 @@ min_speed_rpm
         h = len(rows)
         nwin = max(1, round(window_s * fs))
         fw = sl[:nwin]
-        lw = sl[-nwin:]
+        lw = sl[-min(nwin, max(1, sl.size // 4)):]  # a short cut: its last quarter
         omega = speed[sl] * 2.0 * math.pi / 60.0
         energy = float(np.nansum(torque[sl] * omega) * ct)
         thrust = math.nan
