@@ -203,3 +203,31 @@ def test_faults_are_found_on_their_hole(machine: dict[str, Any], fault: dict[str
     assert first["hole"] == hole, first["message"]
     holes = [m for m in msgs if m["kind"] == "hole"]
     assert len(holes) == prog.holes  # the holes are still counted
+
+
+def test_a_friction_rise_is_found_against_the_calibration(machine: dict[str, Any]) -> None:
+    """Issue 24, the friction-rise fault: draw 102 on the calibrated machine whose spindle's
+    Coulomb friction then doubled (from the start, so a detector that learns the first
+    seconds takes it as normal): the air current against the machine file's twin alarms
+    (AirFrictionCheck); the healthy draw does not (test_varied_production_gives_no_false_
+    result)."""
+    d: Path = machine["dir"]
+    sets = list(machine["sets"])
+    values = dict(x.split("=", 1) for x in sets[1::2])
+    key = "spindle.coulomb_friction_nm"
+    values[key] = str(2.0 * float(values[key]))
+    prog = production_program(102, operations=8)
+    part = d / "friction.mpf"
+    part.write_text(prog.text, encoding="utf-8")
+    assert cli("simulate", "--program", part, "--machine", machine["machine"], "--material",
+               "aisi1045", "--seed", 102,
+               *[x for k, v in values.items() for x in ("--set", f"{k}={v}")],
+               "--out", d / "sim_friction") == 0
+    out = d / "edge_friction"
+    assert cli("edge", "run", "--source", d / "sim_friction" / "friction.json", "--machine",
+               machine["machine"], "--out", out, "--no-twin") == 0
+    alarms = [m for m in map(json.loads, (out / "results.jsonl").read_text().splitlines())
+              if m["kind"] == "alarm"]
+    assert [(a["detector"], a["fault"]) for a in alarms] == [("AirFrictionCheck",
+                                                               "friction_rise")]
+    assert "friction rose" in alarms[0]["message"]

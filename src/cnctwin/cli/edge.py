@@ -545,6 +545,10 @@ def _build(args: argparse.Namespace) -> Any:
         elif args.detector == "physics-torque":
             kw = {"learn_s": 0.0, "material": args.material, "diameter_mm": args.drill_mm,
                   "point_angle_deg": args.point_angle_deg}
+        if args.detector == "physics":  # the calibrated spindle's air current, not learned
+            from cnctwin.usecases.air_friction import AirFrictionCheck
+
+            kw["friction_check"] = AirFrictionCheck()
         procs.append(AnomalyProcessor(det, model=model, **kw))
     if machine_file is not None and not args.no_twin:
         from cnctwin.edge.processors import TwinCompareProcessor

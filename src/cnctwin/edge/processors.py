@@ -30,6 +30,7 @@ from cnctwin.exceptions import ConfigError
 from cnctwin.machine import MachineFile
 from cnctwin.recording import CounterGap, Recording, RecordingMeta
 from cnctwin.spindle import SpeedChangeFlags, SpindleModel, StreamingTorqueEstimator
+from cnctwin.usecases.air_friction import AirFrictionCheck
 from cnctwin.usecases.anomaly import Detector, PhysicsResidualDetector
 from cnctwin.usecases.hole_load import HoleLoadJudge
 from cnctwin.usecases.holes import HOLE_COLUMNS, HoleEvents, holes_from_arrays
@@ -567,6 +568,11 @@ class AnomalyProcessor:
         Drill geometry of ``expected_torque_nm`` [mm], [deg].
     xy_axes : (str, str), default ('X1', 'Y1')
         Lateral axes for the ``air`` input.
+    friction_check : AirFrictionCheck, optional
+        Also judge the mean air current against ``model`` itself (not learned: a friction
+        that is high from the start shows; :mod:`cnctwin.usecases.air_friction`): an alarm
+        with ``detector`` ``AirFrictionCheck``, ``fault`` ``friction_rise``/``friction_drop``.
+        ``cnctwin edge run`` turns it on with the calibrated machine file's spindle.
     air_still_s, air_after_plunge_s : float, default 0.3, 1.0
         ``air`` (given when the detector asks for it): 1 where every feed axis has stood
         still for ``air_still_s`` and Z has not gone down for ``air_after_plunge_s`` (a tool
@@ -587,9 +593,11 @@ class AnomalyProcessor:
                  refractory_s: float = 1.0, material: str = "aisi1045",
                  diameter_mm: float = 8.5, point_angle_deg: float = 140.0,
                  xy_axes: tuple[str, str] = ("X1", "Y1"), air_still_s: float = 0.3,
-                 air_after_plunge_s: float = 1.0) -> None:
+                 air_after_plunge_s: float = 1.0,
+                 friction_check: AirFrictionCheck | None = None) -> None:
         from cnctwin.usecases.monitoring import KIENZLE_PARAMETERS
 
+        self.friction_check = friction_check
         self.detector = detector if detector is not None else PhysicsResidualDetector()
         self.name = f"anomaly:{type(self.detector).__name__}"
         self.model = model if model is not None else SpindleModel.from_parameters(
@@ -662,7 +670,7 @@ class AnomalyProcessor:
         if tq is not None:
             cols["torque_nm"] = tq
         keys = list(self.detector.inputs)
-        if "air" in keys:
+        if "air" in keys or self.friction_check is not None:
             cols["air"] = self._air(chunk)
         needs_holes = "hole" in keys or "progress" in keys or self.learn_holes is not None
         if needs_holes and hole is None:
@@ -715,6 +723,18 @@ class AnomalyProcessor:
             self.scored += m - n_learn
             self._alarms(chunk.cycles[n_learn:m], sc, x, n_learn, refr, out)
         chunk.derived[f"ANOMALY_SCORE|{self.spindle}"] = scores
+        if self.friction_check is not None:
+            for f in self.friction_check.update(chunk.cycles, i, pred, n, cols["air"],
+                                                cycle_time_s=chunk.cycle_time_s):
+                self.alarms += 1
+                out.append(Result("alarm", f.cycle, {
+                    "detector": "AirFrictionCheck",
+                    "fault": "friction_rise" if f.residual_a > 0 else "friction_drop",
+                    "cycle": f.cycle, "score": f.residual_a / f.tolerance_a, "threshold": 1.0,
+                    "current_a": f.predicted_a + f.residual_a, "predicted_current_a":
+                    f.predicted_a, "speed_rpm": f.speed_rpm, "message": f.message,
+                    "hole": None, "units": {"current_a": "A", "predicted_current_a": "A",
+                                            "speed_rpm": "rpm", "score": "-"}}))
         return out
 
     def _air(self, chunk: Chunk) -> NDArray[np.float64]:

@@ -1,0 +1,137 @@
+"""Spindle friction against the calibration, judged where no tool cuts.
+
+The calibrated twin predicts the spindle current at constant speed without a cut
+(``SpindleModel.predict_current_a(0, n)``, thesis Eq. 4.4: Coulomb and viscous friction over
+Kt). Where the tool cannot be cutting (every feed axis still, the speed steady: the edge's
+``air`` flag) the measured current must match it within what the twin cannot know: the bearing
+friction drifts with temperature (~0.5 %/K, ~10 % over a warm-up) and the calibration has its
+uncertainty. A friction rise (a bearing, a seal, lubrication) shows as a lasting offset there.
+A learned detector cannot see a friction that was high from the start of its learning; this
+check compares with the machine file, so it sees it in the first air seconds.
+
+Below ``min_speed_rpm`` the friction law of the calibration is not used: there the Stribeck
+friction the model leaves out adds up to ~0.2 A (BENCHMARKS.md, "Soak").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cnctwin.analysis.segments import samples_since
+from cnctwin.exceptions import ConfigError
+
+__all__ = ["AirFrictionCheck", "FrictionFinding"]
+
+
+@dataclass(frozen=True)
+class FrictionFinding:
+    """A window of air samples whose current departs from the calibrated twin.
+
+    Attributes
+    ----------
+    cycle : int
+        Last cycle of the window.
+    residual_a : float
+        Mean measured minus predicted current over the window [A].
+    predicted_a : float
+        Mean predicted current over the window [A].
+    tolerance_a : float
+        What the check allows [A].
+    speed_rpm : float
+        Mean speed of the window [rpm].
+    """
+
+    cycle: int
+    residual_a: float
+    predicted_a: float
+    tolerance_a: float
+    speed_rpm: float
+
+    @property
+    def message(self) -> str:
+        """The finding in words."""
+        word = "rose" if self.residual_a > 0 else "fell"
+        return (f"spindle air current {self.predicted_a + self.residual_a:.2f} A at "
+                f"{self.speed_rpm:.0f} rpm against {self.predicted_a:.2f} A of the calibrated "
+                f"twin ({self.residual_a:+.2f} A, tolerance {self.tolerance_a:.2f} A): the "
+                f"friction {word} (bearing, seal, lubrication) or the calibration is stale")
+
+
+class AirFrictionCheck:
+    """Mean air current over windows of ``window_s`` of air samples against the twin.
+
+    Parameters
+    ----------
+    window_s : float, default 0.5
+        Air samples (not necessarily consecutive) per judged window [s] (production leaves
+        little air time with the spindle turning: 0.7 s in a 97 s draw; the mean of 250
+        samples has a noise of ~0.02 A).
+    rel_tol : float, default 0.25
+        Allowed offset, a fraction of the predicted current (friction drift with temperature
+        ~10 %, the calibration's uncertainty, the current sensor's offset) [-].
+    abs_tol_a : float, default 0.1
+        Allowed offset at least [A].
+    min_speed_rpm : float, default 600
+        Slower samples are not judged (Stribeck friction, not in the model).
+    settle_s : float, default 0.3
+        Samples after a speed change that are not judged [s].
+    """
+
+    def __init__(self, *, window_s: float = 0.5, rel_tol: float = 0.25, abs_tol_a: float = 0.1,
+                 min_speed_rpm: float = 600.0, settle_s: float = 0.3) -> None:
+        if window_s <= 0 or rel_tol < 0 or abs_tol_a < 0 or settle_s < 0:
+            raise ConfigError("window_s must be > 0 and rel_tol, abs_tol_a, settle_s >= 0; got "
+                              f"{window_s}, {rel_tol}, {abs_tol_a}, {settle_s}")
+        self.window_s, self.rel_tol, self.abs_tol_a = window_s, rel_tol, abs_tol_a
+        self.min_speed_rpm, self.settle_s = min_speed_rpm, settle_s
+        self._sum = np.zeros(3)  # residual, predicted, speed
+        self._n = 0
+        self._since = 0
+        self._prev_speed: float | None = None
+        self.windows = 0
+        self.departed = False
+
+    def update(self, cycles: NDArray[np.int64], current_a: NDArray[np.float64],
+               predicted_a: NDArray[np.float64], speed_rpm: NDArray[np.float64],
+               air: NDArray[np.float64], *, cycle_time_s: float) -> list[FrictionFinding]:
+        """Judge the next consecutive cycles; the findings of the windows they complete (a
+        departure is reported once, again only after a window within the tolerance)."""
+        n = np.asarray(speed_rpm, dtype=np.float64)
+        prev = n[0] if self._prev_speed is None else self._prev_speed
+        step = np.abs(np.diff(np.concatenate([[prev], n])))
+        with np.errstate(invalid="ignore"):
+            changed = ~(step <= 1.0)
+        since = samples_since(changed, before=self._since)
+        self._since = int(since[-1]) if since.size else self._since
+        self._prev_speed = float(n[-1]) if n.size else self._prev_speed
+        r = np.asarray(current_a, dtype=np.float64) - np.asarray(predicted_a, dtype=np.float64)
+        with np.errstate(invalid="ignore"):
+            ok = ((np.asarray(air) == 1.0) & (since >= round(self.settle_s / cycle_time_s))
+                  & (np.abs(n) >= self.min_speed_rpm) & np.isfinite(r))
+        need = max(1, round(self.window_s / cycle_time_s))
+        out: list[FrictionFinding] = []
+        idx = np.flatnonzero(ok)
+        pred_a = np.asarray(predicted_a, dtype=np.float64)
+        k = 0
+        while k < idx.size:  # one pass per window the chunk completes, not per sample
+            take = idx[k:k + need - self._n]
+            self._sum += (r[take].sum(), pred_a[take].sum(), np.abs(n[take]).sum())
+            self._n += take.size
+            k += take.size
+            if self._n < need:
+                break
+            res, pred, spd = self._sum / self._n
+            tol = max(self.abs_tol_a, self.rel_tol * abs(pred))
+            self.windows += 1
+            self._sum[:] = 0.0
+            self._n = 0
+            bad = bool(abs(res) > tol and math.isfinite(res))
+            if bad and not self.departed:
+                out.append(FrictionFinding(int(cycles[take[-1]]), float(res), float(pred),
+                                           float(tol), float(spd)))
+            self.departed = bad
+        return out

@@ -1,0 +1,63 @@
+"""AirFrictionCheck: the spindle's air current against the calibrated twin (issue 24, the
+friction-rise fault), on synthetic streams with a known offset, both sides of the tolerance."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cnctwin.exceptions import ConfigError
+from cnctwin.usecases.air_friction import AirFrictionCheck
+
+CT = 0.002
+
+
+def _stream(offset_a: float, *, n: int = 2000, speed: float = 2400.0, air: float = 1.0,
+            noise_a: float = 0.3, seed: int = 1) -> tuple[np.ndarray, ...]:
+    rng = np.random.default_rng(seed)
+    pred = np.full(n, 0.6)  # the twin's air current at this speed [A]
+    cur = pred + offset_a + rng.normal(0.0, noise_a, n)
+    return (np.arange(n, dtype=np.int64), cur, pred, np.full(n, speed), np.full(n, air))
+
+
+def _run(check: AirFrictionCheck, s: tuple[np.ndarray, ...], chunk: int = 50) -> list:
+    out = []
+    for k in range(0, s[0].size, chunk):
+        sl = slice(k, k + chunk)
+        out += check.update(*(a[sl] for a in s), cycle_time_s=CT)
+    return out
+
+
+def test_tolerance_is_the_larger_of_the_absolute_and_relative_bound() -> None:
+    # 0.6 A predicted: 25 % = 0.15 A > 0.1 A. 0.10 A passes, 0.20 A is found (noise of the
+    # 250-sample mean: 0.3 / sqrt(250) = 0.019 A: each 2.6 sigma from the bound)
+    assert _run(AirFrictionCheck(), _stream(0.10)) == []
+    found = _run(AirFrictionCheck(), _stream(0.20))
+    assert len(found) == 1  # once, not every window
+    f = found[0]
+    assert f.residual_a == pytest.approx(0.20, abs=0.06) and f.tolerance_a == pytest.approx(0.15)
+    # a larger relative tolerance wins over the absolute one where the twin predicts more
+    assert _run(AirFrictionCheck(rel_tol=0.5), _stream(0.20)) == []
+    assert "friction rose" in f.message and f.speed_rpm == pytest.approx(2400.0)
+    drop = _run(AirFrictionCheck(), _stream(-0.2))
+    assert len(drop) == 1 and "fell" in drop[0].message
+
+
+def test_only_air_steady_fast_samples_are_judged() -> None:
+    assert _run(AirFrictionCheck(), _stream(0.5, air=0.0)) == []  # cutting: not air
+    assert _run(AirFrictionCheck(), _stream(0.5, speed=400.0)) == []  # Stribeck region
+    s = _stream(0.5)
+    s[3][::100] += 50.0  # a speed change every 0.2 s: never 0.3 s steady
+    assert _run(AirFrictionCheck(), s) == []
+
+
+def test_a_departure_that_returns_is_reported_again() -> None:
+    c = AirFrictionCheck()
+    found = (_run(c, _stream(0.4, n=1000)) + _run(c, _stream(0.0, n=1000, seed=2))
+             + _run(c, _stream(0.4, n=1000, seed=3)))
+    assert len(found) == 2 and c.departed  # found again after a window within tolerance
+
+
+def test_bad_options() -> None:
+    with pytest.raises(ConfigError):
+        AirFrictionCheck(window_s=0)
