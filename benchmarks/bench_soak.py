@@ -17,8 +17,9 @@ Run: ``.venv/bin/python benchmarks/bench_soak.py --draws 40`` (about 1.5 machine
 breaks at a random depth fraction 0.3-0.8 of a random hole), ``load_rise`` (worn drill / harder
 stock: cutting load x 1.3-1.6 from a random hole on, the simulator's ``HardnessChange``) and
 ``friction_rise`` (spindle Coulomb friction x 1.5-2.5 against the calibrated machine file, from
-the start). Per kind: draws, found (the first alarm on the fault's hole, or any alarm for the
-friction), alarms before the fault's hole (false).
+the start) and ``loose_tap`` (the simulator's ``LooseTool`` from a random tapped hole on; a draw
+without tapping is skipped). Per kind: draws, found (the first alarm on the fault's hole, or
+any alarm for the friction), alarms before the fault's hole (false).
 """
 
 from __future__ import annotations
@@ -80,7 +81,7 @@ def draw(d: Path, machine: Path, sets: list[str], seed: int, operations: int) ->
                      noise_a=current_noise_a(sim / "truth.json"))
 
 
-FAULT_KINDS = ("breakage", "load_rise", "friction_rise")
+FAULT_KINDS = ("breakage", "load_rise", "friction_rise", "loose_tap")
 
 
 def draw_fault(d: Path, machine: Path, sets: list[str], seed: int, operations: int,
@@ -126,15 +127,26 @@ def draw_fault(d: Path, machine: Path, sets: list[str], seed: int, operations: i
                     and abs(t["cut_first_cycle"] - r["cut_start_cycle"]) < 1500]
             if near:
                 mapped[int(r["hole"])] = int(near[0]["hole"])
-        hole = int(rng.choice(sorted(mapped)))
+        pool = sorted(mapped)
+        if kind == "loose_tap":  # a tap that works loose: on a tapped hole
+            pool = [h for h in pool if next(r for r in rows if int(r["hole"]) == h)["cycle"]
+                    == "CYCLE84"]
+            if not pool:
+                return {"seed": seed, "kind": kind, "detail": "no tapping in this draw",
+                        "found": False, "later": False, "judgeable": False, "before": 0,
+                        "alarms": 0, "first": None, "skipped": True}
+        hole = int(rng.choice(pool))
         sim_hole = mapped[hole]
         row = next(r for r in rows if int(r["hole"]) == hole)
         # the first hole of a cut condition has no taught reference (only a breakage in it
         # shows, against the cut's own mean): counted apart
         judgeable = kind == "breakage" or any(
-            HoleLoadJudge.condition(r) == HoleLoadJudge.condition(row)
+            HoleLoadJudge.same_condition(HoleLoadJudge.condition(r), HoleLoadJudge.condition(row))
             for r in rows if int(r["hole"]) < hole)
-        if kind == "breakage":
+        if kind == "loose_tap":
+            fault = {"type": "LooseTool", "start_hole": sim_hole}
+            detail = f"from hole {hole}"
+        elif kind == "breakage":
             frac = float(rng.uniform(0.3, 0.8))
             # the simulator's depth fraction is of a 20 mm hole in part programs (its drilling
             # process has one hole depth): scaled to this hole's depth
@@ -184,7 +196,8 @@ def run_faults(draws: int, operations: int, machine_seed: int, first_seed: int
                   flush=True)
     for kind in FAULT_KINDS:
         rows = [r for r in out if r["kind"] == kind and r["judgeable"]]
-        first = sum(1 for r in out if r["kind"] == kind and not r["judgeable"])
+        first = sum(1 for r in out if r["kind"] == kind and not r["judgeable"]
+                    and not r.get("skipped"))
         if first:
             print(f"{kind}: {first} on the first hole of a cut condition (no reference: "
                   "not judged)")

@@ -231,3 +231,28 @@ def test_a_friction_rise_is_found_against_the_calibration(machine: dict[str, Any
     assert [(a["detector"], a["fault"]) for a in alarms] == [("AirFrictionCheck",
                                                                "friction_rise")]
     assert "friction rose" in alarms[0]["message"]
+
+
+def test_a_loose_tap_is_found_on_its_hole(machine: dict[str, Any]) -> None:
+    """Issue 24, the loose-tap fault (thesis §5.4): draw 100 taps three holes (5-7, CYCLE84);
+    the tap works loose from hole 6 (the simulator's LooseTool: stick-slip on reversal). The
+    first alarm is HoleLoadJudge's loose_tool on hole 6 (its extraction current fluctuates
+    3.5x hole 5's)."""
+    d: Path = machine["dir"]
+    prog = production_program(100, operations=8)
+    part = d / "loose.mpf"
+    part.write_text(prog.text, encoding="utf-8")
+    fault = [{"type": "LooseTool", "start_hole": 6}]
+    assert cli("simulate", "--program", part, "--machine", machine["machine"], "--material",
+               "aisi1045", "--seed", 100, *machine["sets"], "--option",
+               f"faults={json.dumps(fault)}", "--out", d / "sim_loose") == 0
+    truth = json.loads((d / "sim_loose" / "truth.json").read_text())
+    assert [h["x_mm"] for h in truth["holes"]][5:8] == [12.0, 108.0, 156.0]  # the taps
+    out = d / "edge_loose"
+    assert cli("edge", "run", "--source", d / "sim_loose" / "loose.json", "--machine",
+               machine["machine"], "--out", out, "--no-twin") == 0
+    msgs = [json.loads(x) for x in (out / "results.jsonl").read_text().splitlines()]
+    holes = {m["hole"]: m["row"] for m in msgs if m["kind"] == "hole"}
+    assert holes[6]["cycle"] == "CYCLE84" and holes[6]["x_mm"] == 108.0
+    alarms = [m for m in msgs if m["kind"] == "alarm"]
+    assert alarms and (alarms[0]["fault"], alarms[0]["hole"]) == ("loose_tool", 6)

@@ -15,10 +15,16 @@ teach-in cut, per tool and cut) and judges each later hole of the same condition
   worn or chipped drill, harder material): ``rise`` 0.25 lies far above the healthy scatter
   and slow wear between holes, and below the rise of a worn-out drill;
 * ``load_drop``: the mean torque is lower by more than ``drop`` (softer material, a wrong
-  tool) where it is not a breakage.
+  tool) where it is not a breakage;
+* ``loose_tool``: a tap's current fluctuates while it is extracted (spindle reversed) more
+  than ``loose_ratio`` times its reference (thesis §5.4, Fig. 5.10: a tap loose in its
+  collet stick-slips on the way out; the simulator's ``LooseTool``: 3.5x, healthy taps of one
+  condition scatter by ~10 %).
 
-A hole that alarmed is not learned. Conditions are keyed by ``(tool, cycle, depth [0.5 mm],
-speed [10 rpm], feed [5 mm/min])``: a change of any of them is a new cut and is taught anew.
+A hole that alarmed is not learned. A condition is one (tool, cycle) with the depth within
+0.5 mm, the speed within 1 % + 5 rpm and the feed within 2 % + 2 mm/min of the first hole's
+(measured values scatter: a tapping depth reads 11.7 or 11.8 mm): a change beyond that is a
+new cut and is taught anew.
 The first hole of a condition is never judged against a reference (there is none), except:
 
 * a drilling-cycle hole whose torque at the end of the cut (the drill fully engaged, where it
@@ -85,6 +91,8 @@ class HoleLoadJudge:
         Relative rise / drop of the mean torque that alarms.
     min_load_nm : float, default 0.25
         A drilling-cycle hole below this mean cutting torque cut nothing [Nm].
+    loose_ratio : float, default 2
+        A tap's extraction fluctuation above this multiple of its reference: loose.
     """
 
     teach_holes: int = 1
@@ -92,7 +100,9 @@ class HoleLoadJudge:
     rise: float = 0.25
     drop: float = 0.25
     min_load_nm: float = 0.25
-    references: dict[tuple[Any, ...], list[tuple[float, float]]] = field(default_factory=dict)
+    loose_ratio: float = 2.0
+    references: dict[tuple[Any, ...], list[tuple[float, float, float]]] = field(
+        default_factory=dict)
     broken: dict[Any, float] = field(default_factory=dict)
     """Tool -> torque of its broken stub [Nm] (after a breakage, until it cuts again)."""
 
@@ -105,14 +115,34 @@ class HoleLoadJudge:
 
     @staticmethod
     def condition(row: Mapping[str, Any]) -> tuple[Any, ...]:
-        """The cut condition of a hole row (its teach-in key)."""
-        def r(key: str, step: float) -> float | None:
-            v = row.get(key)
-            return None if v is None or not math.isfinite(float(v)) else \
-                round(float(v) / step) * step
+        """The cut condition of a hole row: ``(tool, cycle, depth [mm], speed [rpm], feed
+        [mm/min])`` as measured (NaN where unknown)."""
+        def v(key: str) -> float:
+            f = _finite(row.get(key))
+            return math.nan if f is None else f
 
-        return (row.get("tool"), row.get("cycle"), r("depth_mm", 0.5), r("speed_rpm", 10.0),
-                r("feed_mm_min", 5.0))
+        return (row.get("tool"), row.get("cycle"), v("depth_mm"), v("speed_rpm"),
+                v("feed_mm_min"))
+
+    @staticmethod
+    def same_condition(a: tuple[Any, ...], b: tuple[Any, ...]) -> bool:
+        """Two conditions are one cut: the same tool and cycle, depth within 0.5 mm, speed
+        within 1 % + 5 rpm, feed within 2 % + 2 mm/min (NaN matches NaN)."""
+        if a[:2] != b[:2]:
+            return False
+
+        def close(x: float, y: float, rel: float, tol: float) -> bool:
+            if math.isnan(x) or math.isnan(y):
+                return math.isnan(x) and math.isnan(y)
+            return abs(x - y) <= rel * max(abs(x), abs(y)) + tol
+
+        return (close(a[2], b[2], 0.0, 0.5) and close(a[3], b[3], 0.01, 5.0)
+                and close(a[4], b[4], 0.02, 2.0))
+
+    def _key(self, row: Mapping[str, Any]) -> tuple[Any, ...]:
+        """The taught condition this row belongs to (or its own, new)."""
+        cond = self.condition(row)
+        return next((k for k in self.references if self.same_condition(k, cond)), cond)
 
     def judge(self, row: Mapping[str, Any]) -> HoleLoadVerdict | None:
         """The finding on one hole (None: normal, or taught), learning it when normal.
@@ -130,11 +160,12 @@ class HoleLoadJudge:
         hole = int(row.get("hole", -1))
         mean = _finite(row.get("torque_mean_nm"))
         last = _finite(row.get("torque_last_nm"))
+        fluct = _finite(row.get("reverse_current_fluct_a"))
         if mean is None:
             return None  # no torque estimate (flagged samples only): nothing to judge
         drilling = str(row.get("cycle", "")).upper().startswith("CYCLE8") and \
             str(row.get("cycle", "")).upper() != "CYCLE84"
-        key = self.condition(row)
+        key = self._key(row)
         refs = self.references.get(key, [])
         tool = row.get("tool")
         stub = self.broken.get(tool)
@@ -163,11 +194,19 @@ class HoleLoadJudge:
                     "no_load", hole, math.nan, math.nan,
                     f"hole {hole}: drilling cycle cut with {mean:.2f} Nm (< "
                     f"{self.min_load_nm:g} Nm): no cutting load, a broken or missing drill")
-            self.references.setdefault(key, []).append((mean, last if last is not None
-                                                         else mean))
+            self.references.setdefault(key, []).append(
+                (mean, last if last is not None else mean,
+                 fluct if fluct is not None else math.nan))
             return None
-        ref_mean = sum(m for m, _ in refs) / len(refs)
-        ref_last = sum(x for _, x in refs) / len(refs)
+        ref_mean = sum(r[0] for r in refs) / len(refs)
+        ref_last = sum(r[1] for r in refs) / len(refs)
+        ref_fluct = sum(r[2] for r in refs) / len(refs)
+        if fluct is not None and ref_fluct > 0 and fluct > self.loose_ratio * ref_fluct:
+            return HoleLoadVerdict(
+                "loose_tool", hole, fluct / ref_fluct, ref_fluct,
+                f"hole {hole}: the spindle current fluctuates {fluct:.3f} A while the tap is "
+                f"extracted, {fluct / ref_fluct:.1f}x the {ref_fluct:.3f} A taught: the tap "
+                "is loose in its holder (stick-slip on reversal)")
         if ref_mean <= 0 or ref_last <= 0:
             return None
         if mean < self.breakage_ratio * ref_mean:

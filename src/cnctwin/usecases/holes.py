@@ -92,6 +92,11 @@ HOLE_COLUMNS: dict[str, str] = {
                       "[Nm]",
     "energy_j": "cutting energy, integral of torque x omega over the cut [J]",
     "thrust_proxy": "Z-axis load in the cut minus its air-feed level (unit in attrs) [-]",
+    "reverse_current_fluct_a": "tapping: std of the sample-to-sample change of CURRENT while "
+                               "the spindle runs in reverse to extract the tap (after 0.1 s), "
+                               "NaN for other holes [A]",
+    "reverse_z_fluct_mm": "tapping: the same of the Z following error (DES_POS - ENC_POS) "
+                          "[mm]",
     "dev_{x,y,z}_{mean,maxabs,rms}_mm": "DES_POS - ENC_POS statistics during the cut [mm]",
     "tool": "active tool number (NC events), <NA> without events",
     "cycle": "drilling cycle name (CYCLE81 ...); 'plunge' for a straight Z plunge with "
@@ -675,6 +680,8 @@ min_speed_rpm
                 thrust = -float(np.nanmean(zl[0][sl]) - np.mean(air))
         out_idx = np.flatnonzero(za[last.end:] > surface)
         extraction = last.end + int(out_idx[0]) if out_idx.size else len(za) - 1
+        fluct_i, fluct_z = _reverse_fluctuation(current, zm, za, speed, n_med, bottom,
+                                                extraction, fs)
         row: dict[str, Any] = {
             "hole": first_hole + h,
             "set": (first_hole + h) // set_size,
@@ -706,6 +713,8 @@ min_speed_rpm
                                else math.nan),
             "energy_j": energy,
             "thrust_proxy": thrust,
+            "reverse_current_fluct_a": fluct_i,
+            "reverse_z_fluct_mm": fluct_z,
         }
         for ax, tag in ((xy_axes[0], "x"), (xy_axes[1], "y"), (z_axis, "z")):
             m, mx, rms = _dev(columns, ax, sl)
@@ -841,6 +850,29 @@ def _columns() -> list[str]:
 def _count_cycle_calls(ev: HoleEvents) -> int:
     return sum(1 for k, p in zip(ev.kind.tolist(), ev.path.tolist(), strict=True)
                if k == "call" and p is not None and _COUNT_RE.search(str(p)))
+
+
+def _reverse_fluctuation(current: NDArray[np.float64], z_des: NDArray[np.float64],
+                         z_enc: NDArray[np.float64], speed: NDArray[np.float64],
+                         n_cut: float, bottom: int, extraction: int, fs: float
+                         ) -> tuple[float, float]:
+    """Fluctuation of the current and of the Z following error while a tap is extracted with
+    the spindle reversed (thesis Fig. 5.10: a loose tap stick-slips there); NaN without a
+    reversal of at least 0.2 s after its first 0.1 s."""
+    seg = np.arange(bottom, extraction + 1)
+    with np.errstate(invalid="ignore"):
+        rev = seg[speed[seg] * np.sign(n_cut) < -1.0]
+    skip = round(0.1 * fs)
+    rev = rev[skip:]
+    if rev.size < round(0.2 * fs) or not np.all(np.diff(rev) == 1):
+        if rev.size >= round(0.2 * fs):  # the longest run only
+            runs = np.split(rev, np.flatnonzero(np.diff(rev) != 1) + 1)
+            rev = max(runs, key=len)
+        if rev.size < round(0.2 * fs):
+            return math.nan, math.nan
+    fi = float(np.nanstd(np.diff(current[rev])))
+    fz = float(np.nanstd(np.diff(z_des[rev] - z_enc[rev]))) if z_des is not z_enc else math.nan
+    return fi, fz
 
 
 def hole_records(
