@@ -108,3 +108,22 @@ def test_saved_machine_file_has_the_users_permissions(tmp_path: Path) -> None:
         assert stat.S_IMODE(p.stat().st_mode) == 0o640
     finally:
         os.umask(old)
+
+
+def test_the_documented_example_is_a_valid_machine_file(tmp_path: Path) -> None:
+    """Issue 29, pt 5: docs/machine-file.md's example, copied verbatim, failed at line 7
+    (TOML inline tables cannot span lines). It loads now, with the values it states."""
+    import re
+
+    from cnctwin.machine import load_machine
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "machine-file.md").read_text()
+    example = re.search(r"```toml\n(.*?)```", doc, re.S)
+    assert example is not None
+    p = tmp_path / "machine.toml"
+    p.write_text(example.group(1), encoding="utf-8")
+    mf = load_machine(p)
+    assert mf.value("spindle.kt_nm_per_a") == pytest.approx(1.021)
+    assert mf.is_identified("spindle.kt_nm_per_a")
+    assert not mf.is_identified("spindle.inertia_kg_m2")
+    assert mf.machine.name == "dmc60h-cell3"
