@@ -128,11 +128,16 @@ def draw_fault(d: Path, machine: Path, sets: list[str], seed: int, operations: i
             if near:
                 mapped[int(r["hole"])] = int(near[0]["hole"])
         pool = sorted(mapped)
-        if kind == "loose_tap":  # a tap that works loose: on a tapped hole
-            pool = [h for h in pool if next(r for r in rows if int(r["hole"]) == h)["cycle"]
-                    == "CYCLE84"]
+        if kind == "loose_tap":  # a tap that works loose: on a tapped hole after the first of
+            # its condition (a tap loose from the first hole on is the reference: by design)
+            taps = [r for r in rows if r["cycle"] == "CYCLE84"]
+            pool = [h for h in pool if any(
+                int(r["hole"]) == h and any(
+                    int(q["hole"]) < h and HoleLoadJudge.same_condition(
+                        HoleLoadJudge.condition(q), HoleLoadJudge.condition(r))
+                    for q in taps) for r in taps)]
             if not pool:
-                return {"seed": seed, "kind": kind, "detail": "no tapping in this draw",
+                return {"seed": seed, "kind": kind, "detail": "no judgeable tap",
                         "found": False, "later": False, "judgeable": False, "before": 0,
                         "alarms": 0, "first": None, "skipped": True}
         hole = int(rng.choice(pool))
@@ -179,14 +184,14 @@ def draw_fault(d: Path, machine: Path, sets: list[str], seed: int, operations: i
             if alarms else None}
 
 
-def run_faults(draws: int, operations: int, machine_seed: int, first_seed: int
-               ) -> list[dict[str, object]]:
+def run_faults(draws: int, operations: int, machine_seed: int, first_seed: int,
+               kinds: tuple[str, ...] = FAULT_KINDS) -> list[dict[str, object]]:
     out: list[dict[str, object]] = []
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         machine, sets = calibrated_machine(d, machine_seed)
         for k in range(draws):
-            kind = FAULT_KINDS[k % len(FAULT_KINDS)]
+            kind = kinds[k % len(kinds)]
             r = draw_fault(d, machine, sets, first_seed + k, operations, kind)
             out.append(r)
             print(f"{r['seed']:>5} {kind:<14} {r['detail']!s:<22} "
@@ -194,7 +199,7 @@ def run_faults(draws: int, operations: int, machine_seed: int, first_seed: int
                   f"found {r['found']!s:<5} later {r['later']!s:<5} "
                   f"alarms {r['alarms']:>3} (before the fault {r['before']}) first {r['first']}",
                   flush=True)
-    for kind in FAULT_KINDS:
+    for kind in kinds:
         rows = [r for r in out if r["kind"] == kind and r["judgeable"]]
         first = sum(1 for r in out if r["kind"] == kind and not r["judgeable"]
                     and not r.get("skipped"))
@@ -249,9 +254,13 @@ if __name__ == "__main__":
     ap.add_argument("--machine-seed", type=int, default=7)
     ap.add_argument("--first-seed", type=int, default=100)
     ap.add_argument("--faults", action="store_true",
-                    help="inject one fault per draw (breakage, load rise, friction rise)")
+                    help="inject one fault per draw (breakage, load rise, friction rise, "
+                    "loose tap)")
+    ap.add_argument("--kinds", default=",".join(FAULT_KINDS),
+                    help="with --faults: the fault kinds, in turn (comma-separated)")
     a = ap.parse_args()
     if a.faults:
-        run_faults(a.draws, a.operations, a.machine_seed, a.first_seed)
+        run_faults(a.draws, a.operations, a.machine_seed, a.first_seed,
+                   tuple(k.strip() for k in a.kinds.split(",") if k.strip()))
     else:
         print(summary(run(a.draws, a.operations, a.machine_seed, a.first_seed)))
