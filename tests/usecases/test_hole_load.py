@@ -96,12 +96,13 @@ def test_breakage_in_the_first_hole_of_a_condition() -> None:
 
 def test_a_loose_tap_is_its_extraction_fluctuation() -> None:
     """Thesis Fig. 5.10: a loose tap stick-slips while it is extracted; the healthy taps of
-    one condition scatter by ~10 % (draw 100: 0.048-0.053 A), a loose one 3.5x (0.18 A)."""
+    one condition scatter by ~5 % (draw 106: 0.102-0.103 A at 500 rpm), a loose one 1.7x
+    (0.172 A) there and 3x at 300 rpm."""
     j = HoleLoadJudge()
     tap = {"cycle": "CYCLE84", "tool": 2, "depth_mm": 11.8, "speed_rpm": 300.0,
            "feed_mm_min": 450.0}
     assert j.judge(_row(5, 25.0, reverse_current_fluct_a=0.05, **tap)) is None
-    assert j.judge(_row(6, 25.0, reverse_current_fluct_a=0.05 * 1.99, **tap)) is None
-    v = j.judge(_row(7, 25.0, reverse_current_fluct_a=0.05 * 2.01, **tap))
+    assert j.judge(_row(6, 25.0, reverse_current_fluct_a=0.05 * 1.49, **tap)) is None
+    v = j.judge(_row(7, 25.0, reverse_current_fluct_a=0.05 * 1.51, **tap))
     assert v is not None and v.kind == "loose_tool" and "loose" in v.message
-    assert v.ratio == pytest.approx(2.01)
+    assert v.ratio == pytest.approx(1.51)
