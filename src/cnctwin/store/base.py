@@ -426,7 +426,7 @@ _HOLE_FLOAT_A = ("start_s", "end_s", "extraction_s", "cut_duration_s", "x_mm", "
 _HOLE_FLOAT_B = (
     "bottom_z_mm", "depth_mm", "feed_mm_min", "speed_rpm", "current_mean_a", "current_peak_a",
     "current_first_a", "torque_first_nm", "torque_mean_nm", "torque_last_nm", "energy_j",
-    "thrust_proxy",
+    "thrust_proxy", "reverse_current_fluct_a", "reverse_z_fluct_mm",
     *(f"dev_{a}_{s}_mm" for a in "xyz" for s in ("mean", "maxabs", "rms")),
 )
 
