@@ -17,7 +17,7 @@ import os
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
@@ -28,7 +28,7 @@ import orjson
 
 from cnctwin.edge.cycles import CycleTracker
 from cnctwin.edge.pipeline import Chunk, MessageBatch, Processor, Result, Sink, Source
-from cnctwin.edge.sinks import rotated_files, tail_lines
+from cnctwin.edge.sinks import tail_messages
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import CounterGap
 
@@ -678,7 +678,7 @@ def last_emitted(results: str | PathLike[str], *, tail_bytes: int = 1 << 20
         Message kind -> last cycle emitted (empty on a first run).
     """
     out: dict[str, int] = {}
-    for msgs in _tail_messages(results, tail_bytes=tail_bytes):
+    for msgs in tail_messages(results, tail_bytes=tail_bytes):
         for m in msgs:
             try:
                 kind = str(m["kind"])
@@ -709,7 +709,7 @@ def last_hole_number(results: str | PathLike[str], *, tail_bytes: int = 1 << 20
     int or None
         The hole number, or None when no hole was emitted.
     """
-    for msgs in _tail_messages(results, tail_bytes=tail_bytes):
+    for msgs in tail_messages(results, tail_bytes=tail_bytes):
         numbers = []
         for m in msgs:
             with contextlib.suppress(KeyError, TypeError, ValueError):
@@ -718,23 +718,6 @@ def last_hole_number(results: str | PathLike[str], *, tail_bytes: int = 1 << 20
         if numbers:
             return max(numbers)
     return None
-
-
-def _tail_messages(results: str | PathLike[str], *, tail_bytes: int
-                   ) -> Iterator[list[dict[str, Any]]]:
-    """The messages in the tail of ``results``, then of each rotated file, newest first (a
-    line a crash cut short, or not a JSON object, is skipped)."""
-    p = Path(results)
-    for f in [p, *reversed(rotated_files(p))]:
-        msgs = []
-        for line in tail_lines(f, tail_bytes=tail_bytes):
-            try:
-                m = json.loads(line)
-            except json.JSONDecodeError:
-                continue
-            if isinstance(m, dict):
-                msgs.append(m)
-        yield msgs
 
 
 def last_emitted_cycle(results: str | PathLike[str], *, tail_bytes: int = 1 << 20

@@ -7,10 +7,13 @@ Messages are dicts built by the runtime (``seq``, ``kind``, ``machine``, ``cycle
 from __future__ import annotations
 
 import contextlib
+import itertools
+import json
 import os
 import random
 import threading
 import time
+from collections.abc import Iterator
 from os import PathLike
 from pathlib import Path
 from typing import IO, Any
@@ -24,7 +27,8 @@ from cnctwin.exceptions import ConfigError
 from cnctwin.iotools.mqtt import MqttSecurity, connect_error, refusal
 from cnctwin.recording import Recording, RecordingMeta, find_gaps
 
-__all__ = ["JsonLinesSink", "MqttSink", "StoreSink", "dumps", "reconnect_delay_s"]
+__all__ = ["JsonLinesSink", "MqttSink", "StoreSink", "dumps", "reconnect_delay_s",
+           "tail_messages"]
 
 
 def reconnect_delay_s(failures: int, *, base_s: float, max_s: float) -> float:
@@ -93,6 +97,37 @@ def rotated_files(path: str | PathLike[str]) -> list[Path]:
     return sorted(p.parent.glob(f"{p.stem}.*{p.suffix}"))
 
 
+
+
+def tail_messages(results: str | PathLike[str], *, tail_bytes: int
+                  ) -> Iterator[list[dict[str, Any]]]:
+    """The messages in the tail of a results file, then of each file it was rotated into,
+    newest first (:func:`tail_lines`; a line a crash cut short, or not a JSON object, is
+    skipped).
+
+    Parameters
+    ----------
+    results : str or path-like
+        The runtime's ``results.jsonl``.
+    tail_bytes : int
+        How much of the end of each file is read [bytes].
+
+    Yields
+    ------
+    list of dict
+        The messages of one file, in file order.
+    """
+    p = Path(results)
+    for f in [p, *reversed(rotated_files(p))]:
+        msgs = []
+        for line in tail_lines(f, tail_bytes=tail_bytes):
+            try:
+                m = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            if isinstance(m, dict):
+                msgs.append(m)
+        yield msgs
 
 
 class JsonLinesSink:
@@ -596,14 +631,13 @@ class StoreSink:
             return
         cyc = np.concatenate(self._cyc) if self._cyc else np.empty(0, dtype=np.int64)
         t = np.concatenate(self._t) if self._t else np.empty(0, dtype=np.int64)
-        order = np.argsort(cyc, kind="stable")
-        if cyc.size > 1 and np.any(np.diff(cyc) <= 0):  # rows restored after a restart
-            cyc, t = cyc[order], t[order]
         cols = sorted({c for d in self._der for c in d})
         data = {c: np.concatenate([d.get(c, np.full(len(k), np.nan))
                                    for d, k in zip(self._der, self._cyc, strict=True)])
                 for c in cols}
-        if cyc.size > 1 and not np.array_equal(order, np.arange(cyc.size)):
+        if cyc.size > 1 and np.any(np.diff(cyc) < 0):  # rows restored after a restart
+            order = np.argsort(cyc, kind="stable")
+            cyc, t = cyc[order], t[order]
             data = {c: v[order] for c, v in data.items()}
         tq_c, tq_v = self._torque()
         # the torque of the newest cycle comes with the next chunk: a full block ends at the
@@ -726,19 +760,16 @@ class StoreSink:
         """Torque after ``torque_last``, holes and alarms after ``stored_last``, up to
         ``after_cycle``, from the runtime's results file (what the crash kept from the
         store)."""
-        import json
-
         cyc_l: list[np.ndarray] = []
         t_l: list[np.ndarray] = []
         held = {int(m["cycle"]) for m in self._holes}
         alarms = {(int(m["cycle"]), m.get("detector")) for m in self._alarms}
-        for f in [*rotated_files(path)[-1:], path]:
-            for line in tail_lines(f, tail_bytes=64 << 20):
-                try:
-                    m = json.loads(line)
-                    kind = m["kind"]
-                except (json.JSONDecodeError, KeyError, TypeError):
-                    continue  # the line a crash cut short
+        # the open block is at most block_cycles long: the newest rotated file and the
+        # current one hold it (read in that order: the holes stay in time order)
+        newest = list(itertools.islice(tail_messages(path, tail_bytes=64 << 20), 2))
+        for msgs in reversed(newest):
+            for m in msgs:
+                kind = m.get("kind")
                 if kind == "torque":
                     c0, n = int(m["first_cycle"]), int(m["n"])
                     c = np.arange(c0, c0 + n, dtype=np.int64)
