@@ -236,7 +236,6 @@ class HoleProcessor:
                  load_judge: HoleLoadJudge | bool = True) -> None:
         self.load_judge: HoleLoadJudge | None = (
             HoleLoadJudge() if load_judge is True else load_judge or None)
-        self.load_alarms = 0
         self.model = model
         self.spindle, self.z_axis, self.xy_axes = spindle, z_axis, xy_axes
         self.window_s, self.set_size, self.settle_s = window_s, set_size, settle_s
@@ -407,7 +406,6 @@ class HoleProcessor:
             if self.load_judge is not None and not msg.get("partial"):
                 verdict = self.load_judge.judge(payload)
                 if verdict is not None:
-                    self.load_alarms += 1
                     out.append(Result("alarm", int(row["end_cycle"]), {
                         "detector": "HoleLoadJudge", "fault": verdict.kind,
                         "cycle": int(row["end_cycle"]), "score": verdict.ratio,

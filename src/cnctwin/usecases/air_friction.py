@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from cnctwin.analysis.segments import samples_since
 from cnctwin.exceptions import ConfigError
+from cnctwin.spindle import SpeedChangeFlags
 
 __all__ = ["AirFrictionCheck", "FrictionFinding"]
 
@@ -78,7 +78,8 @@ class AirFrictionCheck:
     min_speed_rpm : float, default 600
         Slower samples are not judged (Stribeck friction, not in the model).
     settle_s : float, default 0.3
-        Samples after a speed change that are not judged [s].
+        Samples after a speed change that are not judged [s] (the speed rule is
+        :class:`cnctwin.spindle.SpeedChangeFlags`, as for the cutting torque).
     """
 
     def __init__(self, *, window_s: float = 0.5, rel_tol: float = 0.25, abs_tol_a: float = 0.1,
@@ -90,8 +91,7 @@ class AirFrictionCheck:
         self.min_speed_rpm, self.settle_s = min_speed_rpm, settle_s
         self._sum = np.zeros(3)  # residual, predicted, speed
         self._n = 0
-        self._since = 0
-        self._prev_speed: float | None = None
+        self._flags: SpeedChangeFlags | None = None
         self.windows = 0
         self.departed = False
 
@@ -101,17 +101,13 @@ class AirFrictionCheck:
         """Judge the next consecutive cycles; the findings of the windows they complete (a
         departure is reported once, again only after a window within the tolerance)."""
         n = np.asarray(speed_rpm, dtype=np.float64)
-        prev = n[0] if self._prev_speed is None else self._prev_speed
-        step = np.abs(np.diff(np.concatenate([[prev], n])))
-        with np.errstate(invalid="ignore"):
-            changed = ~(step <= 1.0)
-        since = samples_since(changed, before=self._since)
-        self._since = int(since[-1]) if since.size else self._since
-        self._prev_speed = float(n[-1]) if n.size else self._prev_speed
+        if self._flags is None:  # the torque's own rule: a step > 1 rpm, settling, too slow
+            self._flags = SpeedChangeFlags(fs_hz=1.0 / cycle_time_s, speed_step_rpm=1.0,
+                                           settle_s=self.settle_s,
+                                           min_speed_rpm=self.min_speed_rpm)
+        steady = self._flags.update(n) == 0
         r = np.asarray(current_a, dtype=np.float64) - np.asarray(predicted_a, dtype=np.float64)
-        with np.errstate(invalid="ignore"):
-            ok = ((np.asarray(air) == 1.0) & (since >= round(self.settle_s / cycle_time_s))
-                  & (np.abs(n) >= self.min_speed_rpm) & np.isfinite(r))
+        ok = (np.asarray(air) == 1.0) & steady & np.isfinite(r)
         need = max(1, round(self.window_s / cycle_time_s))
         out: list[FrictionFinding] = []
         idx = np.flatnonzero(ok)

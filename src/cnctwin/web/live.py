@@ -134,7 +134,8 @@ def directory_labels(paths: Iterable[str | os.PathLike[str]]) -> dict[str, Path]
     for item in paths:
         p = Path(item)
         d = p.parent if p.suffix.lower() == ".jsonl" else p
-        label = _machine_named(d) or _folder_label(d)
+        named = LiveSource(d).status().get("machine")  # the --machine of the run
+        label = named.strip() if isinstance(named, str) and named.strip() else _folder_label(d)
         while label in out:  # two state directories of one name in different folders
             label += "'"
         out[label] = p
@@ -149,16 +150,6 @@ def _folder_label(d: Path) -> str:
     if name.lower() in _GENERIC and d.parent.name:
         return f"{d.parent.name}/{name}"
     return name
-
-
-def _machine_named(d: Path) -> str | None:
-    """The machine name in ``d/status.json`` (None when there is none or it is unreadable)."""
-    try:
-        doc = json.loads((d / "status.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    m = doc.get("machine") if isinstance(doc, dict) else None
-    return m.strip() if isinstance(m, str) and m.strip() else None
 
 
 class LiveSource:
