@@ -95,12 +95,19 @@ def test_friction_change_detected_at_hidden_index() -> None:
     assert not [a for a in res.alarms if a.window_index < at], res.alarms
     coulomb = [a for a in res.alarms if a.parameter in ("coulomb_pos", "coulomb_neg")]
     assert {a.parameter for a in coulomb} == {"coulomb_pos", "coulomb_neg"}
+    # Coulomb current scales with coulomb_n (Stribeck and viscous parts unchanged; the
+    # current-loop gain is constant). The screw's position-periodic force (FeedAxis.ripple_n,
+    # A) does not scale: over strokes that are not whole periods its mean r adds to the fitted
+    # Coulomb term, |r| <= A, so the relative change is (f - 1) C / (C + r), between
+    # (f - 1) C / (C + A) and (f - 1) C / (C - A); within 5 points of that range
+    ax = sim.Machine.thesis_default().with_overrides(
+        random_loop_overrides(seed, axes=("X1",))).axis("X1")
+    c, amp = ax.coulomb_n, ax.ripple_n
+    lo, hi = (factor - 1.0) * c / (c + amp), (factor - 1.0) * c / (c - amp)
     for a in coulomb:
         assert a.onset_index == at and a.window_index == at
         assert a.confidence > 0.999
-        # Coulomb current scales with coulomb_n (Stribeck and viscous parts unchanged; the
-        # current-loop gain is constant): relative change within 5 points of the hidden one
-        assert a.relative_change == pytest.approx(factor - 1.0, abs=0.05)
+        assert lo - 0.05 <= a.relative_change <= hi + 0.05, (a.relative_change, lo, hi)
     # Kv and the speed loop did not change and raise nothing
     assert not res.alarms_for("kv_1_s") and not res.alarms_for("speed_loop_equiv_time_s")
 

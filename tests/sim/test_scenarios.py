@@ -8,6 +8,7 @@ written Capture4Analysis files, dynamometer/camera CSVs through their readers.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +21,7 @@ from cnctwin.exceptions import ConfigError
 from cnctwin.iotools import read_recording
 from cnctwin.iotools.dynamometer import read_dynamometer_csv
 from cnctwin.iotools.thermal import read_thermal_camera_csv
+from cnctwin.machine import Machine
 from cnctwin.recording import Recording
 from cnctwin.sim.cutting import THESIS_DRILLING_CUTS
 from cnctwin.sim.scenarios import (
@@ -154,13 +156,19 @@ def test_hole_position_deviation_grows_with_wear(
         wear: tuple[Path, dict[str, Any], Recording]) -> None:
     # thesis §5.3: X/Y encoder positions deviate from the (constant) desired positions while
     # drilling; the drill walk and run-out force grow with flank wear (docs/simulator.md §2)
+    # The encoders carry white measuring noise (issue 29; FeedAxis.encoder_noise, 0.15 um, and
+    # a 10 nm quantiser): its variance, known from the axis description, is taken off the
+    # mean square so that dev is the rms of the slide's motion
     _, truth, rec = wear
+    m = Machine.thesis_default()
+    noise_var = sum(m.axis(a).encoder_noise**2 + m.axis(a).encoder_resolution**2 / 12.0
+                    for a in ("X1", "Y1"))
     dev = []
     for h in truth["holes"]:
         sel = _window(rec, h["full_engagement_first_cycle"], h["cut_last_cycle"] - 100)
         dx = (rec.hf["ENC_POS|X1"] - rec.hf["DES_POS|X1"]).to_numpy()[sel]
         dy = (rec.hf["ENC_POS|Y1"] - rec.hf["DES_POS|Y1"]).to_numpy()[sel]
-        dev.append(np.sqrt(np.mean(dx**2 + dy**2)))
+        dev.append(np.sqrt(max(np.mean(dx**2 + dy**2) - noise_var, 0.0)))
     wear_um = [h["wear_um"] for h in truth["holes"]]
     assert np.corrcoef(wear_um, dev)[0, 1] > 0.9
     assert dev[-1] > 2 * dev[0]
@@ -182,13 +190,28 @@ def test_loose_tap_fluctuates_only_on_extraction(tmp_path: Path) -> None:
     tight, loose = truth["holes"][1], truth["holes"][2]
     assert truth["fault_onsets_s"][0] == pytest.approx(
         (loose["extraction_first_cycle"] - START_CYCLE) * CT, abs=0.01)
-    for x, factor in ((z, 5.0), (cur, 2.0)):
-        ext_t = rough(x, tight["extraction_first_cycle"], tight["extraction_last_cycle"])
-        ext_l = rough(x, loose["extraction_first_cycle"], loose["extraction_last_cycle"])
-        cut_t = rough(x, tight["cut_first_cycle"], tight["extraction_first_cycle"])
-        cut_l = rough(x, loose["cut_first_cycle"], loose["extraction_first_cycle"])
-        assert ext_l > factor * ext_t
-        assert cut_l < 1.3 * cut_t
+    ext_t = rough(cur, tight["extraction_first_cycle"], tight["extraction_last_cycle"])
+    ext_l = rough(cur, loose["extraction_first_cycle"], loose["extraction_last_cycle"])
+    cut_t = rough(cur, tight["cut_first_cycle"], tight["extraction_first_cycle"])
+    cut_l = rough(cur, loose["cut_first_cycle"], loose["extraction_first_cycle"])
+    assert ext_l > 2.0 * ext_t
+    assert cut_l < 1.3 * cut_t
+    # Z: the slide's motion under the 300 N slip pulls is ~0.2 um rms, the size of the
+    # measuring noise (FeedAxis.encoder_noise 0.15 um, increments sqrt 2 x that): compared
+    # above the noise floor known from the axis description. The floor's estimate from ~600
+    # increments has a standard error of ~6 % of its variance (0.05 um in these terms)
+    zax = Machine.thesis_default().axis("Z1")
+    floor = 2.0 * (zax.encoder_noise**2 + zax.encoder_resolution**2 / 12.0)
+
+    def excess(first: int, last: int) -> float:
+        return math.sqrt(max(rough(z, first, last) ** 2 - floor, 0.0))
+
+    ext_t = excess(tight["extraction_first_cycle"], tight["extraction_last_cycle"])
+    ext_l = excess(loose["extraction_first_cycle"], loose["extraction_last_cycle"])
+    cut_t = excess(tight["cut_first_cycle"], tight["extraction_first_cycle"])
+    cut_l = excess(loose["cut_first_cycle"], loose["extraction_first_cycle"])
+    assert ext_l > 3.0 * max(ext_t, 5e-5), (ext_l, ext_t)
+    assert cut_l < max(1.3 * cut_t, 5e-5), (cut_l, cut_t)
     # rigid tapping: spindle in position control, CTRL_DIFF of the spindle non-zero
     assert np.abs(rec.hf["CTRL_DIFF|SP1"].to_numpy()).max() > 0
 

@@ -173,23 +173,36 @@ def test_hole_quality_recovers_hidden_walk_and_runout(seed: int) -> None:
     def rel(est: str, true: str) -> np.ndarray:
         return np.abs(q[est].to_numpy() / t[true].to_numpy() - 1.0)
 
-    # rotating (1x spindle) force from the lock-in amplitude x axis stiffness: measured <= 2 %
-    assert rel("rotating_force_est_n", "rotating_force_n").max() < 0.05
-    # chisel-edge entry force and its direction from the entry-window response fit:
-    # measured <= 5 % and <= 0.04 rad
-    assert rel("entry_force_est_n", "entry_force_peak_n").max() < 0.10
+    # rotating (1x spindle) force from the lock-in amplitude x axis stiffness: <= 1 % without
+    # measuring noise; with the encoders' noise (issue 29, 0.15 um) each hole's estimate
+    # scatters by its stated standard error (3-8 % here): within 2 % + 3 of those
+    err = np.abs(q["rotating_force_est_n"].to_numpy() - t["rotating_force_n"].to_numpy())
+    allowed = 0.02 * t["rotating_force_n"].to_numpy() + 3.0 * q["rotating_force_se_n"].to_numpy()
+    assert np.all(err <= allowed), (err, allowed)
+    # chisel-edge entry force and its direction from the entry-window response fit: <= 5 %
+    # and <= 0.04 rad without measuring noise; with it (issue 29) each hole scatters by its
+    # stated standard error (6-20 % here): within 5 % + 3 standard errors, the direction
+    # within 0.04 rad + 3 se / F
+    f_true = t["entry_force_peak_n"].to_numpy()
+    se = q["entry_force_se_n"].to_numpy()
+    assert np.all(np.abs(q["entry_force_est_n"].to_numpy() - f_true) <= 0.05 * f_true + 3 * se)
     dang = np.angle(np.exp(1j * (q["entry_force_direction_rad"] - t["entry_direction_rad"])))
-    assert np.abs(dang).max() < 0.1
-    # tool-tip hole position error (F_entry / k_tip) per hole
-    assert rel("tip_position_error_est_um", "tip_position_error_um").max() < 0.10
+    assert np.all(np.abs(dang) <= 0.04 + 3.0 * se / q["entry_force_est_n"].to_numpy())
+    # tool-tip hole position error (F_entry / k_tip) per hole, the same way
+    tip = t["tip_position_error_um"].to_numpy()
+    assert np.all(np.abs(q["tip_position_error_est_um"].to_numpy() - tip)
+                  <= 0.05 * tip + 3.0 * q["tip_position_error_se_um"].to_numpy())
     # static walk: weakest (a ramp that the speed-loop integral mostly absorbs): the sum over
     # the run within 30 %
     assert q["walk_force_est_n"].sum() / t["walk_force_n"].sum() == pytest.approx(1.0, abs=0.3)
-    # growth with wear: the slide run-out (um) tracks the wear and the true force ratio
-    assert np.corrcoef(q["runout_um"], t["wear_um"])[0, 1] > 0.99
-    growth = q["runout_um"].iloc[-1] / q["runout_um"].iloc[0]
-    assert growth == pytest.approx(t["rotating_force_n"].iloc[-1] / t["rotating_force_n"].iloc[0],
-                                   rel=0.1)
+    # growth with wear: the slide run-out (um) tracks the wear (0.99 without measuring noise;
+    # the 3-8 % scatter of each hole's run-out takes ~0.02 off) and the true force ratio within
+    # 3 standard errors of the ratio (+ 2 %)
+    assert np.corrcoef(q["runout_um"], t["wear_um"])[0, 1] > 0.97
+    a0, a1 = q["runout_um"].iloc[0], q["runout_um"].iloc[-1]
+    s0, s1 = q["runout_se_um"].iloc[0], q["runout_se_um"].iloc[-1]
+    true_growth = t["rotating_force_n"].iloc[-1] / t["rotating_force_n"].iloc[0]
+    assert abs(a1 / a0 / true_growth - 1.0) <= 0.02 + 3.0 * math.hypot(s0 / a0, s1 / a1)
     # sub-micrometre, above the 10 nm encoder resolution
     assert q["runout_um"].min() > 0.02 and q["runout_um"].max() < 1.0
     # flags: a tolerance between the smallest and largest tip error splits the holes

@@ -134,5 +134,8 @@ def test_hole_quality_with_the_calibrated_axes(run: dict[str, Any]) -> None:
     tip = np.abs(q["tip_position_error_est_um"].to_numpy()
                  / t["tip_position_error_um"].to_numpy() - 1.0)
     assert np.median(tip) < 0.12 and tip.max() < 0.25, (np.median(tip), tip.max())
-    rot = np.abs(q["rotating_force_est_n"].to_numpy() / t["rotating_force_n"].to_numpy() - 1.0)
-    assert rot.max() < 0.05
+    # each hole within 2 % + 3 of its stated standard errors (the encoders' measuring noise,
+    # issue 29; test_quality.py)
+    err = np.abs(q["rotating_force_est_n"].to_numpy() - t["rotating_force_n"].to_numpy())
+    allowed = 0.02 * t["rotating_force_n"].to_numpy() + 3.0 * q["rotating_force_se_n"].to_numpy()
+    assert np.all(err <= allowed), (err, allowed)

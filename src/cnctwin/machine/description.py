@@ -356,7 +356,24 @@ class FeedAxis:
     lf_smoothing_time_s : float
         PT1 smoothing of the LF drive values (r0063/r0068/r0078) [s]. [T] 0.1 (thesis §3.2.1)
     current_noise_a : float
-        Std of the current measurement noise per 2 ms sample [A]. [E] 0.05
+        Std of the current measurement noise per 2 ms sample [A]; the drive's torque actual
+        value (``TORQUE``) is Kt times the measured current and carries it too. [E] 0.05
+        (real Capture4Analysis X1 at standstill: 0.027 A cycle to cycle, docs/simulator.md)
+    encoder_noise : float
+        Std of the white measurement noise of the NC's position measuring system per latch
+        (2 ms) [mm] (rotary [deg]), before the encoder quantisation. It enters ``ENC_POS``,
+        ``CTRL_DIFF2``, ``CONT_DEV`` and the NC's speed setpoint (``CMD_SPEED`` = Kv x the
+        difference); the drive's 125 us speed loop uses its own (motor) encoder. [D] 1.5e-4
+        (real Capture4Analysis X1 at standstill: ENC_POS steps of 0.28 um rms, white, and
+        CMD_SPEED steps of Kv x that; docs/simulator.md)
+    ripple_n : float
+        Amplitude of a position-periodic force on the slide with the period of one motor
+        revolution (ball-screw lead error and preload-torque fluctuation, cogging) [N]
+        (rotary: [Nm] at the table). [E] 10 (JIS B 1192 allows +-30-40 % fluctuation of the
+        preload torque of C3-C5 screws; 10 N is ~7 % of the 150 N friction)
+    ripple_phase_rad : float
+        Phase of that ripple at position 0 [rad], a property of the machine (the same in every
+        recording of it; ``random_loop_overrides`` draws it for a hidden machine). [-] 0
     """
 
     name: str
@@ -395,6 +412,9 @@ class FeedAxis:
     ambient_temperature_c: float = 22.0
     lf_smoothing_time_s: float = 0.1
     current_noise_a: float = 0.05
+    encoder_noise: float = 1.5e-4
+    ripple_n: float = 10.0
+    ripple_phase_rad: float = 0.0
 
     # ------------------------------------------------------------ derived quantities
     @property
@@ -477,6 +497,9 @@ class FeedAxis:
         _check(f"{prefix}.ambient_temperature_c", self.ambient_temperature_c, -40.0, 80.0)
         _check(f"{prefix}.lf_smoothing_time_s", self.lf_smoothing_time_s, 1e-3, 10.0)
         _check(f"{prefix}.current_noise_a", self.current_noise_a, 0.0, 100.0)
+        _check(f"{prefix}.encoder_noise", self.encoder_noise, 0.0, 1.0)
+        _check(f"{prefix}.ripple_n", self.ripple_n, 0.0, 1e6)
+        _check(f"{prefix}.ripple_phase_rad", self.ripple_phase_rad, -1e3, 1e3)
 
 
 def _check(name: str, value: float, lo: float, hi: float) -> None:
@@ -525,7 +548,7 @@ def _default_axes() -> tuple[FeedAxis, ...]:
             stribeck_n=8.0, stribeck_speed_mm_s=1.0, friction_smoothing_mm_s=0.02,
             max_velocity_mm_min=54000.0, max_accel_mm_s2=720.0, max_jerk_mm_s3=7200.0,
             speed_kp_nm_s_per_rad=0.8, kt_nm_per_a=1.2, current_limit_a=20.0,
-            rated_torque_nm=6.0, encoder_resolution=1e-5,
+            rated_torque_nm=6.0, encoder_resolution=1e-5, encoder_noise=3.7e-5, ripple_n=1.0,
         ),
         FeedAxis(
             "B1", rotary=True, gear_ratio=120.0, load_inertia_kgm2=6.0,
@@ -533,7 +556,7 @@ def _default_axes() -> tuple[FeedAxis, ...]:
             stribeck_n=15.0, stribeck_speed_mm_s=1.0, friction_smoothing_mm_s=0.02,
             max_velocity_mm_min=36000.0, max_accel_mm_s2=360.0, max_jerk_mm_s3=3600.0,
             speed_kp_nm_s_per_rad=1.5, kt_nm_per_a=1.4, current_limit_a=30.0,
-            rated_torque_nm=10.0, encoder_resolution=1e-5,
+            rated_torque_nm=10.0, encoder_resolution=1e-5, encoder_noise=3.7e-5, ripple_n=2.0,
         ),
     )
 

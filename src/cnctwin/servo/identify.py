@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from scipy import optimize
 
-from cnctwin.exceptions import IdentificationError
+from cnctwin.exceptions import CnctwinError, IdentificationError
 from cnctwin.recording import Recording
 from cnctwin.servo._common import (
     AxisData,
@@ -45,6 +45,7 @@ from cnctwin.servo._common import (
 )
 
 __all__ = [
+    "CUT_MARGIN_S",
     "JERK_FILTER_TYPES",
     "KV_PER_S_PER_M_MIN_MM",
     "AxisFrictionFit",
@@ -55,6 +56,7 @@ __all__ = [
     "SpeedLoopFit",
     "apply_setpoint_chain",
     "constant_velocity_runs",
+    "cut_cycles",
     "fit_axis_friction",
     "fit_position_controller",
     "fit_setpoint_chain",
@@ -759,6 +761,40 @@ def constant_velocity_runs(
     return runs
 
 
+def _outside(runs: list[slice], cut: np.ndarray, *, min_cycles: int) -> list[slice]:
+    """The parts of the runs outside ``cut`` that are at least ``min_cycles`` long."""
+    out: list[slice] = []
+    for r in runs:
+        free = ~cut[r]
+        edges = np.flatnonzero(np.diff(np.r_[False, free, False].astype(np.int8)))
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            if b - a >= min_cycles:
+                out.append(slice(r.start + int(a), r.start + int(b)))
+    return out
+
+
+def _identifiable(v: FloatArray, both: bool) -> bool:
+    """Runs that determine the friction law: two speeds (:func:`_two_speeds`) and, with the
+    offset (both directions), three (direction, speed) groups - fewer leave the lstsq rank
+    deficient and its minimum-norm answer is not an estimate."""
+    if not _two_speeds(v):
+        return False
+    if not both:
+        return True
+    if not ((v > 0).any() and (v < 0).any()):
+        return False
+    groups = {(bool(x > 0), int(np.floor(np.log(abs(x)) / np.log(1.25)))) for x in v if x != 0}
+    return len(groups) >= 3
+
+
+def _two_speeds(v: FloatArray) -> bool:
+    """Run speeds that separate Coulomb from viscous friction: the slowest at most 80 % of
+    the fastest (runs at one programmed feed differ by their noise only, and a fit on those is
+    ill-conditioned, not informative)."""
+    a = np.abs(v)
+    return bool(a.size and a.max() > 0 and a.min() <= 0.8 * a.max())
+
+
 def fit_axis_friction(
     v_per_s: FloatArray, effort: FloatArray, runs: list[slice], *, signal: str, unit: str,
     n_bootstrap: int = 200, seed: int = 0,
@@ -790,17 +826,23 @@ def fit_axis_friction(
     Notes
     -----
     ``tau = Fc sign(v) + b v + c``; ``c`` (weight compensation of a vertical axis) is fitted
-    only when both directions occur. Run means average out the cutting-free ripple.
+    only when both directions occur. Run means average out the cutting-free ripple; runs are
+    weighted by their length (weighted least squares), because a short run averages the
+    noise and a position-periodic force (screw ripple, one period per motor revolution) over
+    less travel: its mean keeps up to A lead / (pi L) of a ripple of amplitude A over L.
     """
     vm = np.array([np.nanmean(v_per_s[r]) for r in runs])
     tm = np.array([np.nanmean(effort[r]) for r in runs])
+    wm = np.array([float(r.stop - r.start) for r in runs])
     ok = np.isfinite(vm) & np.isfinite(tm)
-    vm, tm = vm[ok], tm[ok]
+    vm, tm, wm = vm[ok], tm[ok], np.sqrt(wm[ok])
     both = bool((vm > 0).any() and (vm < 0).any())
     p = 3 if both else 2
-    if vm.size < p + 1 or np.unique(np.round(np.abs(vm), 9)).size < 2:
+    if vm.size < p + 1 or not _identifiable(vm, both):
         raise IdentificationError(
-            f"friction needs >= {p + 1} constant-velocity runs at >= 2 speeds; found {vm.size}")
+            f"friction needs >= {p + 1} constant-velocity runs at >= 2 speeds; found {vm.size}"
+            + (f" at one speed ({np.median(np.abs(vm)):.4g} {unit.split('/')[-1] or 'unit'}/s)"
+               if vm.size and not _two_speeds(vm) else ""))
 
     def design(v: FloatArray) -> FloatArray:
         cols = [np.sign(v), v]
@@ -808,21 +850,73 @@ def fit_axis_friction(
             cols.append(np.ones_like(v))
         return np.column_stack(cols)
 
-    coef, *_ = np.linalg.lstsq(design(vm), tm, rcond=None)
+    coef, *_ = np.linalg.lstsq(design(vm) * wm[:, None], tm * wm, rcond=None)
     rng = np.random.default_rng(seed)
     boots = []
     for _ in range(n_bootstrap):
         sel = rng.integers(0, vm.size, vm.size)
-        if np.unique(np.round(np.abs(vm[sel]), 9)).size < 2 or (
-                both and not ((vm[sel] > 0).any() and (vm[sel] < 0).any())):
+        if not _identifiable(vm[sel], both):
             continue
-        cb, *_ = np.linalg.lstsq(design(vm[sel]), tm[sel], rcond=None)
+        cb, *_ = np.linalg.lstsq(design(vm[sel]) * wm[sel, None], tm[sel] * wm[sel],
+                                 rcond=None)
         boots.append(cb)
     se = np.asarray(boots).std(axis=0, ddof=1) if len(boots) > 2 else np.full(p, np.nan)
     return AxisFrictionFit(
         float(coef[0]), float(coef[1]), float(coef[2]) if both else 0.0, float(se[0]),
         float(se[1]), float(se[2]) if both else float("nan"), int(vm.size), signal, unit,
     )
+
+
+CUT_MARGIN_S = 0.3
+"""Time added before and after every cut when runs are excluded [s]: the current's 5 Hz
+smoothing and the engagement's fade-in and out (a milled circle's exit tapers over ~0.2 s)."""
+
+
+def cut_cycles(recording: Recording, *, spindle: str = "SP1",
+               margin_s: float = CUT_MARGIN_S) -> tuple[np.ndarray | None, str]:
+    """Where the spindle cuts: its current above its air level, with a margin.
+
+    Parameters
+    ----------
+    recording : Recording
+        The recording.
+    spindle : str, default 'SP1'
+        Spindle axis name.
+    margin_s : float, default :data:`CUT_MARGIN_S`
+        Added before and after every cut [s].
+
+    Returns
+    -------
+    mask : numpy.ndarray of bool or None
+        Per HF row, True inside a cut (with the margin); None if the recording cannot tell
+        (no spindle current).
+    why : str
+        Without a mask, the reason; else ``""``.
+
+    Notes
+    -----
+    :func:`cnctwin.analysis.segments.cutting_regions` with the air level per spindle speed
+    from the speed's own samples (its 10th percentile: a milling cut does not move Z down, so
+    the drilling rule "air = Z not feeding" does not hold) and no Z condition.
+    """
+    from cnctwin.analysis.segments import cutting_regions
+
+    col = f"CURRENT|{spindle}"
+    if not recording.has(col):
+        return None, f"{col} is not recorded, so cuts cannot be told from air moves"
+    try:
+        reg = cutting_regions(recording, spindle=spindle, require_z_down=False,
+                              air_from_z=False)
+    except CnctwinError as exc:
+        return None, f"the cuts of {spindle} could not be found ({exc})"
+    cycles = np.asarray(recording.cycles, dtype=np.int64)
+    mask = np.zeros(cycles.size, dtype=bool)
+    pad = round(margin_s / recording.meta.cycle_time_s)
+    for a, b in zip(reg["start_cycle"], reg["end_cycle"], strict=True):
+        lo = int(np.searchsorted(cycles, int(a) - pad, side="left"))
+        hi = int(np.searchsorted(cycles, int(b) + pad, side="right"))
+        mask[lo:hi] = True
+    return mask, ""
 
 
 # ---------------------------------------------------------------------------- orchestration
@@ -906,6 +1000,8 @@ def identify_axis(
     block_cycles: int = 100,
     seed: int = 0,
     fir_cycles: int = 40,
+    spindle: str = "SP1",
+    exclude_cuts: bool = True,
 ) -> AxisIdentification:
     """Identify the cascade position loop of one axis from production data.
 
@@ -926,6 +1022,11 @@ def identify_axis(
     fir_cycles : int, default 40
         Without CTRL_POS: length of the setpoint-difference regressors that absorb the
         unrecorded setpoint filter in the Kv regression [cycles].
+    spindle : str, default 'SP1'
+        The spindle whose current tells cuts from air moves (``exclude_cuts``).
+    exclude_cuts : bool, default True
+        Leave the constant-velocity runs during which the spindle cuts out of the friction
+        fit (:func:`cut_cycles`): a process force on the axis is not friction.
 
     Returns
     -------
@@ -945,7 +1046,9 @@ def identify_axis(
       Without CMD_SPEED and with FFW off: ``v = Kv e`` on constant-velocity runs.
     * Jerk filter, delay and PT1: :func:`fit_setpoint_chain` on DES_POS -> CTRL_POS.
     * Speed loop: :func:`fit_speed_loop` on CMD_SPEED -> d(ENC_POS)/dt.
-    * Friction: :func:`fit_axis_friction` on CURRENT and TORQUE.
+    * Friction: :func:`fit_axis_friction` on CURRENT and TORQUE, on the constant-velocity
+      runs outside the cuts (``exclude_cuts``); too few such runs -> not identified, with what
+      to record.
     """
     d = axis_data(recording, axis)
     for code in ("DES_POS", "ENC_POS"):
@@ -1282,6 +1385,21 @@ def identify_axis(
     # --- friction: runs where the *actual* speed is steady (no inertia term left)
     v_steady = np.where(np.abs(v_act_c - v_des) <= 0.01 * np.abs(v_des), v_act_c, np.nan)
     runs = constant_velocity_runs(v_steady, segs, rel_tol=0.01)
+    in_cut = 0
+    if exclude_cuts and runs:
+        cut, why = cut_cycles(recording, spindle=spindle)
+        if cut is None:
+            ident.notes.append(f"friction of {axis}: {why}; its constant-velocity runs are "
+                               "taken as air moves")
+        else:
+            kept = _outside(runs, cut, min_cycles=40)
+            in_cut = sum(1 for r in runs if cut[r].any())
+            if in_cut:
+                ident.notes.append(
+                    f"friction of {axis}: {in_cut} of {len(runs)} constant-velocity runs lie "
+                    f"in cuts ({spindle} current above its air level): their parts in the cut "
+                    f"are left out, {len(kept)} runs of at least 40 cycles remain")
+            runs = kept
     for code in ("CURRENT", "TORQUE"):
         if not d.has(code):
             NI[f"coulomb_{code.lower()}"] = f"{code}|{axis} is not recorded"
@@ -1291,7 +1409,11 @@ def identify_axis(
                                    unit=d.units.get(code, ""), n_bootstrap=n_bootstrap,
                                    seed=seed)
         except IdentificationError as exc:
-            NI[f"coulomb_{code.lower()}"] = str(exc)
+            NI[f"coulomb_{code.lower()}"] = str(exc) + (
+                f" outside the cuts ({in_cut} more lie in cuts); record air moves of {axis} "
+                "at two or more feeds in both directions (G1 moves clear of the part, or a "
+                "test program such as the one of `cnctwin simulate axis_test`)"
+                if in_cut else "")
             continue
         u = ff.unit
         meth = f"{code} = Fc*sign(v) + b*v{' + c' if ff.se_offset == ff.se_offset else ''} on " \

@@ -1657,10 +1657,19 @@ def loose_tap(
     return res
 
 
-def _milling_program(side_mm: float, radius_mm: float, gap_mm: float, **kw: Any) -> str:
-    """Square (first corner at the origin) then circle right of it, one program."""
+def _milling_program(side_mm: float, radius_mm: float, gap_mm: float,
+                     air_moves_mm_min: Sequence[float] = (), air_stroke_mm: float = 60.0,
+                     **kw: Any) -> str:
+    """Square (first corner at the origin) then circle right of it, one program; optional
+    air moves of X and Y at the clearance height first (out and back at each feed)."""
     sq = square_path(side_mm, **kw).splitlines()
     sq = [line for line in sq if line.strip() not in ("M30", "M5 M9")]
+    if air_moves_mm_min:
+        at = next(i for i, line in enumerate(sq) if line.startswith("G0 X"))
+        air = ["; air moves clear of the part (approach at feed)"]
+        for f in air_moves_mm_min:
+            air += [f"G1 X{air_stroke_mm:g} F{f:g}", "X0", f"Y{air_stroke_mm:g}", "Y0"]
+        sq = sq[:at + 1] + air + sq[at + 1:]
     center = (side_mm + gap_mm + radius_mm, side_mm / 2.0)
     ci = circle_path(radius_mm, center_xy=center, **kw).splitlines()
     ci = [line for line in ci if not line.startswith(("G90", "T", "S"))]
@@ -1679,6 +1688,7 @@ def milling_square_circle(
     speed_rpm: float = 6000.0,
     feed_per_tooth_mm: float = 0.167,
     depth_mm: float = 0.5,
+    air_moves_mm_min: Sequence[float] = (),
     faults: Sequence[Fault | Mapping[str, Any]] = (),
     fmt: str = "c4a",
     max_file_mb: float | None = None,
@@ -1717,6 +1727,11 @@ def milling_square_circle(
         Feed per tooth [mm].
     depth_mm : float, default 0.5
         Axial depth of cut [mm].
+    air_moves_mm_min : sequence of float, default ()
+        Feeds of air moves before the square: X and Y out 60 mm and back at each feed at the
+        clearance height, spindle on (a CAM program's approach moves; what friction from a
+        production recording needs, docs/validation-calibration.md). Default none: the
+        thesis program, every X/Y move at constant feed in the cut.
     faults : sequence or mapping, default ()
         Faults to inject (:mod:`cnctwin.sim.faults`), objects or their dicts.
     fmt : str, default 'c4a'
@@ -1740,7 +1755,8 @@ def milling_square_circle(
     o = _prepare(out)
     flist = _faults_from(faults)
     gap = 30.0
-    text = _milling_program(side_mm, radius_mm, gap, speed_rpm=speed_rpm,
+    text = _milling_program(side_mm, radius_mm, gap, air_moves_mm_min=air_moves_mm_min,
+                            speed_rpm=speed_rpm,
                             feed_per_tooth_mm=feed_per_tooth_mm,
                             n_flutes=cfg.end_mill.flutes, depth_mm=depth_mm,
                             tool=cfg.end_mill.tool_number)
@@ -1750,6 +1766,7 @@ def milling_square_circle(
         **_base_truth("milling_square_circle", seed, overrides, cfg),
         "loop_overrides": drawn, "material": "al7050", "speed_rpm": speed_rpm,
         "feed_per_tooth_mm": feed_per_tooth_mm, "feed_mm_min": feed, "depth_mm": depth_mm,
+        "air_moves_mm_min": [float(f) for f in air_moves_mm_min],
         "square": {"corners_mm": [[0.0, 0.0], [side_mm, 0.0], [side_mm, side_mm],
                                   [0.0, side_mm]], "direction": "ccw"},
         "circle": {"center_mm": [side_mm + gap + radius_mm, side_mm / 2.0],

@@ -44,7 +44,15 @@ Signal definitions (what the kernel computes at cycle k)
   disturbances (force steps, friction at reversals).
 * Following error = ``DES_POS - ENC_POS`` (computed by the reader from the recording).
 * Drive values (``CURRENT``, ``TORQUE``, ``LOAD``, ``POWER``) are sampled at the end of the
-  cycle that starts at k.
+  cycle that starts at k. ``TORQUE`` is the torque actual value, Kt x the measured current
+  (``CURRENT``, with its noise), as on the real drive (Capture4Analysis X1:
+  TORQUE = 1.44 CURRENT, residual below the noise; docs/simulator.md); ``LOAD`` is the
+  torque setpoint over the rated torque.
+* Measurement: the NC's position measuring system has white noise
+  (``FeedAxis.encoder_noise``) before the quantisation; ``ENC_POS``, ``CTRL_DIFF2``,
+  ``CONT_DEV`` and the speed setpoint (``CMD_SPEED``) see it; the drive's 125 us speed (and DSC
+  position) loop reads the motor encoder, quantised without it. A position-periodic force
+  (``FeedAxis.ripple_n``, one period per motor revolution) loads the slide.
 
 References
 ----------
@@ -147,7 +155,10 @@ P_TAMB = 26  # [degC]
 P_LFT = 27  # LF smoothing time [s]
 P_ROTARY = 28
 P_NOISE = 29  # current noise std [A]
-_N_PARAM = 30
+P_ENC_NOISE = 30  # NC measuring-system noise std [mm] / [deg]
+P_RIPPLE = 31  # position-periodic force amplitude [N] / [Nm]
+P_RIPPLE_PHASE = 32  # its phase at position 0 [rad]
+_N_PARAM = 33
 
 # ---------------------------------------------------------------- state vector layout
 S_INIT = 0
@@ -200,7 +211,9 @@ C_HG = 17  # h g
 C_INV_RES = 18
 C_RES = 19
 C_DSC = 20
-_N_CST = 21
+C_RIPPLE = 21  # ripple amplitude [N] / [Nm] at the slide
+C_RIPPLE_PHASE = 22  # [rad]
+_N_CST = 23
 
 # per-axis values handed from the NC part of a cycle to its drive loops (columns of cin)
 I_CTRL = 0
@@ -211,7 +224,8 @@ I_TFFW = 4
 I_FEXT = 5
 I_XQ = 6  # encoder value latched at the start of the cycle
 I_XQP = 7  # encoder value of the previous latch
-_N_CIN = 8
+I_XN = 8  # the NC's measured position (ENC_POS): latched with its measurement noise
+_N_CIN = 9
 
 # drive state per axis while a chunk runs (columns of dst)
 D_X = 0
@@ -286,6 +300,8 @@ def _drive_step(
         fr += sg * (c[C_FC] + c[C_FS] * math.exp(-u * u))
     else:
         fr += sg * c[C_FC]
+    if c[C_RIPPLE] != 0.0:  # position-periodic force, one period per motor revolution
+        fext -= c[C_RIPPLE] * math.sin(x * c[C_INV_G] + c[C_RIPPLE_PHASE])
     w += c[C_H_OVER_J] * (tact - (fr - fext) * c[C_R])
     x += c[C_HG] * w
     return x, w, integ, tact, tset, dsum, fr
@@ -349,15 +365,24 @@ def _drive_lanes(
 
 @njit(cache=True)
 def _hold_settled(
-    out: NDArray[np.float64], noise: NDArray[np.float64], st: NDArray[np.float64],
-    par: NDArray[np.float64], a: int, k0: int, k1: int, iq: float, v_lf: float, util: float,
-    a_lf: float, tc: float,
+    out: NDArray[np.float64], noise: NDArray[np.float64], enc_noise: NDArray[np.float64],
+    st: NDArray[np.float64], par: NDArray[np.float64], cst: NDArray[np.float64], a: int,
+    k0: int, k1: int, iq: float, v_lf: float, util: float, a_lf: float, tc: float, x: float,
+    kt_f: float,
 ) -> None:
     """Cycles k0..k1-1 of a settled axis (inputs as at cycle k0 - 1, a bitwise fixed point of
-    its dynamic state): outputs held, only current noise, motor temperature and LF filters move.
-    The same operations per cycle as the full computation, with the state in registers."""
+    its dynamic state): outputs held, only the measurement noises (current, torque actual, the
+    NC's measuring system and what the NC computes from it), motor temperature and LF filters
+    move. The same operations per cycle as the full computation, with the state in
+    registers."""
     if k1 <= k0:
         return
+    for i in range(_N_OUT):
+        if i == 8 or i == 9 or 12 <= i <= 16:
+            continue
+        v = out[a, i, k0 - 1]
+        for k in range(k0, k1):
+            out[a, i, k] = v
     rph = par[a, P_RPH]
     tamb = par[a, P_TAMB]
     rth = par[a, P_RTH]
@@ -368,6 +393,14 @@ def _hold_settled(
     lf_iq = st[a, S_LF_IQ]
     lf_util = st[a, S_LF_UTIL]
     iq_abs = abs(iq)
+    noisy_enc = par[a, P_ENC_NOISE] > 0.0
+    ctrl = out[a, 0, k0 - 1]
+    vel = out[a, 5, k0 - 1]
+    mod = st[a, S_MOD]
+    kv = par[a, P_KV]
+    dsc = cst[a, C_DSC] > 0.5
+    inv_res = cst[a, C_INV_RES]
+    res = cst[a, C_RES]
     for k in range(k0, k1):
         temp += tc * (rph * iq * iq - (temp - tamb) / rth) / cth
         lf_speed += a_lf * (v_lf - lf_speed)
@@ -375,17 +408,21 @@ def _hold_settled(
         lf_iq += a_lf * (iq - lf_iq)
         lf_util += a_lf * (util - lf_util)
         out[a, 8, k] = iq + noise[a, k]
+        out[a, 9, k] = (iq + noise[a, k]) * kt_f
         out[a, 12, k] = lf_speed
         out[a, 13, k] = lf_iabs
         out[a, 14, k] = lf_iq
         out[a, 15, k] = lf_util
         out[a, 16, k] = temp
-    for i in range(_N_OUT):
-        if i == 8 or 12 <= i <= 16:
-            continue
-        v = out[a, i, k0 - 1]
-        for k in range(k0, k1):
-            out[a, i, k] = v
+        if noisy_enc:  # the NC's values from its noisy measuring system (the drive's are held)
+            xn = np.rint((x + enc_noise[a, k]) * inv_res) * res
+            diff2 = ctrl - xn
+            out[a, 1, k] = xn
+            if not dsc:
+                out[a, 2, k] = diff2
+            out[a, 3, k] = diff2
+            out[a, 4, k] = mod - xn
+            out[a, 7, k] = kv * diff2 + vel
     st[a, S_TEMP] = temp
     st[a, S_LF_SPEED] = lf_speed
     st[a, S_LF_IABS] = lf_iabs
@@ -422,6 +459,8 @@ def _drive_constants(par: NDArray[np.float64], h: float) -> NDArray[np.float64]:
         cst[a, C_INV_RES] = 1.0 / par[a, P_RES]
         cst[a, C_RES] = par[a, P_RES]
         cst[a, C_DSC] = 1.0 if par[a, P_DSC] > 0.5 else 0.0
+        cst[a, C_RIPPLE] = par[a, P_RIPPLE]
+        cst[a, C_RIPPLE_PHASE] = par[a, P_RIPPLE_PHASE]
     return cst
 
 
@@ -458,6 +497,7 @@ def _servo_kernel(
     des: NDArray[np.float64],
     force: NDArray[np.float64],
     noise: NDArray[np.float64],
+    enc_noise: NDArray[np.float64],
     par: NDArray[np.float64],
     st: NDArray[np.float64],
     ring: NDArray[np.float64],
@@ -489,6 +529,7 @@ def _servo_kernel(
     a_lf_a = np.zeros(n_axes)
     v_lf_a = np.zeros(n_axes)
     f_out_a = np.zeros(n_axes)
+    kt_f_a = np.zeros(n_axes)
     for a in range(n_axes):
         kv = par[a, P_KV]
         mode = int(par[a, P_FFW_MODE])
@@ -517,6 +558,8 @@ def _servo_kernel(
         # unit factors: load units/s -> LF r0063 in mm/min or rpm; Nm motor -> N at slide
         v_lf_a[a] = 60.0 if not rotary else 1.0 / 6.0
         f_out_a[a] = 1.0 / par[a, P_R] if not rotary else 1.0
+        # TORQUE is the drive's torque actual value: Kt x the measured current, at the slide
+        kt_f_a[a] = par[a, P_KT] * f_out_a[a]
         use[a, 0] = jtype == 2 or jtype == 4
         use[a, 1] = jtype == 4
         use[a, 2] = dra_t > 0.0 and mode in (3, 4)
@@ -628,9 +671,11 @@ def _servo_kernel(
             st[a, S_MOD] += a_mod_a[a] * (xf - st[a, S_MOD])
             st[a, S_XF2] = xf1
             st[a, S_XF1] = xf
-            # ---- position controller (NC): encoder latched at t_k
+            # ---- position controller (NC): measuring system latched at t_k, with its noise;
+            # the drive's speed loop reads the motor encoder (xq) without it
             xq = np.rint(dst[a, D_X] * cst[a, C_INV_RES]) * cst[a, C_RES]
-            diff2 = ctrl - xq
+            xn = np.rint((dst[a, D_X] + enc_noise[a, k]) * cst[a, C_INV_RES]) * cst[a, C_RES]
+            diff2 = ctrl - xn
             cin[a, I_CTRL] = ctrl
             cin[a, I_DCTRL] = ctrl - st[a, S_CTRL1]
             cin[a, I_VEL] = vel
@@ -639,6 +684,7 @@ def _servo_kernel(
             cin[a, I_FEXT] = fext
             cin[a, I_XQ] = xq
             cin[a, I_XQP] = dst[a, D_XQ]
+            cin[a, I_XN] = xn
             st[a, S_CTRL1] = ctrl
             active[na] = a
             na += 1
@@ -660,7 +706,7 @@ def _servo_kernel(
             a_lf = a_lf_a[a]
             f_out = f_out_a[a]
             ctrl = cin[a, I_CTRL]
-            enc = cin[a, I_XQ]
+            enc = cin[a, I_XN]
             diff2 = ctrl - enc
             iq = tact / kt
             temp = st[a, S_TEMP]
@@ -682,7 +728,7 @@ def _servo_kernel(
             out[a, 6, k] = cin[a, I_TFFW] * f_out
             out[a, 7, k] = cin[a, I_VSET0]
             out[a, 8, k] = iq + noise[a, k]
-            out[a, 9, k] = tset * f_out
+            out[a, 9, k] = (iq + noise[a, k]) * kt_f_a[a]
             out[a, 10, k] = abs(tset) / par[a, P_TRATED] * 100.0
             out[a, 11, k] = tact * w + rph * iq * iq
             out[a, 12, k] = st[a, S_LF_SPEED]
@@ -719,7 +765,8 @@ def _servo_kernel(
                 k1 = k + 1
                 while k1 < n and des[a, k1] == des[a, k] and force[a, k1] == force[a, k]:
                     k1 += 1
-                _hold_settled(out, noise, st, par, a, k + 1, k1, iq, v_lf, util, a_lf, tc)
+                _hold_settled(out, noise, enc_noise, st, par, cst, a, k + 1, k1, iq, v_lf, util,
+                              a_lf, tc, dst[a, D_X], kt_f_a[a])
                 fz_end[a] = k1
                 ridx_a[a] = (ridx_a[a] + (k1 - k - 1)) % nring  # the skipped cycles' advance
     for a in range(n_axes):
@@ -738,7 +785,7 @@ def servo_parameters(axes: Sequence[FeedAxis]) -> NDArray[np.float64]:
 
     Returns
     -------
-    numpy.ndarray, shape (n_axes, 30)
+    numpy.ndarray, shape (n_axes, 33)
         Internal units: gains in 1/s, times in s, inertia at the motor in kg m^2, friction in
         N (Nm) at the slide (table), speeds in mm/s (deg/s).
     """
@@ -775,6 +822,9 @@ def servo_parameters(axes: Sequence[FeedAxis]) -> NDArray[np.float64]:
         p[i, P_LFT] = ax.lf_smoothing_time_s
         p[i, P_ROTARY] = 1.0 if ax.rotary else 0.0
         p[i, P_NOISE] = ax.current_noise_a
+        p[i, P_ENC_NOISE] = ax.encoder_noise
+        p[i, P_RIPPLE] = ax.ripple_n
+        p[i, P_RIPPLE_PHASE] = ax.ripple_phase_rad
     return p
 
 
@@ -862,8 +912,9 @@ def simulate_servo(
     state : ServoState, optional
         State from the previous chunk; ``None`` starts at rest at the first setpoint.
     rng : numpy.random.Generator, optional
-        Source of the current measurement noise (``FeedAxis.current_noise_a``); ``None`` gives a
-        noise-free run.
+        Source of the measurement noises: the current (``FeedAxis.current_noise_a``, also in
+        the torque actual value ``TORQUE``) and the NC's measuring system
+        (``FeedAxis.encoder_noise``); ``None`` gives a noise-free run.
     out : numpy.ndarray, optional
         Buffer for the kernel's outputs, C-contiguous float64 of shape (n_axes, 20, n_cycles);
         the trace's arrays are then views into it (``simulate`` reuses one buffer between
@@ -943,9 +994,17 @@ def simulate_servo(
                 f"force_n has shape {force.shape}, des_pos {des.shape}; they must match"
             )
     noise = np.zeros_like(des)
+    enc_noise = np.zeros_like(des)
     if rng is not None:
         sd = par[:, P_NOISE]
-        if np.any(sd > 0):
+        esd = par[:, P_ENC_NOISE]
+        if np.any(esd > 0):
+            # current and measuring-system noise from one cycle-major block: a chunked run
+            # consumes the stream like one long run
+            z = rng.standard_normal((n, 2 * n_axes)).T
+            np.multiply(z[:n_axes], sd[:, None], out=noise)
+            np.multiply(z[n_axes:], esd[:, None], out=enc_noise)
+        elif np.any(sd > 0):
             # drawn cycle-major so that chunked runs consume the stream like one long run;
             # scaled straight into the axis-major array (15x faster than (z * sd).T.copy(),
             # the same products)
@@ -961,7 +1020,8 @@ def simulate_servo(
     elif out.shape != (n_axes, _N_OUT, n) or out.dtype != np.float64 or not out.flags.c_contiguous:
         raise ConfigError(f"out must be C-contiguous float64 of shape ({n_axes}, {_N_OUT}, {n}), "
                           f"not {out.dtype} {out.shape}")
-    _servo_kernel(des, force, noise, par, st.values, st.history, out, cycle_time_s, inner_steps)
+    _servo_kernel(des, force, noise, enc_noise, par, st.values, st.history, out, cycle_time_s,
+                  inner_steps)
     signals: dict[str, NDArray[np.float64]] = {"DES_POS": des}
     for i, code in enumerate(_OUT_CODES):
         if code in _TRUTH_CODES:

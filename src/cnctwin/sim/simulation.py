@@ -282,8 +282,9 @@ def simulate(
     machine : Machine, optional
         Machine description; default :meth:`Machine.thesis_default`.
     seed : int, default 0
-        Seed of every random stream (servo and spindle noise, dropped cycles). Same seed ->
-        identical output.
+        Seed of every random stream (feed-axis current and measuring-system noise, spindle
+        noise, dropped cycles). Same seed -> identical output; two seeds -> independent noise
+        (the machine's own properties, e.g. each screw's ripple phase, stay the machine's).
     start_cycle : int, default 5_000_000
         CYCLE counter value of the first cycle.
     start_time : str or Timestamp, default '2026-01-01T08:00:00Z'

@@ -316,12 +316,22 @@ def _alias_hz(f: float, fs: float) -> float:
     return abs(((f + fs / 2.0) % fs) - fs / 2.0)
 
 
-def _lockin(t: NDArray[np.float64], d: NDArray[np.float64], f_hz: float) -> float:
-    """Amplitude of the f_hz sinusoid in d(t) (least squares with offset and trend)."""
+def _lockin(t: NDArray[np.float64], d: NDArray[np.float64], f_hz: float
+            ) -> tuple[float, float]:
+    """Amplitude of the f_hz sinusoid in d(t) (least squares with offset and trend) and its
+    standard error from the residual (white-noise covariance s^2 (A'A)^-1, propagated to
+    sqrt(a^2 + b^2) to first order)."""
     w = 2.0 * math.pi * f_hz
     a = np.column_stack([np.ones_like(t), t - t.mean(), np.cos(w * t), np.sin(w * t)])
     coef, *_ = np.linalg.lstsq(a, d, rcond=None)
-    return float(math.hypot(coef[2], coef[3]))
+    amp = float(math.hypot(coef[2], coef[3]))
+    dof = t.size - a.shape[1]
+    if dof <= 0 or amp == 0.0:
+        return amp, math.nan
+    s2 = float(np.sum((d - a @ coef) ** 2)) / dof
+    cov = s2 * np.linalg.pinv(a.T @ a)[2:, 2:]
+    g = np.array([coef[2], coef[3]]) / amp
+    return amp, float(math.sqrt(max(float(g @ cov @ g), 0.0)))
 
 
 def hole_runout(
@@ -355,10 +365,15 @@ def hole_runout(
     pandas.DataFrame
         Per hole: ``hole``, ``spindle_hz``, ``alias_hz`` (frequency seen at the recording rate),
         ``runout_x_um``, ``runout_y_um``, ``runout_um`` (mean of the two: slide orbit radius),
+        their standard errors ``runout_x_se_um``, ``runout_y_se_um``, ``runout_se_um`` (from
+        the lock-in residual: the encoders' measuring noise),
         ``entry_deviation_x_um``, ``entry_deviation_y_um``, ``entry_deviation_um``,
         ``entry_direction_rad`` (largest excursion of the revolution-averaged deviation);
-        with ``machine``: ``rotating_force_est_n``, ``entry_force_est_x_n``/``_y_n``,
+        with ``machine``: ``rotating_force_est_n`` (and ``rotating_force_se_n``),
+        ``entry_force_est_x_n``/``_y_n``,
         ``entry_force_est_n``, ``entry_force_direction_rad``, ``walk_force_est_x_n``/``_y_n``,
+        (standard errors ``entry_force_se_n``, ``walk_force_se_n``,
+        ``tip_position_error_se_um``),
         ``walk_force_est_n``; with ``drill`` too: ``tip_position_error_est_um``,
         ``tip_straightness_est_um``, ``tip_orbit_radius_est_um``, ``hole_oversize_est_um``.
 
@@ -396,11 +411,13 @@ def hole_runout(
         span = float(np.ptp(t[full])) if full.sum() > 2 else 0.0
         ok = math.isfinite(fa) and fa > 2.0 / max(span, 1e-9)
         if ok and full.sum() >= 20:
-            row["runout_x_um"] = _lockin(t[full], dx[full], fa)
-            row["runout_y_um"] = _lockin(t[full], dy[full], fa)
+            row["runout_x_um"], row["runout_x_se_um"] = _lockin(t[full], dx[full], fa)
+            row["runout_y_um"], row["runout_y_se_um"] = _lockin(t[full], dy[full], fa)
         else:
             row["runout_x_um"] = row["runout_y_um"] = math.nan
+            row["runout_x_se_um"] = row["runout_y_se_um"] = math.nan
         row["runout_um"] = 0.5 * (row["runout_x_um"] + row["runout_y_um"])
+        row["runout_se_um"] = 0.5 * math.hypot(row["runout_x_se_um"], row["runout_y_se_um"])
         # entry: baseline before contact from the full recording, then the bump
         c0 = int(p["cycle"].iloc[0])
         i0 = int(np.searchsorted(cyc, c0))
@@ -434,9 +451,12 @@ def hole_runout(
             ky = float(feed_axis_dynamic_stiffness(ax_y, f_sp).stiffness_n_per_um[0])
             row["rotating_force_est_n"] = 0.5 * (row["runout_x_um"] * kx
                                                  + row["runout_y_um"] * ky)
+            row["rotating_force_se_n"] = 0.5 * math.hypot(row["runout_x_se_um"] * kx,
+                                                          row["runout_y_se_um"] * ky)
             if drill is not None:
                 kt = drill.tip_stiffness_n_per_um
                 row["tip_position_error_est_um"] = row["entry_force_est_n"] / kt
+                row["tip_position_error_se_um"] = row.get("entry_force_se_n", math.nan) / kt
                 row["tip_straightness_est_um"] = row["walk_force_est_n"] / (
                     drill.guided_stiffness_gain * kt)
                 orbit = drill.radial_runout_um + row["rotating_force_est_n"] / (
@@ -457,22 +477,36 @@ def _entry_fit(ax_x: FeedAxis, ax_y: FeedAxis, t: NDArray[np.float64],
     thrust (u), the chisel-edge skid is a bump 4 u (1 - u); each goes through the axis model
     (:func:`_axis_response_um_per_n`); regressors per axis: offset, the two responses and
     u cos / u sin at the spindle alias frequency (the rotating force rising with the thrust).
+    Standard errors from the residual (white-noise covariance s^2 (A'A)^-1; the entry force's
+    propagated to its magnitude to first order): ``entry_force_se_n``, ``walk_force_se_n``.
     """
     u = np.clip(depth_mm / point_length_mm, 0.0, 1.0)
     shapes = (u, 4.0 * u * (1.0 - u))
     w = 2.0 * math.pi * alias_hz if math.isfinite(alias_hz) else 0.0
     out: dict[str, float] = {}
+    var: dict[str, float] = {}
     for tag, ax, d in (("x", ax_x, dx_um), ("y", ax_y, dy_um)):
         resp = [_axis_response_um_per_n(ax, g, dt_s) for g in shapes]
         cols = [np.ones_like(t), *resp]
         if w > 0:
             cols += [u * np.cos(w * t), u * np.sin(w * t)]
-        coef, *_ = np.linalg.lstsq(np.column_stack(cols), d, rcond=None)
+        a = np.column_stack(cols)
+        coef, *_ = np.linalg.lstsq(a, d, rcond=None)
         out[f"walk_force_est_{tag}_n"] = float(coef[1])
         out[f"entry_force_est_{tag}_n"] = float(coef[2])
+        dof = d.size - a.shape[1]
+        s2 = float(np.sum((d - a @ coef) ** 2)) / dof if dof > 0 else math.nan
+        cov = s2 * np.linalg.pinv(a.T @ a)
+        var[f"walk_{tag}"], var[f"entry_{tag}"] = float(cov[1, 1]), float(cov[2, 2])
     out["walk_force_est_n"] = math.hypot(out["walk_force_est_x_n"], out["walk_force_est_y_n"])
     out["entry_force_est_n"] = math.hypot(out["entry_force_est_x_n"],
                                           out["entry_force_est_y_n"])
+    for kind in ("walk", "entry"):
+        fx, fy = out[f"{kind}_force_est_x_n"], out[f"{kind}_force_est_y_n"]
+        f = math.hypot(fx, fy)
+        out[f"{kind}_force_se_n"] = math.sqrt(
+            (fx * fx * var[f"{kind}_x"] + fy * fy * var[f"{kind}_y"]) / (f * f)) \
+            if f > 0 else math.nan
     out["entry_force_direction_rad"] = math.atan2(out["entry_force_est_y_n"],
                                                   out["entry_force_est_x_n"])
     return out
