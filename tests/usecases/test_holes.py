@@ -225,3 +225,30 @@ def test_hole_events_arrays_follow_the_event_table(cycle81: Recording) -> None:
     assert len(joined.until(cut)) == int((ev["cycle"] <= cut).sum())
     assert joined.take(-2).cycle.tolist() == ordered.cycle.tolist()[-2:]
     assert len(HoleEvents.from_frame(ev.iloc[:0])) == 0
+
+
+def test_reverse_fluctuation_skips_a_long_reversal_transient() -> None:
+    """A healthy tap whose spindle brakes and turns at its current limit for longer than the
+    0.1 s the window skips (soak draw 1007 of issue 24: 48 A, then -24 A, for ~0.15 s) must
+    give the extraction's own fluctuation, not the transient's: white current noise of std s
+    has sample-to-sample changes of std s sqrt 2 (independent truth); a stick-slip on top
+    (a loose tap) still shows."""
+    from cnctwin.usecases.holes import _reverse_fluctuation
+
+    fs, n_cut = 500.0, 300.0
+    rng = np.random.default_rng(4)
+    n = 1000
+    bottom, extraction = 100, 900
+    speed = np.where(np.arange(n) < bottom + 2, n_cut, -n_cut)
+    s = 0.03
+    current = -0.5 + s * rng.standard_normal(n)
+    current[bottom:bottom + 40] = 48.0   # braking at the current limit
+    current[bottom + 40:bottom + 80] = -24.0  # accelerating the other way
+    current[bottom + 80:bottom + 90] = np.linspace(-10.0, -0.6, 10)  # settling
+    z = np.zeros(n)
+    fi, _ = _reverse_fluctuation(current, z, z, speed, n_cut, bottom, extraction, fs)
+    assert fi == pytest.approx(s * np.sqrt(2.0), rel=0.1)
+    loose = current.copy()
+    loose[bottom + 100:extraction:13] += 0.8  # slips every 26 ms (37 Hz), thesis Fig. 5.10
+    fl, _ = _reverse_fluctuation(loose, z, z, speed, n_cut, bottom, extraction, fs)
+    assert fl > 3.0 * fi

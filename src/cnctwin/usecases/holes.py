@@ -858,7 +858,8 @@ def _reverse_fluctuation(current: NDArray[np.float64], z_des: NDArray[np.float64
                          ) -> tuple[float, float]:
     """Fluctuation of the current and of the Z following error while a tap is extracted with
     the spindle reversed (thesis Fig. 5.10: a loose tap stick-slips there); NaN without a
-    reversal of at least 0.2 s after its first 0.1 s."""
+    reversal of at least 0.2 s after its first 0.1 s and after the reversal's current
+    transient."""
     seg = np.arange(bottom, extraction + 1)
     with np.errstate(invalid="ignore"):
         rev = seg[speed[seg] * np.sign(n_cut) < -1.0]
@@ -870,6 +871,22 @@ def _reverse_fluctuation(current: NDArray[np.float64], z_des: NDArray[np.float64
             rev = max(runs, key=len)
         if rev.size < round(0.2 * fs):
             return math.nan, math.nan
+    # the reversal's own transient (the spindle brakes and turns at its current limit, in
+    # a deep or hard hole longer than the 0.1 s skipped): cut off where the current is last
+    # far (8 robust spreads of the settled second half) from its settled level in the first
+    # half, so only the extraction itself is judged
+    c = current[rev]
+    half = c[c.size // 2:]
+    half = half[np.isfinite(half)]
+    if half.size:
+        ref = float(np.median(half))
+        spread = 1.4826 * float(np.median(np.abs(half - ref)))
+        with np.errstate(invalid="ignore"):
+            far = np.flatnonzero(np.abs(c[:c.size // 2] - ref) > 8.0 * spread + 1e-9)
+        if far.size:
+            rev = rev[int(far[-1]) + 1 + round(0.02 * fs):]
+            if rev.size < round(0.2 * fs):
+                return math.nan, math.nan
     fi = float(np.nanstd(np.diff(current[rev])))
     fz = float(np.nanstd(np.diff(z_des[rev] - z_enc[rev]))) if z_des is not z_enc else math.nan
     return fi, fz
