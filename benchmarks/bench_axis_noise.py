@@ -29,7 +29,8 @@ from cnctwin.iotools import read_recording
 from cnctwin.recording import Recording
 
 ROOT = Path(__file__).resolve().parents[1]
-C4A = ROOT / "tests/data/real/capture4analysis/example_data_ff429d74-6482-4d4f-80e1-31419d9bd56c.json"
+C4A = (ROOT / "tests/data/real/capture4analysis"
+       / "example_data_ff429d74-6482-4d4f-80e1-31419d9bd56c.json")
 TRACE = ROOT / "tests/data/real/sinumerik-trace/Tav23362_2140_frenata_15_4_26_EmgTest.xml"
 
 
