@@ -39,6 +39,7 @@ from cnctwin.recording import Recording
 from cnctwin.servo import AxisIdentification, identify_axis, moving_axes
 
 __all__ = [
+    "CALIBRATED_KEYS",
     "JERK_FILTER_MD32402",
     "REL_FLOOR",
     "AxesCalibration",
@@ -54,6 +55,11 @@ _DIRECT = {
     "ffw_weight": "ffw_weight",
     "jerk_time_s": "jerk_time_s",
 }
+
+CALIBRATED_KEYS: tuple[str, ...] = (
+    "kv_m_min_per_mm", "ffw_weight", "jerk_filter_type", "jerk_time_s", "ffw_mode",
+    "equiv_speedctrl_time_s", "coulomb_n", "viscous_n_per_mm_s")
+"""The keys :func:`calibrate_axes` writes per axis (``axes.<name>.<key>``)."""
 
 REL_FLOOR = 0.01
 """Relative standard-uncertainty floor of an identified loop parameter: what the loop model
@@ -78,11 +84,15 @@ class AxesCalibration:
         Axis -> one :class:`~cnctwin.servo.AxisIdentification` per recording.
     notes : list of str
         Findings worth reading (unit mismatches, assumptions).
+    not_moving : list of str
+        The machine's feed axes that move in no recording (their keys are in ``records``,
+        not identified, with the reason).
     """
 
     records: dict[str, ParameterRecord] = field(default_factory=dict)
     identifications: dict[str, list[AxisIdentification]] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    not_moving: list[str] = field(default_factory=list)
 
 
 def _pool(values: list[tuple[float, float]]) -> tuple[float, float]:
@@ -244,6 +254,18 @@ def calibrate_axes(
         else:
             _balancing(out, ax, idents, prov, pt2_pair=bool(pt2))
         _friction(out, ax, idents, base, prov)
+    if not axes:
+        # the machine's other feed axes: not identified, and why (not an empty section)
+        for ax in m.axis_names:
+            if ax in wanted or ax == m.spindle_name:
+                continue
+            why = (f"{ax} does not move in {', '.join(names)}: nothing to identify; record "
+                   f"a program that moves it (e.g. the axis test program) and calibrate again")
+            base_ax = m.axis(ax)
+            out.not_moving.append(ax)
+            for key in CALIBRATED_KEYS:
+                out.records[f"axes.{ax}.{key}"] = ParameterRecord(
+                    float(getattr(base_ax, key)), identified=False, reason=why)
     return out
 
 

@@ -1,7 +1,9 @@
-"""HTML report of a spindle calibration: plateaus, fit and residuals, parameters, reference cut."""
+"""HTML reports of a calibration: the spindle (plateaus, fit and residuals, parameters,
+reference cut) and the feed axes (parameters, friction runs, error signals)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -11,15 +13,18 @@ import pandas as pd
 from cnctwin.analysis.align import external_on_hf
 from cnctwin.analysis.filters import lowpass
 from cnctwin.analysis.segments import spindle_speed_rpm
+from cnctwin.calibration.axes import AxesCalibration
 from cnctwin.calibration.spindle import METHODS, SpindleCalibration
+from cnctwin.machine import Machine
 from cnctwin.recording import Recording
 from cnctwin.report import Report
+from cnctwin.servo.identify import AxisFrictionFit
 from cnctwin.twin import align_dynamometer
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["spindle_calibration_report"]
+__all__ = ["axes_calibration_report", "spindle_calibration_report"]
 
 
 def _fit_figure(cal: SpindleCalibration) -> Figure:
@@ -186,4 +191,114 @@ def spindle_calibration_report(
                  "torque [Nm]", "Kt [Nm/A]"]
     sec3.table(w, caption="Consecutive windows of the reference cut (the first is the "
                "calibration window)", float_format="{:.5g}")
+    return rep.write(path)
+
+
+def _axis_friction_figure(axis: str, fits: list[AxisFrictionFit], position_unit: str
+                          ) -> Figure | None:
+    """Run means (velocity, effort) of every recording and the fitted friction law."""
+    from matplotlib.figure import Figure
+
+    if not fits:
+        return None
+    fig = Figure(figsize=(7.0, 3.4))
+    ax = fig.add_subplot(1, 1, 1)
+    vmax = max((max(abs(v) for v in f.run_velocity) for f in fits if f.run_velocity),
+               default=0.0)
+    for k, f in enumerate(fits):
+        if not f.run_velocity:
+            continue
+        size = 10.0 + 40.0 * np.asarray(f.run_cycles) / max(max(f.run_cycles), 1.0)
+        ax.scatter(f.run_velocity, f.run_effort, s=size, alpha=0.7,
+                   label=f"recording {k + 1}: run means (size: run length)")
+        v = np.linspace(-vmax, vmax, 201)
+        ax.plot(v, f.coulomb * np.sign(v) + f.viscous * v + f.offset, lw=1.0,
+                label=f"Fc {f.coulomb:.4g} +- {f.se_coulomb:.2g} {f.unit}, "
+                      f"b {f.viscous:.3g} +- {f.se_viscous:.2g}")
+    ax.set_xlabel(f"velocity [{position_unit}/s]")
+    ax.set_ylabel(f"{fits[0].signal} [{fits[0].unit}]")
+    ax.set_title(f"{axis}: friction on the constant-velocity air runs")
+    ax.axhline(0.0, color="0.7", lw=0.6)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def axes_calibration_report(
+    cal: AxesCalibration,
+    recordings: Sequence[Recording],
+    path: str | Path,
+    *,
+    machine: Machine,
+    machine_path: str = "",
+) -> Path:
+    """Write the HTML report of a feed-axis calibration (``cnctwin calibrate axes``).
+
+    Parameters
+    ----------
+    cal : AxesCalibration
+        The result of :func:`~cnctwin.calibration.calibrate_axes`.
+    recordings : sequence of Recording
+        The recordings it was identified from (for the error-signal figures).
+    path : str or Path
+        The HTML file.
+    machine : Machine
+        The machine description (rotary axes, units).
+    machine_path : str
+        The machine file the values were written to (named in the report).
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    from cnctwin.exceptions import CnctwinError
+    from cnctwin.machine import parameter_unit
+    from cnctwin.servo.figures import plot_error_signals
+
+    rep = Report("Feed-axis calibration",
+                 subtitle=f"position loop and friction per axis (thesis ch. 3.1); machine "
+                          f"file {machine_path or '-'}")
+    rows = []
+    for key, r in cal.records.items():
+        axis, name = key.split(".")[1], key.split(".")[2]
+        rot = machine.axis(axis).rotary if axis in machine.axis_names else False
+        u = r.uncertainty
+        rows.append({
+            "axis": axis, "parameter": name,
+            "value": f"{r.value:.5g}" if r.identified else "-",
+            "standard uncertainty": f"{u:.2g}" if r.identified and u is not None else "-",
+            "95 % interval": (f"{r.value - 1.96 * u:.5g} ... {r.value + 1.96 * u:.5g}"
+                              if r.identified and u is not None else "-"),
+            "unit": parameter_unit(key, rotary=rot),
+            "not identified: why": "" if r.identified else r.reason})
+    sec = rep.section("Parameters")
+    sec.table(pd.DataFrame(rows), caption="What was written to the machine file (parameter = "
+              "its key in [axes.<axis>]); a value not identified keeps the machine's default "
+              "and says why")
+    for note in cal.notes:
+        sec.text(note, note=True)
+    for axis, idents in cal.identifications.items():
+        s = rep.section(f"Axis {axis}")
+        fits = [i.friction.get("TORQUE") or i.friction.get("CURRENT") for i in idents]
+        fig = _axis_friction_figure(axis, [f for f in fits if f is not None],
+                                    idents[0].position_unit)
+        if fig is not None:
+            s.figure(fig, caption="Mean effort of each constant-velocity run outside the cuts "
+                     "against its velocity, with the fitted law Fc sign(v) + b v (+ offset); "
+                     "runs weighted by their length")
+        else:
+            s.text(f"{axis}: no friction fit (too few constant-velocity air runs; the "
+                   "parameter table says why)", note=True)
+        for rec in recordings:
+            try:
+                s.figure(plot_error_signals(rec, axis), caption=f"{axis}: following error, "
+                         "controller difference and contour deviation of the first recording "
+                         "in which it moves (thesis Figs. 3.2/3.3)")
+                break
+            except (CnctwinError, KeyError, ValueError):
+                continue
+    if cal.not_moving:
+        rep.section("Axes that did not move").text(
+            f"{', '.join(cal.not_moving)}: in none of the recordings; their parameters are "
+            "not identified (the machine file says so for each key).")
     return rep.write(path)

@@ -84,6 +84,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    help="axis to calibrate (repeatable; default every moving axis)")
     a.add_argument("--verbose", action="store_true",
                    help="print the identification's notes on each recording")
+    a.add_argument("--report", type=Path, metavar="HTML",
+                   help="HTML report (default: beside the machine file, "
+                   "<machine>.axes-report.html)")
     a.set_defaults(func=_cmd_axes)
 
 
@@ -223,7 +226,8 @@ def _cmd_axes(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     from cnctwin.calibration.axes import calibrate_axes
-    from cnctwin.machine import save_machine
+    from cnctwin.calibration.report import axes_calibration_report
+    from cnctwin.machine import parameter_unit, save_machine
 
     console = Console(stderr=True)
     mf = _load_or_new(args.machine)
@@ -232,30 +236,52 @@ def _cmd_axes(args: argparse.Namespace) -> int:
     with console.status("identifying the position loops"):
         cal = calibrate_axes(recs, machine=mf.machine, axes=args.axis or None,
                              recording_names=[str(p) for p in args.files])
-    save_machine(mf.with_records(cal.records), args.machine)
-    table = Table(title="feed axes")
-    for col in ("axis", "parameter", "value", "std. uncertainty", "unit", "not identified"):
-        table.add_column(col, justify="left" if col in ("axis", "parameter", "not identified")
-                         else "right")
-    from cnctwin.machine import parameter_unit
+    # an axis that did not move this time keeps what an earlier calibration identified
+    kept = [k for k, r in cal.records.items() if not r.identified
+            and k.split(".")[1] in cal.not_moving and mf.is_identified(k)]
+    records = {k: r for k, r in cal.records.items() if k not in kept}
+    save_machine(mf.with_records(records), args.machine)
+    report = args.report or args.machine.with_name(args.machine.stem + ".axes-report.html")
+    with console.status("writing the report"):
+        axes_calibration_report(cal, recs, report, machine=mf.machine,
+                                machine_path=str(args.machine))
+    table = Table(title="feed axes (parameter = the machine file's key in \\[axes.<axis>])")
+    table.add_column("axis", no_wrap=True)
+    table.add_column("parameter", no_wrap=True)
+    table.add_column("value", justify="right", no_wrap=True)
+    table.add_column("std. unc.", justify="right", no_wrap=True)
+    table.add_column("unit", justify="right", no_wrap=True)
+    reasons: list[str] = []  # footnotes: why a value was not identified
 
-    for key, rec in cal.records.items():
-        axis = key.split(".")[1]
+    def note_of(why: str) -> str:
+        if why not in reasons:
+            reasons.append(why)
+        return f"not identified [{reasons.index(why) + 1}]"
+
+    for key, rec in records.items():
+        axis, name = key.split(".")[1], key.split(".")[2]
+        if axis in cal.not_moving:
+            continue
         rot = mf.machine.axis(axis).rotary if axis in mf.machine.axis_names else False
-        why = rec.reason.split(";")[0].split(": ")[0]
-        table.add_row(axis, key.split(".")[2], f"{rec.value:.5g}" if rec.identified else "-",
+        table.add_row(axis, name,
+                      f"{rec.value:.5g}" if rec.identified else note_of(rec.reason),
                       f"{rec.uncertainty:.2g}" if rec.uncertainty is not None else "-",
-                      parameter_unit(key, rotary=rot),
-                      "" if rec.identified else (why[:60] + ("..." if len(why) > 60 else "")))
+                      parameter_unit(key, rotary=rot))
+    for axis in cal.not_moving:
+        table.add_row(axis, "(all)", note_of(
+            "did not move in the recordings" + (" (earlier values kept)" if any(
+                k.startswith(f"axes.{axis}.") for k in kept) else "")), "-", "-")
     out = Console()
     out.print(table)
-    if any(not r.identified for r in cal.records.values()):
-        out.print("not identified: the value stays the default; the machine file gives each "
-                  "reason in full")
+    for k, why in enumerate(reasons, start=1):
+        out.print(f"[{k}] {why}", markup=False)
+    if reasons:
+        out.print("not identified: the value stays the default; the machine file and the "
+                  "report give each reason in full")
     if args.verbose:
         for note in cal.notes:
             out.print(f"note: {note}")
     elif cal.notes:
         out.print(f"{len(cal.notes)} notes on the recordings (--verbose shows them)")
-    out.print(f"wrote {args.machine}")
+    out.print(f"wrote {args.machine} and {report}")
     return 0

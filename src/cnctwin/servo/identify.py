@@ -698,6 +698,8 @@ class AxisFrictionFit:
         ``"CURRENT"`` or ``"TORQUE"``.
     unit : str
         Signal unit.
+    run_velocity, run_effort, run_cycles : tuple of float
+        Per run used: mean velocity [unit/s], mean effort [signal unit], length [cycles].
     """
 
     coulomb: float
@@ -709,6 +711,9 @@ class AxisFrictionFit:
     n_runs: int
     signal: str
     unit: str
+    run_velocity: tuple[float, ...] = ()
+    run_effort: tuple[float, ...] = ()
+    run_cycles: tuple[float, ...] = ()
 
 
 def constant_velocity_runs(
@@ -864,6 +869,7 @@ def fit_axis_friction(
     return AxisFrictionFit(
         float(coef[0]), float(coef[1]), float(coef[2]) if both else 0.0, float(se[0]),
         float(se[1]), float(se[2]) if both else float("nan"), int(vm.size), signal, unit,
+        tuple(vm.tolist()), tuple(tm.tolist()), tuple((wm**2).tolist()),
     )
 
 
@@ -953,6 +959,8 @@ class AxisIdentification:
         Cycle time [s].
     position_unit : str
         ``"mm"`` or ``"deg"``.
+    friction : dict
+        ``"CURRENT"`` / ``"TORQUE"`` -> :class:`AxisFrictionFit` (with its runs).
     """
 
     axis: str
@@ -967,6 +975,7 @@ class AxisIdentification:
     controller: PositionControllerFit | None = None
     cycle_time_s: float = 0.002
     position_unit: str = "mm"
+    friction: dict[str, AxisFrictionFit] = field(default_factory=dict)
 
     def value(self, name: str) -> float:
         """Value of a parameter; raises IdentificationError with the reason if missing."""
@@ -1415,6 +1424,7 @@ def identify_axis(
                 "test program such as the one of `cnctwin simulate axis_test`)"
                 if in_cut else "")
             continue
+        ident.friction[code] = ff
         u = ff.unit
         meth = f"{code} = Fc*sign(v) + b*v{' + c' if ff.se_offset == ff.se_offset else ''} on " \
                f"{ff.n_runs} constant-velocity runs; bootstrap over runs"
