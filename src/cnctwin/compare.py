@@ -31,14 +31,17 @@ from typing import Any
 
 import numpy as np
 
+from cnctwin.analysis.filters import lowpass
 from cnctwin.exceptions import IdentificationError, SignalNotFoundError
 from cnctwin.machine import KV_UNIT_PER_S, FeedAxis, MachineFile
 from cnctwin.recording import Recording
 from cnctwin.servo import AxisIdentification, identify_axis, moving_axes
 from cnctwin.servo._common import axis_data, derivative
+from cnctwin.servo.identify import cut_cycles
 from cnctwin.servo.predict import AxisLoopModel
 
 __all__ = [
+    "CURRENT_BAND_HZ",
     "AxisComparison",
     "MachineComparison",
     "SpindleComparison",
@@ -47,6 +50,10 @@ __all__ = [
 ]
 
 _JERK_TYPES = {0: "none", 1: "pt2", 2: "moving_average", 4: "double_moving_average"}
+
+CURRENT_BAND_HZ = 50.0
+"""Band of the axis-current comparison [Hz]: the motion's accelerations (jerk-limited, tens of
+ms) lie below it; above it the measured current is the sensor's white noise."""
 
 
 def loop_model_from_axis(axis: FeedAxis, *, cycle_time_s: float = 0.002) -> AxisLoopModel:
@@ -111,7 +118,9 @@ class AxisComparison:
     residual_ratio : float
         rms(FE_meas - FE_pred) / rms(FE_meas) over the moving cycles [-].
     current_residual_ratio : float or None
-        rms(I_meas - I_pred) / rms(I_meas) over the moving cycles [-] (None without CURRENT).
+        rms(I_meas - I_pred) / rms(I_meas) over the moving cycles outside the cuts, both below
+        :data:`CURRENT_BAND_HZ`, I_pred from the twin's predicted motion [-] (None without
+        CURRENT or with too few such cycles).
     flagged : bool
         The machine departs from its twin beyond the calibrated uncertainty.
     reasons : list of str
@@ -269,18 +278,31 @@ def _compare_axis(rec: Recording, mf: MachineFile, name: str, *, residual_limit:
     cur_ratio: float | None = None
     i_meas = d.signals.get("CURRENT")
     if i_meas is not None:
-        v_act = derivative(enc, d.segments, dt, kind="central")
-        acc = derivative(v_act, d.segments, dt, kind="central")
+        # the twin's current for the twin's motion: the predicted position differentiated
+        # (the measured ENC_POS twice differentiated turns 0.15 um of measuring noise into
+        # amps of acceleration current), compared where the tool does not cut (the process
+        # force is not in the axis model) and below CURRENT_BAND_HZ on both sides (the
+        # current's white measuring noise above is not the twin's to explain)
+        v_pred = derivative(pred, d.segments, dt, kind="central")
+        acc = derivative(v_pred, d.segments, dt, kind="central")
         r = ax.load_per_motor_rad  # mm (deg) per motor rad
         alpha = acc / r
-        force = ax.coulomb_n * np.tanh(v_act / ax.friction_smoothing_mm_s) \
-            + ax.viscous_n_per_mm_s * v_act
+        force = ax.coulomb_n * np.tanh(v_pred / ax.friction_smoothing_mm_s) \
+            + ax.viscous_n_per_mm_s * v_pred
         i_pred = (ax.total_inertia_kgm2 * alpha + ax.motor_torque_per_load_force * force) \
             / ax.kt_nm_per_a
+        cut, _ = cut_cycles(rec, spindle=mf.machine.spindle_name)
         ok = moving & np.isfinite(i_pred) & np.isfinite(i_meas)
-        rms_i = float(np.sqrt(np.mean(i_meas[ok] ** 2))) if ok.any() else 0.0
-        if rms_i > 0:
-            cur_ratio = float(np.sqrt(np.mean((i_meas[ok] - i_pred[ok]) ** 2)) / rms_i)
+        if cut is not None:
+            ok &= ~cut
+        if ok.sum() > 30:
+            fs = 1.0 / dt
+            band = min(CURRENT_BAND_HZ, 0.4 * fs)
+            i_m = lowpass(np.where(np.isfinite(i_meas), i_meas, 0.0), band, fs_hz=fs, order=2)
+            i_p = lowpass(np.where(np.isfinite(i_pred), i_pred, 0.0), band, fs_hz=fs, order=2)
+            rms_i = float(np.sqrt(np.mean(i_m[ok] ** 2)))
+            if rms_i > 0:
+                cur_ratio = float(np.sqrt(np.mean((i_m[ok] - i_p[ok]) ** 2)) / rms_i)
     # parameters the recording shows against the twin's
     params: dict[str, dict[str, float]] = {}
     ident: AxisIdentification | None = None

@@ -80,6 +80,7 @@ __all__ = [
     "fit_flux_law",
     "fit_friction",
     "identify_inertia",
+    "inertia_uncertainty",
     "linear_region",
     "linear_region_from_recording",
     "measure_cut",
@@ -1616,6 +1617,77 @@ def identify_inertia(
     x = np.column_stack([acc[m], speed[m], np.sign(speed[m])])
     sol, *_ = np.linalg.lstsq(x, tau[m], rcond=None)
     return float(sol[0])
+
+
+def inertia_uncertainty(
+    rec: Recording,
+    model: SpindleModel,
+    *,
+    spindle: str = "SP1",
+    lowpass_hz: float = 20.0,
+    min_speed_rpm: float = 300.0,
+    min_accel_rad_s2: float = 5.0,
+) -> float:
+    """Standard uncertainty of the spindle inertia identified from an air cut's speed ramps.
+
+    Parameters
+    ----------
+    rec : Recording
+        The air cut (run-ups and run-downs between its plateaus).
+    model : SpindleModel
+        The calibrated model (Kt, friction) and its ``j_kgm2``.
+    spindle : str, default 'SP1'
+        Spindle axis.
+    lowpass_hz : float, default 20.0
+        Zero-phase low-pass of speed and torque before differentiating [Hz].
+    min_speed_rpm : float, default 300.0
+        Slower samples are left out (Stribeck zone, as the identification).
+    min_accel_rad_s2 : float, default 5.0
+        Samples accelerating less are left out [rad/s^2].
+
+    Returns
+    -------
+    float
+        u(J) [kg m^2]; NaN if the air cut has no run-up or no run-down.
+
+    Notes
+    -----
+    ``tau_m - tau_friction(n) = J dOmega/dt`` fitted on the run-ups alone and on the
+    run-downs alone: an error of the friction law (its temperature, its form) adds to the
+    accelerating torque on the way up and takes from it on the way down, so the two fits
+    differ by twice its effect on J. u(J) combines half their difference (that model error)
+    with the statistical standard error of the pooled fit (its residual inflated by the
+    residual's autocorrelation, the samples being low-passed).
+    """
+    speed, _ = spindle_speed_rpm(rec, spindle)
+    cur = rec.signal(f"CURRENT|{spindle}").to_numpy(dtype=np.float64)
+    tau = model.kt_nm_per_a * cur
+    fs = rec.fs_hz
+    ok = np.isfinite(speed) & np.isfinite(tau)
+    speed = _fill(np.where(ok, speed, np.nan))
+    tau = _fill(np.where(ok, tau, np.nan))
+    if speed.size > 30:
+        speed = lowpass(speed, lowpass_hz, fs_hz=fs, order=2)
+        tau = lowpass(tau, lowpass_hz, fs_hz=fs, order=2)
+    acc = _domega_dt(speed, fs)
+    m = ok & (np.abs(speed) >= min_speed_rpm) & (np.abs(acc) >= min_accel_rad_s2)
+    # accelerating the rotor's speed magnitude (up) or slowing it (down)
+    up = m & (acc * np.sign(speed) > 0)
+    down = m & (acc * np.sign(speed) < 0)
+    if not up.any() or not down.any():
+        return float("nan")
+    y = tau - model.friction_torque_nm(speed)
+
+    def fit(sel: NDArray[np.bool_]) -> float:
+        return float(np.dot(acc[sel], y[sel]) / np.dot(acc[sel], acc[sel]))
+
+    j_up, j_down = fit(up), fit(down)
+    j = model.j_kgm2
+    r = y[m] - j * acc[m]
+    rho = float(np.corrcoef(r[1:], r[:-1])[0, 1]) if r.size > 3 else 0.0
+    infl = math.sqrt((1.0 + rho) / (1.0 - rho)) if -1.0 < rho < 1.0 else 1.0
+    se = float(np.std(r) / math.sqrt(float(np.dot(acc[m], acc[m])))) * infl
+    return math.hypot(se, 0.5 * abs(j_up - j_down))
 
 
 # ====================================================================== speed changes

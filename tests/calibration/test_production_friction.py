@@ -12,7 +12,8 @@ force as friction (Y1 1489 +- 1000 N against a true 150 N, X1 refused as -963 N)
   (the thesis machine's X1/Y1: Coulomb 150 N, viscous 0.2 N/(mm/s), src/cnctwin/machine/
   description.py) within 3 stated standard uncertainties; ``twin compare`` of a new recording
   (another seed) of the unchanged machine flags nothing, of the machine with Y1 Coulomb x 1.5
-  flags Y1 (its Coulomb friction) and nothing else.
+  flags Y1 (its Coulomb friction) and nothing else; the twin's axis current stays within
+  0.2 of the measured one on the healthy machine.
 """
 
 from __future__ import annotations
@@ -81,6 +82,12 @@ def test_compare_of_a_production_recording_flags_the_friction_rise_only(
         calibrated: Path) -> None:
     same = _compare(calibrated, "same", 2)
     assert not any(a["flagged"] for a in same["axes"].values()), same["axes"]
+    # the twin's axis current on a healthy machine (issue 29, point 4): below 0.2 of the
+    # measured current outside the cuts (0.07-0.11 measured; 0.43-0.85 before the DSC spline
+    # and the twin's own predicted motion)
+    for name, a in same["axes"].items():
+        assert a["current_residual_ratio"] is not None and a["current_residual_ratio"] < 0.2, \
+            (name, a["current_residual_ratio"])
     changed = _compare(calibrated, "y1_coulomb", 3, "--set", "axes.Y1.coulomb_n=225")
     flagged = {k for k, a in changed["axes"].items() if a["flagged"]}
     assert flagged == {"Y1"}, changed["axes"]

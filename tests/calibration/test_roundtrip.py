@@ -8,7 +8,7 @@ simulated (air cut, one drilling cut with the dynamometer, the axis test program
   of the hidden values (issue 12), every seed;
 * honesty: each hidden value inside its stated 95 % interval (value +- 1.96 standard
   uncertainties) in at least 7 of the 8 seeds (the 20-seed campaign with its coverage per
-  parameter is ``scripts/validate_calibration.py``, docs/validation-calibration.md; 8 seeds
+  parameter is ``benchmarks/bench_calibration_coverage.py``, docs/validation-calibration.md; 8 seeds
   keep this test at about a minute of the suite's 15).
 
 Two physical referrals are applied to the hidden values before comparing, because the

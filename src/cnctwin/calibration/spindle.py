@@ -33,7 +33,7 @@ import pandas as pd
 from cnctwin.exceptions import IdentificationError
 from cnctwin.machine import ParameterRecord, Provenance
 from cnctwin.recording import Recording
-from cnctwin.spindle import FluxLawFit, SpindleModel, fit_flux_law
+from cnctwin.spindle import FluxLawFit, SpindleModel, fit_flux_law, inertia_uncertainty
 from cnctwin.twin import TwinChain, TwinChainResult
 
 __all__ = [
@@ -359,7 +359,12 @@ def calibrate_spindle(
         records["spindle.stribeck_torque_nm"] = ParameterRecord(fr.stribeck_a * kt, None, prov)
         records["spindle.stribeck_speed_rpm"] = ParameterRecord(fr.stribeck_speed_rpm, None, prov)
     if model.j_kgm2 > 0:
-        records["spindle.inertia_kg_m2"] = ParameterRecord(model.j_kgm2, None, prov)
+        # u(J): run-ups against run-downs (the friction law's error) and the fit's own
+        # scatter, plus Kt's relative uncertainty (J comes from Kt x the current)
+        u_fit = inertia_uncertainty(air_cuts[0], model, spindle=spindle)
+        u_j = math.hypot(u_fit, model.j_kgm2 * unc["kt_nm_per_a"] / kt) \
+            if math.isfinite(u_fit) else None
+        records["spindle.inertia_kg_m2"] = ParameterRecord(model.j_kgm2, u_j, prov)
     else:
         records["spindle.inertia_kg_m2"] = ParameterRecord(
             0.015, identified=False,
@@ -548,7 +553,9 @@ def _speed_law(model: SpindleModel, speeds: pd.DataFrame, unc: dict[str, float],
     for key in ("spindle.stribeck_torque_nm", "spindle.inertia_kg_m2"):
         r0 = records.get(key)
         if r0 is not None and r0.identified:
-            records[key] = dataclasses.replace(r0, value=r0.value * scale)
+            records[key] = dataclasses.replace(
+                r0, value=r0.value * scale,
+                uncertainty=r0.uncertainty * scale if r0.uncertainty is not None else None)
     if law.base_speed_bound == "at least":
         records["spindle.flux_base_speed_rpm"] = ParameterRecord(
             0.0, identified=False,

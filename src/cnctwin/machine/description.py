@@ -345,6 +345,12 @@ class FeedAxis:
         Encoder resolution at the load [mm] (rotary [deg]). [E] 1e-5 (10 nm)
     dsc : bool
         Dynamic servo control (position loop closed in the drive at 125 us). [S] 840D sl + S120
+    dsc_spline : bool
+        With DSC, the drive interpolates the NC's speed feedforward linearly over the
+        position-control cycle (SINAMICS S120 "DSC with spline", p1191) instead of holding it:
+        without it every 2 ms step of the feedforward during an acceleration kicks the speed
+        loop, and the current sampled at the end of the cycle misses a third of the
+        acceleration current (docs/simulator.md §1b). [S] S120 p1191; default on
     phase_resistance_ohm : float
         Winding resistance for copper losses in POWER and heating [Ohm]. [E] 0.8
     thermal_resistance_k_per_w : float
@@ -406,6 +412,7 @@ class FeedAxis:
     rated_torque_nm: float = 10.0
     encoder_resolution: float = 1e-5
     dsc: bool = True
+    dsc_spline: bool = True
     phase_resistance_ohm: float = 0.8
     thermal_resistance_k_per_w: float = 0.4
     heat_capacity_j_per_k: float = 3000.0

@@ -11,7 +11,9 @@ following thesis Fig. 3.1 and SINUMERIK function manuals G2/K3/B2
             -> x_f ----------------------------------------------+--> VEL_FFW = w dx_f/dt
                |                                                  +--> TORQUE_FFW = J d2x_f/dt2
                +-> FFW balancing (MD32620 mode, MD32810/MD32800) -> CTRL_POS
-    CMD_SPEED = Kv (CTRL_POS - ENC_POS) + VEL_FFW  ->  drive: PI speed loop (125 us)
+    CMD_SPEED = Kv (CTRL_POS - ENC_POS) + VEL_FFW  ->  drive: PI speed loop (125 us;
+            with DSC the position difference every 125 us and VEL_FFW interpolated over the
+            cycle, "DSC with spline" S120 p1191, FeedAxis.dsc_spline)
             -> torque setpoint (+ TORQUE_FFW, limited) -> current loop (PT1, MD32800-like)
             -> motor + ball screw + slide (inertia, Coulomb/viscous/Stribeck friction,
                external force) -> encoder (quantised) -> ENC_POS
@@ -158,7 +160,8 @@ P_NOISE = 29  # current noise std [A]
 P_ENC_NOISE = 30  # NC measuring-system noise std [mm] / [deg]
 P_RIPPLE = 31  # position-periodic force amplitude [N] / [Nm]
 P_RIPPLE_PHASE = 32  # its phase at position 0 [rad]
-_N_PARAM = 33
+P_DSC_SPLINE = 33  # interpolate the speed feedforward over the cycle (S120 p1191)
+_N_PARAM = 34
 
 # ---------------------------------------------------------------- state vector layout
 S_INIT = 0
@@ -183,7 +186,8 @@ S_LF_IQ = 18
 S_LF_UTIL = 19
 S_CTRL1 = 20  # CTRL_POS at k-1 (DSC extrapolation)
 S_FRIC = 21  # last friction force (truth)
-_N_STATE = 22
+S_VEL1 = 22  # speed feedforward at k-1 (DSC spline)
+_N_STATE = 23
 
 # ring buffers: 0 jerk MA1 input, 1 jerk MA2 input, 2 DRA dead-time input, 3 balance input
 _N_RING = 4
@@ -213,7 +217,8 @@ C_RES = 19
 C_DSC = 20
 C_RIPPLE = 21  # ripple amplitude [N] / [Nm] at the slide
 C_RIPPLE_PHASE = 22  # [rad]
-_N_CST = 23
+C_SPLINE = 23  # 1: speed feedforward interpolated over the cycle
+_N_CST = 24
 
 # per-axis values handed from the NC part of a cycle to its drive loops (columns of cin)
 I_CTRL = 0
@@ -225,7 +230,8 @@ I_FEXT = 5
 I_XQ = 6  # encoder value latched at the start of the cycle
 I_XQP = 7  # encoder value of the previous latch
 I_XN = 8  # the NC's measured position (ENC_POS): latched with its measurement noise
-_N_CIN = 9
+I_DVEL = 9  # speed feedforward minus the previous cycle's (DSC spline)
+_N_CIN = 10
 
 # drive state per axis while a chunk runs (columns of dst)
 D_X = 0
@@ -265,7 +271,7 @@ def _ring_delay(ring: NDArray[np.float64], a: int, b: int, idx: int,
 def _drive_step(
     c: NDArray[np.float64], x: float, w: float, integ: float, tact: float, tset: float,
     xq: float, xq_prev: float, dsum: float, frac: float, ctrl: float, dctrl: float,
-    vel: float, vset0: float, tffw: float, fext: float,
+    vel: float, vset0: float, tffw: float, fext: float, dvel: float,
 ) -> tuple[float, float, float, float, float, float, float]:
     """One 125 us step of one axis: speed PI, current PT1, friction, mechanics.
 
@@ -275,7 +281,10 @@ def _drive_step(
     if c[C_DSC] > 0.5:
         dd = ctrl + dctrl * frac - xq
         dsum += dd
-        vset = c[C_KV] * dd + vel
+        if c[C_SPLINE] > 0.5:  # feedforward from the previous cycle's value to this one's
+            vset = c[C_KV] * dd + (vel - dvel * (1.0 - frac))
+        else:
+            vset = c[C_KV] * dd + vel
     else:
         vset = vset0
     e = vset * c[C_INV_G] - w_meas
@@ -342,13 +351,16 @@ def _drive_lanes(
         fr = fracs[j]
         x0, w0, i0, t0, s0, d0, f0 = _drive_step(
             c0, x0, w0, i0, t0, s0, q0, p0, d0, fr, cin[a0, I_CTRL], cin[a0, I_DCTRL],
-            cin[a0, I_VEL], cin[a0, I_VSET0], cin[a0, I_TFFW], cin[a0, I_FEXT])
+            cin[a0, I_VEL], cin[a0, I_VSET0], cin[a0, I_TFFW], cin[a0, I_FEXT],
+            cin[a0, I_DVEL])
         x1, w1, i1, t1, s1, d1, f1 = _drive_step(
             c1, x1, w1, i1, t1, s1, q1, p1, d1, fr, cin[a1, I_CTRL], cin[a1, I_DCTRL],
-            cin[a1, I_VEL], cin[a1, I_VSET0], cin[a1, I_TFFW], cin[a1, I_FEXT])
+            cin[a1, I_VEL], cin[a1, I_VSET0], cin[a1, I_TFFW], cin[a1, I_FEXT],
+            cin[a1, I_DVEL])
         x2, w2, i2, t2, s2, d2, f2 = _drive_step(
             c2, x2, w2, i2, t2, s2, q2, p2, d2, fr, cin[a2, I_CTRL], cin[a2, I_DCTRL],
-            cin[a2, I_VEL], cin[a2, I_VSET0], cin[a2, I_TFFW], cin[a2, I_FEXT])
+            cin[a2, I_VEL], cin[a2, I_VSET0], cin[a2, I_TFFW], cin[a2, I_FEXT],
+            cin[a2, I_DVEL])
     # a repeated lane computed the same values from the same inputs: storing twice is harmless
     for a, x, w, ig, t, s, f, q, d in ((a2, x2, w2, i2, t2, s2, f2, q2, d2),
                                        (a1, x1, w1, i1, t1, s1, f1, q1, d1),
@@ -461,6 +473,7 @@ def _drive_constants(par: NDArray[np.float64], h: float) -> NDArray[np.float64]:
         cst[a, C_DSC] = 1.0 if par[a, P_DSC] > 0.5 else 0.0
         cst[a, C_RIPPLE] = par[a, P_RIPPLE]
         cst[a, C_RIPPLE_PHASE] = par[a, P_RIPPLE_PHASE]
+        cst[a, C_SPLINE] = 1.0 if par[a, P_DSC_SPLINE] > 0.5 else 0.0
     return cst
 
 
@@ -679,6 +692,8 @@ def _servo_kernel(
             cin[a, I_CTRL] = ctrl
             cin[a, I_DCTRL] = ctrl - st[a, S_CTRL1]
             cin[a, I_VEL] = vel
+            cin[a, I_DVEL] = vel - st[a, S_VEL1]
+            st[a, S_VEL1] = vel
             cin[a, I_VSET0] = par[a, P_KV] * diff2 + vel  # load units/s
             cin[a, I_TFFW] = tffw
             cin[a, I_FEXT] = fext
@@ -748,7 +763,7 @@ def _servo_kernel(
                     or dst[a, D_XQ] != before[a, S_XQ]):
                 continue
             ok = True
-            for i in (S_XF1, S_XF2, S_J1, S_J2, S_DRA, S_BAL, S_MOD, S_CTRL1):
+            for i in (S_XF1, S_XF2, S_J1, S_J2, S_DRA, S_BAL, S_MOD, S_CTRL1, S_VEL1):
                 if st[a, i] != before[a, i]:
                     ok = False
             for b in range(_N_RING):
@@ -785,7 +800,7 @@ def servo_parameters(axes: Sequence[FeedAxis]) -> NDArray[np.float64]:
 
     Returns
     -------
-    numpy.ndarray, shape (n_axes, 33)
+    numpy.ndarray, shape (n_axes, 34)
         Internal units: gains in 1/s, times in s, inertia at the motor in kg m^2, friction in
         N (Nm) at the slide (table), speeds in mm/s (deg/s).
     """
@@ -825,6 +840,7 @@ def servo_parameters(axes: Sequence[FeedAxis]) -> NDArray[np.float64]:
         p[i, P_ENC_NOISE] = ax.encoder_noise
         p[i, P_RIPPLE] = ax.ripple_n
         p[i, P_RIPPLE_PHASE] = ax.ripple_phase_rad
+        p[i, P_DSC_SPLINE] = 1.0 if ax.dsc_spline else 0.0
     return p
 
 
@@ -834,7 +850,7 @@ class ServoState:
 
     Attributes
     ----------
-    values : numpy.ndarray, shape (n_axes, 22)
+    values : numpy.ndarray, shape (n_axes, 23)
         Filter, controller, mechanics and thermal states.
     history : numpy.ndarray, shape (n_axes, 4, HISTORY_LENGTH)
         Ring buffers of the moving averages and dead times.

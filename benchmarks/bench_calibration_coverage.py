@@ -1,0 +1,233 @@
+"""Coverage of the calibration's stated intervals on hidden machines (issue 29, point 2).
+
+The same campaign as ``tests/calibration/test_roundtrip.py``, through the command line as a
+user types it: per draw a machine with hidden spindle and X1/Y1 loop and friction parameters
+(``random_spindle_overrides``, ``random_loop_overrides``) is simulated with its own noise
+(an air cut up and back down through 200-5000 rpm, one drilling cut with the dynamometer, the
+axis test program); ``cnctwin calibrate spindle`` and ``cnctwin calibrate axes`` recover the
+parameters from the files. Per parameter: the mean and max error, and the **coverage**, the
+share of draws whose hidden value lies inside the stated 95 % interval (value +- 1.96 standard
+uncertainties; the goal is 90-98 %); a value identified without an uncertainty counts as "no
+interval". Also the thesis method on the same files, for comparison. Writes the table into
+docs/validation-calibration.md (the part above its first "## " section after the table).
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_calibration_coverage.py [--draws 100] [--jobs 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cnctwin.cli import main
+from cnctwin.machine import Machine, load_machine
+from cnctwin.sim.scenarios import random_loop_overrides, random_spindle_overrides
+
+_UP = list(range(200, 5001, 200))
+SPEEDS_RPM = _UP + _UP[-2::-1]
+REF = "drill_1_aisi1045_2400rpm_0p16"
+KEYS = ["spindle.kt_nm_per_a", "spindle.viscous_friction_nm_per_rpm",
+        "spindle.coulomb_friction_nm", "spindle.inertia_kg_m2",
+        "axes.X1.kv_m_min_per_mm", "axes.Y1.kv_m_min_per_mm",
+        "axes.X1.jerk_time_s", "axes.Y1.jerk_time_s", "axes.X1.coulomb_n", "axes.Y1.coulomb_n",
+        "axes.X1.viscous_n_per_mm_s", "axes.Y1.viscous_n_per_mm_s"]
+TOL = {"spindle": 2.0, "kv_m": 5.0, "jerk": 10.0, "coulomb": 5.0, "viscous": 30.0,
+       "inertia": 10.0}
+
+
+def _default(key: str) -> float:
+    """The thesis machine's value of a dotted key (what a draw does not hide)."""
+    m = Machine.thesis_default()
+    parts = key.split(".")
+    obj = m.axis(parts[1]) if parts[0] == "axes" else m.spindle
+    return float(getattr(obj, parts[-1]))
+
+
+def _cli(*args: object) -> None:
+    with contextlib.redirect_stdout(io.StringIO()):
+        code = main([str(a) for a in args])
+    if code != 0:
+        raise SystemExit(f"cnctwin {' '.join(map(str, args[:2]))} failed ({code})")
+
+
+def _seed(seed: int, base: Path) -> dict[str, dict[str, Any]]:
+    d = base / f"seed{seed}"
+    hidden = {**random_spindle_overrides(seed), **random_loop_overrides(seed)}
+    sets = [x for k, v in hidden.items() for x in ("--set", f"{k}={v}")]
+    _cli("simulate", "air_cut_sweep", "--out", d / "ac", "--seed", seed, *sets, "--option",
+         f"speeds_rpm={SPEEDS_RPM}")
+    _cli("simulate", "drilling_validation", "--out", d / "dv", "--seed", seed, *sets,
+         "--option", 'cuts=[["aisi1045", 2400, 0.16]]')
+    _cli("simulate", "axis_test", "--out", d / "at", "--seed", seed, *sets, "--option",
+         'axes=["X1", "Y1"]')
+    out: dict[str, dict[str, Any]] = {}
+    for method in ("improved", "thesis"):
+        m = d / f"{method}.toml"
+        _cli("calibrate", "spindle", "--air-cut", d / "ac" / "air_cut_sweep.json",
+             "--reference", d / "dv" / f"{REF}.json", "--dynamometer",
+             d / "dv" / f"dynamometer_{REF[6:]}.csv", "--machine", m, "--method", method)
+        if method == "improved":
+            _cli("calibrate", "axes", d / "at" / "axis_test.json", "--machine", m)
+        mf = load_machine(m)
+        sp = Machine.thesis_default().spindle
+        for key in KEYS:
+            if method == "thesis" and not key.startswith("spindle"):
+                continue
+            rec = mf.record(key)
+            h = float(hidden[key]) if key in hidden else _default(key)
+            h_acc = h
+            if key == "spindle.kt_nm_per_a":
+                t_ref = mf.value("spindle.kt_ref_temperature_c")
+                if method == "thesis" or not mf.is_identified("spindle.kt_ref_temperature_c"):
+                    t_ref = 22.0
+                h = h_acc = h * (1 + sp.magnet_temp_coeff_per_k * (t_ref - sp.kt_ref_temperature_c))
+            if key.endswith("jerk_time_s"):
+                h_acc = round(h / 0.002) * 0.002
+            ident = rec is not None and rec.identified
+            out[f"{method}:{key}"] = {
+                "hidden": h, "hidden_eff": h_acc,
+                "value": rec.value if ident and rec else float("nan"),
+                "u": rec.uncertainty if ident and rec and rec.uncertainty else float("nan"),
+                "reason": "" if ident or rec is None else rec.reason}
+    return out
+
+
+def _one(args: tuple[int, str]) -> tuple[int, dict[str, dict[str, Any]]]:
+    seed, tmp = args
+    return seed, _seed(seed, Path(tmp))
+
+
+def main_(argv: list[str] | None = None) -> int:
+    from concurrent.futures import ProcessPoolExecutor
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--draws", type=int, default=100)
+    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--jobs", type=int, default=1, help="draws run side by side")
+    ap.add_argument("--doc", type=Path, default=Path("docs/validation-calibration.md"))
+    ap.add_argument("--raw", type=Path, help="append each draw's results here (JSON lines) "
+                    "as it finishes; with --summarize, the file to summarize")
+    ap.add_argument("--summarize", action="store_true",
+                    help="no new draws: the table from the draws in --raw")
+    a = ap.parse_args(argv)
+    t0 = time.time()
+    seeds = list(range(a.first_seed, a.first_seed + a.draws))
+    res: dict[int, dict[str, dict[str, Any]]] = {}
+
+    def done(seed: int, r: dict[str, dict[str, Any]]) -> None:
+        res[seed] = r
+        if a.raw is not None:
+            with a.raw.open("a", encoding="utf-8") as f:
+                f.write(json.dumps({"seed": seed, "results": r}) + "\n")
+        print(f"draw {seed} done ({len(res)}/{a.draws})", file=sys.stderr, flush=True)
+
+    if a.summarize:
+        if a.raw is None or not a.raw.exists():
+            raise SystemExit("--summarize needs --raw FILE with the draws")
+        for line in a.raw.read_text(encoding="utf-8").splitlines():
+            d = json.loads(line)
+            res[int(d["seed"])] = d["results"]
+        seeds = sorted(res)
+        a.draws = len(seeds)
+    else:
+        with tempfile.TemporaryDirectory() as tmp:
+            if a.jobs > 1:
+                with ProcessPoolExecutor(a.jobs) as ex:
+                    for seed, r in ex.map(_one, [(s, tmp) for s in seeds]):
+                        done(seed, r)
+            else:
+                for s in seeds:
+                    done(s, _seed(s, Path(tmp)))
+    wall = time.time() - t0
+    rows = []
+    first = res[seeds[0]]
+    for method in ("improved", "thesis"):
+        for key in KEYS:
+            k = f"{method}:{key}"
+            if k not in first:
+                continue
+            err = np.array([100 * (r[k]["value"] / r[k]["hidden_eff"] - 1) for r in res.values()])
+            z = np.array([(r[k]["value"] - r[k]["hidden"]) / r[k]["u"] for r in res.values()])
+            nan = int(np.isnan(err).sum())
+            no_u = int(np.sum(np.isfinite(err) & ~np.isfinite(z)))
+            inside = int(np.sum(np.abs(z) <= 1.96)) if method == "improved" else None
+            tol = next(v for t, v in TOL.items() if t in key)
+            rows.append((method, key, float(np.nanmean(np.abs(err))),
+                         float(np.nanmax(np.abs(err))), tol, inside, no_u, nan))
+    cpu = platform.processor() or platform.machine()
+    n = a.draws
+    lines = [
+        "# Validation: calibrating the twin of a hidden machine (issues 12 and 29)",
+        "",
+        "Generated by `benchmarks/bench_calibration_coverage.py` (the campaign of "
+        "`tests/calibration/test_roundtrip.py`, which asserts it on a small fixed set): "
+        f"{n} machines (seeds {seeds[0]}-{seeds[-1]}) with hidden spindle and X1/Y1 loop and "
+        "friction parameters drawn from their seed, each simulated with its own noise and "
+        "calibrated through the command line only (`cnctwin simulate ... --set`, "
+        "`cnctwin calibrate spindle`, `cnctwin calibrate axes`). "
+        + (f"Wall time {wall:.0f} s with {a.jobs} job(s) ({cpu})." if not a.summarize else
+           "Summarized from the draws' raw results (`--summarize`)."),
+        "",
+        "Campaign per machine: an air cut up and back down through 200-5000 rpm (3 s per "
+        "speed), one drilling cut (AISI 1045, 2400 rpm, 0.16 mm/rev) with the rotary "
+        "dynamometer on its own clock, and the axis test program (`cnctwin simulate "
+        "axis_test`: X1 and Y1 back and forth over 60 mm at 500-8000 mm/min).",
+        "",
+        "Coverage = the share of the draws whose hidden value lies inside the stated 95 % "
+        "interval (value +- 1.96 standard uncertainties); the goal is 90-98 %. 'No interval': "
+        "identified without a stated uncertainty.",
+        "",
+        "| method | parameter | mean abs. error [%] | max abs. error [%] | tolerance [%] | "
+        "coverage of the 95 % interval | no interval | not identified |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for method, key, mean, mx, tol, inside, no_u, nan in rows:
+        ins = "-" if inside is None else f"{100 * inside / n:.0f} % ({inside} of {n})"
+        lines.append(f"| {method} | `{key}` | {mean:.2f} | {mx:.2f} | {tol:g} | {ins} | "
+                     f"{no_u} | {nan} |")
+    lines += [
+        "",
+        "Notes:",
+        "",
+        "* Kt is compared at the temperature the machine file states it for "
+        "(`spindle.kt_ref_temperature_c`, the motor temperature of the air cut): the hidden Kt "
+        "holds at 20 degC and falls by 0.11 %/K (NdFeB). The thesis method states no "
+        "temperature; it is compared at 22 degC.",
+        "* A moving-average jerk filter spans whole 2 ms cycles; the error is against that "
+        "effective length, the interval against the hidden MD32410 itself. A filter of two "
+        "cycles is exactly a half-cycle delay (no recording can tell it from the balancing "
+        "delay): the calibration writes `identified = false` with that reason; such seeds "
+        "count under 'not identified' and as outside the interval.",
+        "* The thesis method fits a straight line to a sweep that heats its bearings while it "
+        "runs; the improved method fits the self-heating out of the up-and-down air cut "
+        "(`cnctwin.twin.fit_friction_thermal`).",
+        "* Axis friction: the hidden Coulomb friction is drawn (80-220 N); the viscous "
+        "friction is the thesis machine's 0.2 N/(mm/s); the screw ripple (10 N per motor "
+        "revolution, docs/simulator.md) is in every draw and not in the friction law.",
+        "",
+    ]
+    text = "\n".join(lines)
+    if a.doc.exists():  # keep the hand-written sections after the generated part
+        old = a.doc.read_text(encoding="utf-8")
+        cut = old.find("\n## ")
+        if cut >= 0:
+            text += old[cut + 1:]
+    a.doc.write_text(text, encoding="utf-8")
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main_())
