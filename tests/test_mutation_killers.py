@@ -1,0 +1,128 @@
+"""Tests with an independent truth for code paths a mutation review found untested (issue 29,
+point 6): each fails when the named mutation is applied (a boundary on each side of a threshold,
+a hand calculation, a failure injected mid-write).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cnctwin.exceptions import ConfigError
+
+
+# --------------------------------------------------------------- calibration: pooling
+def test_pool_is_the_inverse_variance_mean() -> None:
+    # mutation: a plain mean. Hand calculation: (10/1 + 20/4) / (1/1 + 1/4) = 12; the stated
+    # uncertainty is the larger of 1/sqrt(1.25) = 0.894 and the spread std([10, 20]) / sqrt 2
+    from cnctwin.calibration.axes import _pool
+
+    mean, u = _pool([(10.0, 1.0), (20.0, 2.0)])
+    assert mean == pytest.approx(12.0, abs=1e-12)
+    assert u == pytest.approx(np.std([10.0, 20.0], ddof=1) / np.sqrt(2.0), rel=1e-12)
+    # agreeing values: the inverse-variance uncertainty, not the spread
+    mean, u = _pool([(10.0, 1.0), (10.0, 1.0)])
+    assert (mean, u) == (pytest.approx(10.0), pytest.approx(1.0 / np.sqrt(2.0)))
+
+
+# --------------------------------------------------------------- machine file: atomic write
+def test_save_machine_leaves_the_old_file_when_the_write_fails(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # mutations: writing in place (no temporary file), no fsync, no atomic rename
+    from cnctwin.machine import MachineFile, ParameterRecord, load_machine, save_machine
+
+    p = tmp_path / "m.toml"
+    save_machine(MachineFile().with_records(
+        {"spindle.kt_nm_per_a": ParameterRecord(1.04, 0.01)}), p)
+    before = p.read_bytes()
+    synced: list[int] = []
+    real_fsync = os.fsync
+    monkeypatch.setattr(os, "fsync", lambda fd: (synced.append(fd), real_fsync(fd))[1])
+
+    def crash(src: object, dst: object) -> None:
+        raise OSError("power lost before the rename")
+
+    monkeypatch.setattr(os, "replace", crash)
+    with pytest.raises(OSError, match="power lost"):
+        save_machine(MachineFile().with_records(
+            {"spindle.kt_nm_per_a": ParameterRecord(0.5, 0.01)}), p)
+    assert p.read_bytes() == before  # the old file, whole
+    assert synced, "the new file must reach the disk (fsync) before it replaces the old one"
+    assert [f.name for f in tmp_path.iterdir()] == ["m.toml"]  # no temporary file left
+    monkeypatch.undo()
+    assert load_machine(p).value("spindle.kt_nm_per_a") == pytest.approx(1.04)
+
+
+def test_edge_checkpoint_is_written_atomically(tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    # mutation: the checkpoint written in place
+    from cnctwin.edge.runtime import CHECKPOINT_FILE, read_checkpoint, write_checkpoint
+
+    write_checkpoint(tmp_path, {"version": 1, "cycle": 10})
+    before = (tmp_path / CHECKPOINT_FILE).read_bytes()
+
+    def crash(src: object, dst: object) -> None:
+        raise OSError("killed before the rename")
+
+    monkeypatch.setattr(os, "replace", crash)
+    with pytest.raises(OSError):
+        write_checkpoint(tmp_path, {"version": 1, "cycle": 20})
+    assert (tmp_path / CHECKPOINT_FILE).read_bytes() == before
+    monkeypatch.undo()
+    doc = read_checkpoint(tmp_path)
+    assert doc is None or doc.get("cycle") == 10  # the old one, or none: never half a file
+
+
+# --------------------------------------------------------------- speed law: extrapolation
+def test_kt_extrapolated_boundary_is_two_percent_of_the_range() -> None:
+    # mutation: 0.2 instead of 0.02 of the range. Valid 1000-3000 rpm: tolerance 60 rpm
+    from cnctwin.spindle import SpindleModel
+
+    m = SpindleModel(1.0, 8e-5, 0.3, kt_valid_speed_rpm=(1000.0, 3000.0))
+    assert m.kt_extrapolated([3059.0, 941.0, 2000.0, -3059.0]).tolist() == [False] * 4
+    assert m.kt_extrapolated([3061.0, 939.0, 3600.0, -3061.0]).tolist() == [True] * 4
+
+
+# --------------------------------------------------------------- dashboard token
+def test_dashboard_token_needs_sixteen_characters() -> None:
+    # mutation: minimum length 16 -> 8
+    from fastapi import FastAPI
+
+    from cnctwin.web.auth import add_token_auth
+
+    with pytest.raises(ConfigError, match="16 characters"):
+        add_token_auth(FastAPI(), "x" * 15, "t")
+    add_token_auth(FastAPI(), "x" * 16, "t")
+
+
+def test_dashboard_session_cookie_must_be_one_it_issued() -> None:
+    # mutation: any cookie value accepted
+    from cnctwin.web.auth import _Sessions
+
+    s = _Sessions()
+    sid = s.new()
+    assert s.valid(sid)
+    assert not s.valid("forged-" + sid)
+    assert not s.valid("")
+    assert not s.valid(None)
+
+
+# --------------------------------------------------------------- fleet: content hash
+def test_recording_directory_hash_includes_the_file_names(tmp_path: Path) -> None:
+    # mutation: a directory hash that ignores file names (two recordings whose chunks hold the
+    # same bytes under other names are not the same recording)
+    from cnctwin.fleet.ingest import content_hash
+
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.mkdir()
+    b.mkdir()
+    (a / "part-0.parquet").write_bytes(b"chunk")
+    (b / "part-1.parquet").write_bytes(b"chunk")
+    assert content_hash(a) != content_hash(b)
+    c = tmp_path / "c"
+    c.mkdir()
+    (c / "part-0.parquet").write_bytes(b"chunk")
+    assert content_hash(a) == content_hash(c)
