@@ -126,3 +126,25 @@ def test_recording_directory_hash_includes_the_file_names(tmp_path: Path) -> Non
     c.mkdir()
     (c / "part-0.parquet").write_bytes(b"chunk")
     assert content_hash(a) == content_hash(c)
+
+
+# --------------------------------------------------------------- MTConnect buffer
+def test_mtconnect_sample_after_a_wrap_refuses_an_evicted_from_and_pages_fully() -> None:
+    # mutations: 'from = first - 1' after a wrap silently returns the oldest kept observation;
+    # a page one observation short. A buffer of 5 after 12 observations holds 8 ... 12.
+    from cnctwin.edge.mtconnect import ObservationBuffer, OutOfRangeError
+
+    b = ObservationBuffer(size=5)
+    for k in range(12):
+        b.add("x", 1_000_000 * k, k)
+    assert b.first_sequence == 8 and b.next_sequence == 13
+    with pytest.raises(OutOfRangeError, match="left"):
+        b.sample(7, 3)
+    obs, first, nxt, last = b.sample(8, 3)
+    assert [o.sequence for o in obs] == [8, 9, 10] and (first, nxt, last) == (8, 11, 12)
+    obs, _, nxt, _ = b.sample(nxt, 5)  # the rest: 11, 12, and the next to ask for is 13
+    assert [o.sequence for o in obs] == [11, 12] and nxt == 13
+    obs, _, nxt, _ = b.sample(13, 5)  # caught up: nothing, ask again from 13
+    assert obs == [] and nxt == 13
+    with pytest.raises(OutOfRangeError, match="not reached"):
+        b.sample(14, 1)
