@@ -1530,6 +1530,20 @@ def _fill(x: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.asarray(pd.Series(x).interpolate(limit_direction="both"), dtype=np.float64)
 
 
+def _ramp_samples(speed: NDArray[np.float64], tau: NDArray[np.float64], fs: float,
+                  lowpass_hz: float | None) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                                     NDArray[np.float64], NDArray[np.bool_]]:
+    """Speed [rpm] and torque [Nm] with gaps filled and low-passed, dOmega/dt [rad/s^2], and
+    where both were measured (the inertia fits' common preparation)."""
+    ok = np.isfinite(speed) & np.isfinite(tau)
+    speed = _fill(np.where(ok, speed, np.nan))
+    tau = _fill(np.where(ok, tau, np.nan))
+    if lowpass_hz is not None and speed.size > 30:
+        speed = lowpass(speed, lowpass_hz, fs_hz=fs, order=2)
+        tau = lowpass(tau, lowpass_hz, fs_hz=fs, order=2)
+    return speed, tau, _domega_dt(speed, fs), ok
+
+
 def identify_inertia(
     rec_or_speed: Recording | ArrayLike,
     torque_nm: ArrayLike | None = None,
@@ -1597,13 +1611,7 @@ def identify_inertia(
         fs = float(fs_hz)
     if speed.shape != tau.shape:
         raise ConfigError(f"speed has {speed.size} samples, torque {tau.size}")
-    ok = np.isfinite(speed) & np.isfinite(tau)
-    speed = _fill(np.where(ok, speed, np.nan))
-    tau = _fill(np.where(ok, tau, np.nan))
-    if lowpass_hz is not None and speed.size > 30:
-        speed = lowpass(speed, lowpass_hz, fs_hz=fs, order=2)
-        tau = lowpass(tau, lowpass_hz, fs_hz=fs, order=2)
-    acc = _domega_dt(speed, fs)
+    speed, tau, acc, ok = _ramp_samples(speed, tau, fs, lowpass_hz)
     m = ok & (np.abs(speed) >= min_speed_rpm)
     if not np.any(np.abs(acc[m]) >= min_accel_rad_s2):
         raise IdentificationError(
@@ -1661,15 +1669,7 @@ def inertia_uncertainty(
     """
     speed, _ = spindle_speed_rpm(rec, spindle)
     cur = rec.signal(f"CURRENT|{spindle}").to_numpy(dtype=np.float64)
-    tau = model.kt_nm_per_a * cur
-    fs = rec.fs_hz
-    ok = np.isfinite(speed) & np.isfinite(tau)
-    speed = _fill(np.where(ok, speed, np.nan))
-    tau = _fill(np.where(ok, tau, np.nan))
-    if speed.size > 30:
-        speed = lowpass(speed, lowpass_hz, fs_hz=fs, order=2)
-        tau = lowpass(tau, lowpass_hz, fs_hz=fs, order=2)
-    acc = _domega_dt(speed, fs)
+    speed, tau, acc, ok = _ramp_samples(speed, model.kt_nm_per_a * cur, rec.fs_hz, lowpass_hz)
     m = ok & (np.abs(speed) >= min_speed_rpm) & (np.abs(acc) >= min_accel_rad_s2)
     # accelerating the rotor's speed magnitude (up) or slowing it (down)
     up = m & (acc * np.sign(speed) > 0)
