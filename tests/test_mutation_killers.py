@@ -148,3 +148,37 @@ def test_mtconnect_sample_after_a_wrap_refuses_an_evicted_from_and_pages_fully()
     assert obs == [] and nxt == 13
     with pytest.raises(OutOfRangeError, match="not reached"):
         b.sample(14, 1)
+
+
+# --------------------------------------------------------------- fleet drift
+def _health(values: list[tuple[str, float, float]]) -> object:
+    import pandas as pd
+
+    return pd.DataFrame([{"machine": "m1", "day": d, "component": "X1",
+                          "parameter": "coulomb_a", "value": v, "uncertainty": u}
+                         for d, v, u in values])
+
+
+def test_fleet_friction_rise_threshold_on_each_side_of_25_percent() -> None:
+    # mutation: the friction threshold 0.25 -> 0.35. Reference 0.200 A, +24 % and +26 % with
+    # tiny uncertainties (z ~ 50): only the second alarms, and its relative change is +26 %
+    from cnctwin.fleet.drift import drift_alarms
+
+    a = drift_alarms(_health([("2026-01-01", 0.200, 0.001), ("2026-01-02", 0.248, 0.001),
+                              ("2026-01-03", 0.252, 0.001)]))
+    assert a["day"].tolist() == ["2026-01-03"]
+    assert a["relative_change"].iloc[0] == pytest.approx(0.26)
+    assert a["kind"].iloc[0] == "friction_rise"
+
+
+def test_fleet_drift_z_carries_the_reference_uncertainty() -> None:
+    # mutation: z without the reference's uncertainty. A +30 % change of 0.06 A with a day's
+    # uncertainty 0.005 A and the reference's 0.012 A: z = 0.06 / hypot(0.005, 0.012) = 4.6,
+    # below the rule's 5 (no alarm); without the reference's part z would be 12 (an alarm)
+    from cnctwin.fleet.drift import drift_alarms
+
+    h = _health([("2026-01-01", 0.200, 0.012), ("2026-01-02", 0.260, 0.005)])
+    assert drift_alarms(h).empty
+    h = _health([("2026-01-01", 0.200, 0.004), ("2026-01-02", 0.260, 0.005)])  # z = 9.4
+    a = drift_alarms(h)
+    assert len(a) == 1 and a["z"].iloc[0] == pytest.approx(0.06 / np.hypot(0.004, 0.005))
