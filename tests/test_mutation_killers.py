@@ -182,3 +182,27 @@ def test_fleet_drift_z_carries_the_reference_uncertainty() -> None:
     h = _health([("2026-01-01", 0.200, 0.004), ("2026-01-02", 0.260, 0.005)])  # z = 9.4
     a = drift_alarms(h)
     assert len(a) == 1 and a["z"].iloc[0] == pytest.approx(0.06 / np.hypot(0.004, 0.005))
+
+
+# --------------------------------------------------------------- twin compare
+def test_compare_converts_a_current_only_friction_with_kt(tmp_path: Path) -> None:
+    # mutation: the current-to-force conversion without Kt (no test recorded CURRENT without
+    # TORQUE). A recording of the thesis machine's X1 (Coulomb 150 N, Kt 1.4 Nm/A, lead 10 mm)
+    # with its TORQUE columns removed: the friction the compare reads from CURRENT, referred to
+    # the slide with Kt x 2 pi / lead, is the machine's 150 N within 5 % (screw ripple, noise),
+    # not 150 / 1.4 = 107 N
+    from cnctwin.cli import main
+    from cnctwin.compare import compare_recording
+    from cnctwin.iotools import read_recording
+    from cnctwin.machine import MachineFile
+
+    assert main(["simulate", "axis_test", "--out", str(tmp_path), "--seed", "5", "--option",
+                 'axes=["X1"]', "--option", "feeds_mm_min=[1000.0, 3000.0, 6000.0]",
+                 "--option", "stroke_mm=40.0"]) == 0
+    rec = read_recording(tmp_path / "axis_test.json")
+    keep = [c for c in rec.columns if not c.startswith("TORQUE|")]
+    cur_only = rec.select(signals=keep)
+    assert not any(c.startswith("TORQUE|") for c in cur_only.columns)
+    res = compare_recording(cur_only, MachineFile(), axes=["X1"], n_bootstrap=30)
+    machine = res.axes["X1"].parameters["coulomb_n"]["machine"]
+    assert machine == pytest.approx(150.0, rel=0.05)
