@@ -206,3 +206,24 @@ def test_compare_converts_a_current_only_friction_with_kt(tmp_path: Path) -> Non
     res = compare_recording(cur_only, MachineFile(), axes=["X1"], n_bootstrap=30)
     machine = res.axes["X1"].parameters["coulomb_n"]["machine"]
     assert machine == pytest.approx(150.0, rel=0.05)
+
+
+# --------------------------------------------------------------- MTConnect agent token
+def test_mtconnect_agent_with_a_token_guards_every_request() -> None:
+    # mutation: /sample served without the token (probe and current guarded)
+    from cnctwin.edge.mtconnect import ObservationBuffer, machine_tool_device
+    from cnctwin.edge.mtconnect_server import MTConnectAgent
+
+    token = "t" * 24
+    agent = MTConnectAgent(machine_tool_device("mill-1"), ObservationBuffer(size=256),
+                           port=0, token=token)
+    try:
+        for path in ("/probe", "/current", "/sample", "/sample?from=1&count=1",
+                     "/mill-1/sample"):
+            for auth in (None, "Bearer " + "x" * 24, "Bearer " + token[:-1]):
+                status, body = agent.respond(path, auth)
+                assert status == 401 and b"UNAUTHORIZED" in body, (path, auth)
+            status, _ = agent.respond(path, "Bearer " + token)
+            assert status == 200, path
+    finally:
+        agent.close()
