@@ -43,8 +43,9 @@ KEYS = ["spindle.kt_nm_per_a", "spindle.viscous_friction_nm_per_rpm",
         "axes.X1.kv_m_min_per_mm", "axes.Y1.kv_m_min_per_mm",
         "axes.X1.jerk_time_s", "axes.Y1.jerk_time_s", "axes.X1.coulomb_n", "axes.Y1.coulomb_n",
         "axes.X1.viscous_n_per_mm_s", "axes.Y1.viscous_n_per_mm_s"]
-TOL = {"spindle": 2.0, "kv_m": 5.0, "jerk": 10.0, "coulomb": 5.0, "viscous": 30.0,
-       "inertia": 10.0}
+TOL = {"inertia": 10.0, "spindle": 2.0, "kv_m": 5.0, "jerk": 10.0, "coulomb": 5.0,
+       "viscous": 30.0}
+"""Accuracy tolerance [%] by the first of these that the key contains."""
 
 
 def _default(key: str) -> float:
