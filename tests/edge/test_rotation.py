@@ -70,3 +70,26 @@ def test_live_tail_follows_a_rotation(tmp_path: Path) -> None:
     sink.close()
     assert sink.rotations >= 5
     assert got == list(range(200))
+
+
+def test_jsonl_sink_ends_a_line_a_crash_tore(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A kill -9 mid-write leaves a torn last line; the next run's first message must start
+    a line of its own (before: it was glued to the torn one and both were lost to readers)."""
+    import json
+
+    from cnctwin.edge.sinks import JsonLinesSink
+
+    p = tmp_path / "results.jsonl"
+    p.write_bytes(b'{"kind": "hole", "row": {"hole": 1}}\n{"kind": "hole", "row": {"ho')
+    sink = JsonLinesSink(p)
+    sink.write([{"kind": "hole", "row": {"hole": 2}}], None)
+    lines = p.read_bytes().split(b"\n")
+    assert lines[1] == b'{"kind": "hole", "row": {"ho'  # kept, on its own line
+    assert json.loads(lines[2])["row"]["hole"] == 2
+    assert lines[-1] == b""
+    # a file that ends cleanly gets nothing added
+    q = tmp_path / "clean.jsonl"
+    q.write_bytes(b'{"kind": "x"}\n')
+    JsonLinesSink(q).write([{"kind": "y"}], None)
+    got = q.read_bytes().split(b"\n")
+    assert [json.loads(x)["kind"] for x in got[:-1]] == ["x", "y"] and got[-1] == b""

@@ -153,8 +153,13 @@ def test_restart_without_checkpoint_stays_right(machine: dict[str, Any], tmp_pat
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=300,
                          env={**os.environ, "PYTHONUNBUFFERED": "1"})
     assert res.returncode == 0, res.stderr
-    msgs = [json.loads(x) for x in (out / "results.jsonl").read_text().splitlines()
-            if x.strip().endswith("}")]
+    msgs, torn = [], 0
+    for x in (out / "results.jsonl").read_text().splitlines():
+        try:
+            msgs.append(json.loads(x))
+        except json.JSONDecodeError:  # a line a kill cut short (kept, on a line of its own)
+            torn += 1
+    assert torn <= 2  # at most one per kill
     holes = [m for m in msgs if m["kind"] == "hole"]
     assert [h["hole"] for h in holes] == list(range(prog.holes))
     assert not [m for m in msgs if m["kind"] == "alarm"]

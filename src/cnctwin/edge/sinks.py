@@ -169,6 +169,16 @@ class JsonLinesSink:
         self.keep_files = keep_files
         self._f: IO[bytes] = self.path.open("ab")
         self._size = self._f.tell()
+        if self._size:
+            # a crash (kill -9) mid-write leaves a torn last line: end it, so the next
+            # message starts a line of its own (readers skip the torn one; it is kept)
+            with self.path.open("rb") as r:
+                r.seek(-1, os.SEEK_END)
+                torn = r.read(1) != b"\n"
+            if torn:
+                self._f.write(b"\n")
+                self._f.flush()
+                self._size += 1
         self.written = 0
         self.rotations = 0
         self.deleted_files = 0
