@@ -229,7 +229,8 @@ def _spans(bad: np.ndarray, t: np.ndarray, cycles: np.ndarray, resid: np.ndarray
 
 def _compare_axis(rec: Recording, mf: MachineFile, name: str, *, residual_limit: float,
                   k_sigma: float, rel_floor: float, n_bootstrap: int,
-                  parameters: bool = True) -> AxisComparison:
+                  cuts: tuple[np.ndarray | None, str], parameters: bool = True
+                  ) -> AxisComparison:
     ax = mf.machine.axis(name)
     dt = mf.machine.cycle_time_s
     d = axis_data(rec, name)
@@ -291,7 +292,7 @@ def _compare_axis(rec: Recording, mf: MachineFile, name: str, *, residual_limit:
             + ax.viscous_n_per_mm_s * v_pred
         i_pred = (ax.total_inertia_kgm2 * alpha + ax.motor_torque_per_load_force * force) \
             / ax.kt_nm_per_a
-        cut, _ = cut_cycles(rec, spindle=mf.machine.spindle_name)
+        cut = cuts[0]
         ok = moving & np.isfinite(i_pred) & np.isfinite(i_meas)
         if cut is not None:
             ok &= ~cut
@@ -308,7 +309,8 @@ def _compare_axis(rec: Recording, mf: MachineFile, name: str, *, residual_limit:
     ident: AxisIdentification | None = None
     if parameters:
         try:
-            ident = identify_axis(rec, name, n_bootstrap=n_bootstrap)
+            ident = identify_axis(rec, name, n_bootstrap=n_bootstrap,
+                                  spindle=mf.machine.spindle_name, cuts=cuts)
         except IdentificationError:
             ident = None
     if ident is not None:
@@ -454,6 +456,7 @@ def compare_recording(
     for a in moving:
         if a not in m.axis_names:
             skipped[a] = "not in the machine file"
+    cuts = cut_cycles(rec, spindle=m.spindle_name)  # the recording's, for every axis
     for a in wanted:
         if a not in m.axis_names:
             skipped[a] = "not in the machine file"
@@ -464,7 +467,7 @@ def compare_recording(
         try:
             out[a] = _compare_axis(rec, machine_file, a, residual_limit=residual_limit,
                                    k_sigma=k_sigma, rel_floor=rel_floor,
-                                   n_bootstrap=n_bootstrap, parameters=parameters)
+                                   n_bootstrap=n_bootstrap, cuts=cuts, parameters=parameters)
         except IdentificationError as exc:
             skipped[a] = str(exc)
     spindle = _compare_spindle(rec, machine_file, rel_limit=spindle_limit)

@@ -37,6 +37,7 @@ from cnctwin.exceptions import IdentificationError
 from cnctwin.machine import FeedAxis, Machine, ParameterRecord, Provenance
 from cnctwin.recording import Recording
 from cnctwin.servo import AxisIdentification, identify_axis, moving_axes
+from cnctwin.servo.identify import cut_cycles
 
 __all__ = [
     "CALIBRATED_KEYS",
@@ -162,15 +163,18 @@ def calibrate_axes(
             f"no feed axis moves in {', '.join(names)} (DES_POS and ENC_POS with travel); "
             "record a production job or a test program that moves the axes")
     out = AxesCalibration()
+    cuts = [cut_cycles(r, spindle=m.spindle_name) if mov else (None, "")
+            for r, mov in zip(recordings, per_rec, strict=True)]
     for ax in wanted:
         idents: list[AxisIdentification] = []
         used: list[str] = []
         reasons: list[str] = []
-        for name, rec, mov in zip(names, recordings, per_rec, strict=True):
+        for name, rec, mov, cut in zip(names, recordings, per_rec, cuts, strict=True):
             if ax not in mov:
                 continue
             try:
-                idents.append(identify_axis(rec, ax, n_bootstrap=n_bootstrap))
+                idents.append(identify_axis(rec, ax, n_bootstrap=n_bootstrap,
+                                            spindle=m.spindle_name, cuts=cut))
                 used.append(name)
             except IdentificationError as exc:
                 reasons.append(f"{name}: {exc}")

@@ -222,6 +222,8 @@ def _spindle_from_motor_kt(args: argparse.Namespace, mf: Any) -> int:
 
 
 def _cmd_axes(args: argparse.Namespace) -> int:
+    import dataclasses
+
     from rich.console import Console
     from rich.table import Table
 
@@ -243,8 +245,8 @@ def _cmd_axes(args: argparse.Namespace) -> int:
     save_machine(mf.with_records(records), args.machine)
     report = args.report or args.machine.with_name(args.machine.stem + ".axes-report.html")
     with console.status("writing the report"):
-        axes_calibration_report(cal, recs, report, machine=mf.machine,
-                                machine_path=str(args.machine))
+        axes_calibration_report(dataclasses.replace(cal, records=records), recs, report,
+                                machine=mf.machine, machine_path=str(args.machine))
     table = Table(title="feed axes (parameter = the machine file's key in \\[axes.<axis>])")
     table.add_column("axis", no_wrap=True)
     table.add_column("parameter", no_wrap=True)

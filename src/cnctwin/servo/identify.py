@@ -1011,6 +1011,7 @@ def identify_axis(
     fir_cycles: int = 40,
     spindle: str = "SP1",
     exclude_cuts: bool = True,
+    cuts: tuple[np.ndarray | None, str] | None = None,
 ) -> AxisIdentification:
     """Identify the cascade position loop of one axis from production data.
 
@@ -1036,6 +1037,9 @@ def identify_axis(
     exclude_cuts : bool, default True
         Leave the constant-velocity runs during which the spindle cuts out of the friction
         fit (:func:`cut_cycles`): a process force on the axis is not friction.
+    cuts : (mask, reason), optional
+        This recording's :func:`cut_cycles` result, when the caller already has it (the cuts
+        belong to the recording, not to an axis: one computation serves every axis).
 
     Returns
     -------
@@ -1396,7 +1400,7 @@ def identify_axis(
     runs = constant_velocity_runs(v_steady, segs, rel_tol=0.01)
     in_cut = 0
     if exclude_cuts and runs:
-        cut, why = cut_cycles(recording, spindle=spindle)
+        cut, why = cuts if cuts is not None else cut_cycles(recording, spindle=spindle)
         if cut is None:
             ident.notes.append(f"friction of {axis}: {why}; its constant-velocity runs are "
                                "taken as air moves")
