@@ -316,6 +316,17 @@ def _alias_hz(f: float, fs: float) -> float:
     return abs(((f + fs / 2.0) % fs) - fs / 2.0)
 
 
+def _lstsq_cov(a: NDArray[np.float64], d: NDArray[np.float64]
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Least-squares coefficients of ``a x = d`` and their white-noise covariance
+    s^2 (A'A)^-1 (s^2 the residual variance; NaN without degrees of freedom)."""
+    coef, *_ = np.linalg.lstsq(a, d, rcond=None)
+    dof = d.size - a.shape[1]
+    s2 = float(np.sum((d - a @ coef) ** 2)) / dof if dof > 0 else math.nan
+    return np.asarray(coef, dtype=np.float64), np.asarray(s2 * np.linalg.pinv(a.T @ a),
+                                                          dtype=np.float64)
+
+
 def _lockin(t: NDArray[np.float64], d: NDArray[np.float64], f_hz: float
             ) -> tuple[float, float]:
     """Amplitude of the f_hz sinusoid in d(t) (least squares with offset and trend) and its
@@ -323,13 +334,11 @@ def _lockin(t: NDArray[np.float64], d: NDArray[np.float64], f_hz: float
     sqrt(a^2 + b^2) to first order)."""
     w = 2.0 * math.pi * f_hz
     a = np.column_stack([np.ones_like(t), t - t.mean(), np.cos(w * t), np.sin(w * t)])
-    coef, *_ = np.linalg.lstsq(a, d, rcond=None)
+    coef, cov_all = _lstsq_cov(a, d)
     amp = float(math.hypot(coef[2], coef[3]))
-    dof = t.size - a.shape[1]
-    if dof <= 0 or amp == 0.0:
+    if t.size <= a.shape[1] or amp == 0.0:
         return amp, math.nan
-    s2 = float(np.sum((d - a @ coef) ** 2)) / dof
-    cov = s2 * np.linalg.pinv(a.T @ a)[2:, 2:]
+    cov = cov_all[2:, 2:]
     g = np.array([coef[2], coef[3]]) / amp
     return amp, float(math.sqrt(max(float(g @ cov @ g), 0.0)))
 
@@ -491,12 +500,9 @@ def _entry_fit(ax_x: FeedAxis, ax_y: FeedAxis, t: NDArray[np.float64],
         if w > 0:
             cols += [u * np.cos(w * t), u * np.sin(w * t)]
         a = np.column_stack(cols)
-        coef, *_ = np.linalg.lstsq(a, d, rcond=None)
+        coef, cov = _lstsq_cov(a, d)
         out[f"walk_force_est_{tag}_n"] = float(coef[1])
         out[f"entry_force_est_{tag}_n"] = float(coef[2])
-        dof = d.size - a.shape[1]
-        s2 = float(np.sum((d - a @ coef) ** 2)) / dof if dof > 0 else math.nan
-        cov = s2 * np.linalg.pinv(a.T @ a)
         var[f"walk_{tag}"], var[f"entry_{tag}"] = float(cov[1, 1]), float(cov[2, 2])
     out["walk_force_est_n"] = math.hypot(out["walk_force_est_x_n"], out["walk_force_est_y_n"])
     out["entry_force_est_n"] = math.hypot(out["entry_force_est_x_n"],
