@@ -42,6 +42,23 @@ def _version() -> str:
     return f"cnctwin {__version__}"
 
 
+_VALUE_OPTIONS = ("--stock",)
+"""Options whose value may start with a minus sign (a coordinate list, ``-20,0,-30,...``)."""
+
+
+def _join_negative_values(argv: Sequence[str]) -> list[str]:
+    """``--stock -20,0,...`` -> ``--stock=-20,0,...`` (argparse takes ``-20,..`` for an option)."""
+    out: list[str] = []
+    it = iter(argv)
+    for a in it:
+        if a in _VALUE_OPTIONS:
+            nxt = next(it, None)
+            out.append(a if nxt is None else f"{a}={nxt}")
+        else:
+            out.append(a)
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (2 for bad input, 1 for other failures).
 
@@ -58,7 +75,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         stderr).
     """
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_join_negative_values(sys.argv[1:] if argv is None else argv))
     if not getattr(args, "command", None):
         parser.print_help()
         return 0

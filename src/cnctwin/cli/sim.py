@@ -46,9 +46,16 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    "scenario; prints the cycle time and the peak loads against the drive limits")
     p.add_argument("--machine", type=Path, metavar="FILE",
                    help="machine file (cnctwin calibrate) to simulate; default the thesis machine")
-    p.add_argument("--material", default=None,
-                   help="with --program: workpiece material (aisi1045, grey_cast_iron, al7050); "
+    p.add_argument("--material", default=None, metavar="NAME|FILE.toml",
+                   help="with --program: workpiece material (aisi1045, grey_cast_iron, al7050, "
+                   "one calibrated into --machine, or a material file with [milling]); "
                    "default air (no cutting load)")
+    p.add_argument("--tools", type=Path, metavar="TOOLS.toml",
+                   help="with --program: tool table ([tools.N] with kind, diameter_mm, ...); "
+                   "each tool cuts by its kind, so a program that drills and mills does both")
+    p.add_argument("--stock", metavar="X0,Y0,Z0,X1,Y1,Z1",
+                   help="with --program and --tools: the raw part [mm]; end mills cut what is "
+                   "left of it (engagement from a Z-map; a second pass cuts air)")
     p.add_argument("--out", type=Path, required=True, help="output directory")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument(
@@ -120,13 +127,17 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         return _cmd_fleet(args)
     if (args.name is None) == (args.program is None):
         raise ConfigError("give a scenario NAME or --program PART.mpf (one of them)")
-    if args.material is not None and args.program is None:
-        raise ConfigError("--material goes with --program")
+    for opt in ("material", "tools", "stock"):
+        if getattr(args, opt) is not None and args.program is None:
+            raise ConfigError(f"--{opt} goes with --program")
     machine = None
+    mfile = None
     if args.machine is not None:
         from cnctwin.machine import load_machine
 
-        machine = load_machine(args.machine).machine
+        mfile = load_machine(args.machine)
+        machine = mfile.machine
+    program_kw = _program_inputs(args, mfile) if args.program is not None else {}
     overrides = _parse_pairs(args.overrides, "--set")
     options = _parse_pairs(args.options, "--option")
     if args.fmt is not None:
@@ -142,8 +153,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
             if not args.program.exists():
                 raise ConfigError(f"{args.program}: no such file")
             res = part_program(args.out, program=args.program, seed=args.seed,
-                               overrides=overrides, machine=machine, material=args.material,
-                               progress=progress, **options)
+                               overrides=overrides, machine=machine, progress=progress,
+                               **program_kw, **options)
         else:
             res = run_scenario(args.name, args.out, seed=args.seed, overrides=overrides,
                                progress=progress, machine=machine, **options)
@@ -156,6 +167,28 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
         _serve_opcua(read_recording(res.recording_paths[0]), args)
     return 0
+
+
+def _program_inputs(args: argparse.Namespace, mfile: Any) -> dict[str, Any]:
+    """--material, --tools and --stock of a program run, read and checked."""
+    from cnctwin.engagement import parse_stock
+    from cnctwin.machine import read_tool_table
+    from cnctwin.sim.materials import resolve_material
+
+    out: dict[str, Any] = {"material": args.material}
+    if args.material is not None:
+        own = getattr(mfile, "materials", {}) if mfile is not None else {}
+        spec = str(args.material)
+        if spec.lower().endswith(".toml") or Path(spec).is_file() or spec in own:
+            out["material"] = resolve_material(
+                spec, machine_materials=own, machine_source=str(args.machine)).material
+        else:
+            resolve_material(spec)  # a library name: checked here, overrides apply in the sim
+    if args.tools is not None:
+        out["tools"] = read_tool_table(args.tools)
+    if args.stock is not None:
+        out["stock"] = parse_stock(args.stock)
+    return out
 
 
 def _serve_opcua(rec: Any, args: argparse.Namespace) -> None:

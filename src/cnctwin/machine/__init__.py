@@ -24,11 +24,13 @@ from cnctwin.machine.file import (
     save_machine,
 )
 from cnctwin.machine.tools import Drill, EndMill, Tap
+from cnctwin.machine.tooltable import TOOL_KINDS, ToolSpec, ToolTable, read_tool_table
 
 __all__ = [
     "KV_UNIT_PER_S",
     "SCHEMA",
     "SCHEMA_VERSION",
+    "TOOL_KINDS",
     "Drill",
     "EndMill",
     "FeedAxis",
@@ -38,8 +40,11 @@ __all__ = [
     "Provenance",
     "SpindleMotor",
     "Tap",
+    "ToolSpec",
+    "ToolTable",
     "dynamic_response_adaptation_times",
     "load_machine",
     "parameter_unit",
+    "read_tool_table",
     "save_machine",
 ]

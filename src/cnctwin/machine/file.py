@@ -103,7 +103,7 @@ _ROTARY_UNITS = {"N": "Nm", "N/(mm/s)": "Nm/(deg/s)", "mm/s": "deg/s", "mm/min":
 _RECORD_KEYS = {"value", "uncertainty", "unit", "provenance", "identified", "reason",
                 "valid_range", "valid_quantity"}
 _TOP_KEYS = {"schema", "schema_version", "name", "cycle_time_s", "inner_steps", "spindle_name",
-             "axis_map", "axes", "spindle"}
+             "tool_change_s", "axis_map", "axes", "spindle"}
 
 
 def parameter_unit(key: str, *, rotary: bool = False) -> str:
@@ -245,7 +245,7 @@ class MachineFile:
         m = self.machine
         doc: dict[str, Any] = {"schema": SCHEMA, "schema_version": SCHEMA_VERSION,
                                "name": m.name}
-        for k in ("cycle_time_s", "inner_steps", "spindle_name"):
+        for k in ("cycle_time_s", "inner_steps", "spindle_name", "tool_change_s"):
             if getattr(m, k) != getattr(default, k):
                 doc[k] = getattr(m, k)
         if m.axis_map != default.axis_map:
@@ -308,7 +308,7 @@ class MachineFile:
         default = Machine.thesis_default()
         records: dict[str, ParameterRecord] = {}
         plain: dict[str, Any] = {}
-        for k in ("name", "cycle_time_s", "inner_steps", "spindle_name"):
+        for k in ("name", "cycle_time_s", "inner_steps", "spindle_name", "tool_change_s"):
             if k in data:
                 plain[k] = data[k]
         kw: dict[str, Any] = {}

@@ -25,11 +25,13 @@ from cnctwin.sim.tool import Drill, EndMill, Tap, first_order_recursion
 
 __all__ = [
     "MATERIALS",
+    "MILLING_CHIP_RANGE_MM",
     "THESIS_DRILLING_CUTS",
     "CuttingLoad",
     "DrillingModel",
     "KienzleFit",
     "Material",
+    "MeanMillingLoad",
     "MillingCoefficients",
     "drill_thrust_n",
     "drill_torque_nm",
@@ -38,6 +40,8 @@ __all__ = [
     "get_material",
     "kienzle_kc",
     "lip_height_difference_um",
+    "mean_milling_load",
+    "milling_from_kienzle",
     "milling_load",
     "rotating_force_n",
     "tapping_load",
@@ -109,10 +113,14 @@ THESIS_DRILLING_CUTS: tuple[tuple[str, float, float, float], ...] = (
 """Thesis dynamometer means (material, speed [rpm], feed [mm/rev], mean torque [Nm]), 8.5 mm
 TiAlN carbide drill: §4.3 (steel 2400/0.16) and Table 4.1 (the other four)."""
 
+_AL7050_MILLING = MillingCoefficients(2172.0, 850.0, 726.0, 17.3, 7.8, 6.7)
+
 MATERIALS: dict[str, Material] = {
     # kc1/mc: minimax fit (fit_kienzle) to the three steel cuts of THESIS_DRILLING_CUTS, with
     # z = 0.1; the handbook start value is C45 annealed 1500 / 0.22 (ISCAR, VDI 3323).
-    "aisi1045": Material("aisi1045", kc1_n_per_mm2=1556.9, mc=0.21771, hardness_hb=190.0),
+    # milling: linear coefficients derived from the Kienzle law (see _MILLING_FROM_KIENZLE)
+    "aisi1045": Material("aisi1045", kc1_n_per_mm2=1556.9, mc=0.21771, hardness_hb=190.0,
+                         milling=MillingCoefficients(1931.0, 755.7, 645.4, 56.58, 25.51, 21.91)),
     # exact fit to the two cast-iron cuts; handbook GG ferritic/pearlitic 1150 / 0.20.
     "grey_cast_iron": Material(
         "grey_cast_iron",
@@ -120,6 +128,7 @@ MATERIALS: dict[str, Material] = {
         mc=0.23588,
         hardness_hb=180.0,
         thrust_factor=0.9,
+        milling=MillingCoefficients(1189.3, 465.4, 397.5, 38.68, 17.44, 14.98),
     ),
     # Al7050-T7451: Kienzle pair [E] (wrought Al ~ 700 / 0.25); milling coefficients as
     # commonly quoted from Altintas, Manufacturing Automation (2nd ed.) for Al7050 [E: not
@@ -130,10 +139,54 @@ MATERIALS: dict[str, Material] = {
         mc=0.25,
         hardness_hb=140.0,
         speed_exponent=0.0,
-        milling=MillingCoefficients(2172.0, 850.0, 726.0, 17.3, 7.8, 6.7),
+        milling=_AL7050_MILLING,
     ),
 }
-"""Workpiece materials by key."""
+"""Workpiece materials by key.
+
+The milling coefficients of ``aisi1045`` and ``grey_cast_iron`` are derived [D], not measured:
+Ktc and Kte are the least-squares line through the material's Kienzle law kc1 h^(1 - mc) for
+chip thicknesses 0.02-0.25 mm (the tangential force per unit width is Ktc h + Kte), and
+Krc, Kac, Kre, Kae keep the ratios to Ktc and Kte of the Al7050 set (Krc/Ktc 0.39, Kac/Ktc
+0.33, Kre/Kte 0.45, Kae/Kte 0.39). :func:`milling_from_kienzle` reproduces them. They are a
+start: ``cnctwin calibrate material`` fits the user's own from their cuts.
+"""
+
+MILLING_CHIP_RANGE_MM: tuple[float, float] = (0.02, 0.25)
+"""Chip-thickness range over which :func:`milling_from_kienzle` fits the line [mm]."""
+
+
+def milling_from_kienzle(kc1_n_per_mm2: float, mc: float, *,
+                         ratios_from: MillingCoefficients | None = None) -> MillingCoefficients:
+    """Linear edge-force milling coefficients equivalent to a Kienzle law.
+
+    Parameters
+    ----------
+    kc1_n_per_mm2 : float
+        Kienzle kc1.1 [N/mm^2].
+    mc : float
+        Kienzle exponent [-].
+    ratios_from : MillingCoefficients, optional
+        Set whose radial and axial ratios (Krc/Ktc, Kac/Ktc, Kre/Kte, Kae/Kte) are kept;
+        default the Al7050 set.
+
+    Returns
+    -------
+    MillingCoefficients
+
+    Notes
+    -----
+    Tangential force per unit width Ft/b = kc1 h^(1-mc) (Kienzle) is replaced by its
+    least-squares line Ktc h + Kte over :data:`MILLING_CHIP_RANGE_MM` (100 points).
+    """
+    r = ratios_from if ratios_from is not None else _AL7050_MILLING
+    h = np.linspace(*MILLING_CHIP_RANGE_MM, 100)
+    ft = kc1_n_per_mm2 * h ** (1.0 - mc)
+    ktc, kte = np.linalg.lstsq(np.c_[h, np.ones_like(h)], ft, rcond=None)[0]
+    return MillingCoefficients(
+        float(ktc), float(ktc * r.krc_n_per_mm2 / r.ktc_n_per_mm2),
+        float(ktc * r.kac_n_per_mm2 / r.ktc_n_per_mm2), float(kte),
+        float(kte * r.kre_n_per_mm / r.kte_n_per_mm), float(kte * r.kae_n_per_mm / r.kte_n_per_mm))
 
 
 def get_material(material: str | Material) -> Material:
@@ -663,8 +716,8 @@ def milling_load(
     *,
     tool: EndMill | None = None,
     material: str | Material = "al7050",
-    entry_angle_rad: float = 0.0,
-    exit_angle_rad: float = math.pi,
+    entry_angle_rad: ArrayLike = 0.0,
+    exit_angle_rad: ArrayLike = math.pi,
     hardness_factor: ArrayLike = 1.0,
 ) -> CuttingLoad:
     """End-milling forces from the tool engagement (zero-helix mechanistic model).
@@ -683,8 +736,9 @@ def milling_load(
         Default 16 mm, 2 flutes.
     material : str or Material, default 'al7050'
         Needs ``milling`` coefficients.
-    entry_angle_rad, exit_angle_rad : float
-        Immersion; 0 .. pi is a full slot.
+    entry_angle_rad, exit_angle_rad : array-like
+        Immersion [rad], scalars or one per sample (the Z-map's
+        :class:`~cnctwin.engagement.Engagement`); 0 .. pi is a full slot, NaN cuts nothing.
     hardness_factor : array-like, default 1
         Multiplier on all coefficients.
 
@@ -714,6 +768,8 @@ def milling_load(
     a = np.broadcast_to(np.asarray(axial_depth_mm, dtype=np.float64), (nsz,))
     th = np.broadcast_to(np.asarray(feed_direction_rad, dtype=np.float64), (nsz,))
     hard = np.broadcast_to(np.asarray(hardness_factor, dtype=np.float64), (nsz,))
+    p_in = np.broadcast_to(np.asarray(entry_angle_rad, dtype=np.float64), (nsz,))
+    p_out = np.broadcast_to(np.asarray(exit_angle_rad, dtype=np.float64), (nsz,))
     active = (c > 0.0) & (a > 0.0)
     fx = np.zeros(nsz)
     fy = np.zeros(nsz)
@@ -722,7 +778,7 @@ def milling_load(
     eng = np.zeros(nsz)
     for j in range(t.flutes):
         phi = np.mod(ang + 2.0 * math.pi * j / t.flutes, 2.0 * math.pi)
-        inside = active & (phi >= entry_angle_rad) & (phi <= exit_angle_rad)
+        inside = active & (phi >= p_in) & (phi <= p_out)
         h = np.where(inside, c * np.sin(phi), 0.0)
         on = inside.astype(np.float64)
         ft = a * (k.ktc_n_per_mm2 * h + k.kte_n_per_mm * on) * hard
@@ -740,6 +796,108 @@ def milling_load(
         fy_n=fx * sin_t + fy * cos_t,
         engagement=eng,
     )
+
+
+@dataclass(frozen=True)
+class MeanMillingLoad:
+    """Milling load averaged over a spindle revolution (what :func:`mean_milling_load` returns).
+
+    Attributes
+    ----------
+    torque_nm : numpy.ndarray
+        Mean spindle load torque [Nm].
+    fx_n, fy_n : numpy.ndarray
+        Mean force on the tool in machine X and Y [N].
+    axial_n : numpy.ndarray
+        Mean axial force on the tool (+ pushes the tool up) [N].
+    peak_chip_mm : numpy.ndarray
+        Largest uncut chip thickness c sin(phi) over the engaged arc [mm].
+    """
+
+    torque_nm: NDArray[np.float64]
+    fx_n: NDArray[np.float64]
+    fy_n: NDArray[np.float64]
+    axial_n: NDArray[np.float64]
+    peak_chip_mm: NDArray[np.float64]
+
+
+def mean_milling_load(
+    feed_per_tooth_mm: ArrayLike,
+    axial_depth_mm: ArrayLike,
+    entry_angle_rad: ArrayLike,
+    exit_angle_rad: ArrayLike,
+    *,
+    feed_direction_rad: ArrayLike = 0.0,
+    diameter_mm: float,
+    flutes: int,
+    coefficients: MillingCoefficients,
+    hardness_factor: ArrayLike = 1.0,
+) -> MeanMillingLoad:
+    """Per-revolution mean of :func:`milling_load` in closed form (the tooth-passing average).
+
+    Parameters
+    ----------
+    feed_per_tooth_mm : array-like
+        Feed per tooth c [mm].
+    axial_depth_mm : array-like
+        Axial depth a [mm].
+    entry_angle_rad, exit_angle_rad : array-like
+        Immersion in the feed frame [rad] (0..pi full slot; NaN: not engaged, load 0).
+    feed_direction_rad : array-like, default 0
+        Direction of the feed in machine XY [rad].
+    diameter_mm : float
+        Tool diameter D [mm].
+    flutes : int
+        Teeth z.
+    coefficients : MillingCoefficients
+        Linear edge-force coefficients.
+    hardness_factor : array-like, default 1
+        Multiplier on all coefficients.
+
+    Returns
+    -------
+    MeanMillingLoad
+
+    Notes
+    -----
+    With the conventions of :func:`milling_load` and the integrals over phi_st..phi_ex of
+    sin, cos, sin^2 and sin cos (Altintas, *Manufacturing Automation*, 2nd ed., eq. 2.47):
+    T = z a R / (2 pi) [Ktc c (cos phi_st - cos phi_ex) + Kte (phi_ex - phi_st)],
+    Fx_f = z a / (2 pi) [-Ktc c S2 - Kte Sc - Krc c Ss - Kre Sn],
+    Fy_f = z a / (2 pi) [Ktc c Ss + Kte Sn - Krc c S2 - Kre Sc],
+    Fa = z a / (2 pi) [Kac c Sn + Kae (phi_ex - phi_st)], with Sn = cos phi_st - cos phi_ex,
+    Sc = sin phi_ex - sin phi_st, Ss = int sin^2, S2 = int sin cos. The mean is exact when
+    the immersion is constant over the revolution.
+    """
+    c = np.asarray(feed_per_tooth_mm, dtype=np.float64)
+    a = np.asarray(axial_depth_mm, dtype=np.float64)
+    p0 = np.asarray(entry_angle_rad, dtype=np.float64)
+    p1 = np.asarray(exit_angle_rad, dtype=np.float64)
+    c, a, p0, p1, th, hard = np.broadcast_arrays(
+        c, a, p0, p1, np.asarray(feed_direction_rad, dtype=np.float64),
+        np.asarray(hardness_factor, dtype=np.float64))
+    on = np.isfinite(p0) & np.isfinite(p1) & (p1 > p0) & (a > 0.0)
+    p0 = np.where(on, p0, 0.0)
+    p1 = np.where(on, p1, 0.0)
+    a = np.where(on, a, 0.0)
+    k = coefficients
+    sn = np.cos(p0) - np.cos(p1)
+    sc = np.sin(p1) - np.sin(p0)
+    ss = (p1 - p0) / 2.0 - (np.sin(2.0 * p1) - np.sin(2.0 * p0)) / 4.0
+    s2 = (np.sin(p1) ** 2 - np.sin(p0) ** 2) / 2.0
+    g = flutes * a * hard / (2.0 * math.pi)
+    torque = g * (diameter_mm / 2000.0) * (k.ktc_n_per_mm2 * c * sn + k.kte_n_per_mm * (p1 - p0))
+    fxf = g * (-k.ktc_n_per_mm2 * c * s2 - k.kte_n_per_mm * sc - k.krc_n_per_mm2 * c * ss
+               - k.kre_n_per_mm * sn)
+    fyf = g * (k.ktc_n_per_mm2 * c * ss + k.kte_n_per_mm * sn - k.krc_n_per_mm2 * c * s2
+               - k.kre_n_per_mm * sc)
+    fa = g * (k.kac_n_per_mm2 * c * sn + k.kae_n_per_mm * (p1 - p0))
+    smax = np.where((p0 <= math.pi / 2) & (p1 >= math.pi / 2), 1.0,
+                    np.maximum(np.sin(p0), np.sin(p1)))
+    ct, st = np.cos(th), np.sin(th)
+    return MeanMillingLoad(
+        torque_nm=torque, fx_n=fxf * ct - fyf * st, fy_n=fxf * st + fyf * ct, axial_n=fa,
+        peak_chip_mm=np.where(on, c * smax, 0.0))
 
 
 def tapping_load(

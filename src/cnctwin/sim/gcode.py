@@ -702,6 +702,8 @@ def _parse_block(
                        line, text)  # fmt: skip
         st.speed_rpm = s
         spindle_cmd = True
+    if "6" in mcodes:  # the tool change stops the spindle; M3/M4 of the block restart it
+        st.spindle_dir = 0
     for m in mcodes:
         if m == "3":
             st.spindle_dir, spindle_cmd = 1, True

@@ -535,8 +535,14 @@ class _Builder:
         if blk.tool is not None:
             self.selected_tool = blk.tool
         if blk.tool_change:
+            # the change cycle stops the spindle (M5 before the gripper takes the tool; M3/M4
+            # in the block restart it after the change); the program starts with its first
+            # tool in the spindle (tool 0: none known), so only a real change takes the time
+            if self.sp_target != 0.0:
+                self._spindle_to(0.0, blk, wait=True)
+            if self.active_tool not in (0, self.selected_tool):
+                self._hold(self.tool_change_s)
             self.active_tool = self.selected_tool
-            self._hold(self.tool_change_s)
         if blk.spindle_cmd:
             n = (blk.speed_rpm or 0.0) * blk.spindle_dir
             self._spindle_to(n, blk, wait=self.wait_for_spindle)
@@ -1072,7 +1078,8 @@ def interpolate_chunks(
     wait_for_spindle : bool, default True
         Hold the program after spindle commands until the speed set point has ramped.
     tool_change_s : float, default 0
-        Time of an M6 tool change [s].
+        Time of an M6 tool change [s] (chip to chip; the spindle is stopped first, the first
+        M6 of a program and an M6 of the tool in the spindle take no time).
 
     Yields
     ------
@@ -1280,7 +1287,8 @@ def interpolate(
     wait_for_spindle : bool, default True
         Hold the program after spindle commands until the speed set point has ramped.
     tool_change_s : float, default 0
-        Time of an M6 tool change [s].
+        Time of an M6 tool change [s] (chip to chip; the spindle is stopped first, the first
+        M6 of a program and an M6 of the tool in the spindle take no time).
 
     Returns
     -------

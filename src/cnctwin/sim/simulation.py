@@ -241,6 +241,7 @@ def _chunks_from(program: Any, machine: Machine, chunk_cycles: int) -> Iterator[
     for t in interpolator.interpolate_chunks(
         prog, limits=limits, spindle=spindle, cycle_time_s=machine.cycle_time_s,
         axes=machine.axis_names, chunk_cycles=chunk_cycles,
+        tool_change_s=machine.tool_change_s,
     ):
         yield _Chunk(off, t)
         off += _n_cycles(t)

@@ -1,0 +1,416 @@
+"""Any user part program on a machine description (``cnctwin simulate --program``), and the
+check of its peak loads against the drives' limits."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from cnctwin.engagement import Stock, ZMap
+from cnctwin.exceptions import ConfigError, GCodeError
+from cnctwin.machine.tooltable import ToolTable
+from cnctwin.recording import Recording
+from cnctwin.sim.config import (
+    START_CYCLE,
+    START_TIME,
+    ProgressFn,
+    ScenarioConfig,
+    ScenarioResult,
+)
+from cnctwin.sim.cutting import Material
+from cnctwin.sim.faults import Fault, fault_to_dict
+from cnctwin.sim.gcode import Program, parse_program
+from cnctwin.sim.machine import Machine
+from cnctwin.sim.processes import (
+    DrillingProcess,
+    MillingProcess,
+    TappingProcess,
+    _NoLoad,
+    _Process,
+    _Progress,
+)
+from cnctwin.sim.runner import (
+    _base_truth,
+    _collect,
+    _faults_from,
+    _make_sink,
+    _prepare,
+    _write_program,
+    _write_truth,
+)
+from cnctwin.sim.simulation import simulate
+from cnctwin.sim.stockcut import StockMillingProcess, ToolDispatch
+
+__all__ = ["drive_limits_check", "part_program"]
+
+
+_DRILL_WORDS = ("CYCLE81", "CYCLE82", "CYCLE83", "G81", "G82", "G83")
+
+
+def _line_of_offset(text: str, offset: int) -> int:
+    """1-based program line of a byte offset (the block events' ``seek_offset``)."""
+    return text.encode("utf-8")[: max(offset, 0)].count(b"\n") + 1
+
+
+def drive_limits_check(rec: Recording, machine: Machine, program_text: str) -> dict[str, Any]:
+    """Peak spindle and axis loads of a simulated program against the drives' limits.
+
+    Parameters
+    ----------
+    rec : Recording
+        The simulated recording (CURRENT, TORQUE, POWER per axis; block events).
+    machine : Machine
+        Its description (current limits, rated torque and current, base speed).
+    program_text : str
+        The program (to name the line of the block where a limit is exceeded).
+
+    Returns
+    -------
+    dict
+        ``cycle_time_s``, ``spindle`` peaks (``torque_nm``, ``power_w``, ``current_a`` with the
+        line where each peaks) and ``limits``, per feed axis the peak current, and
+        ``warnings``: one line per exceeded limit naming the program line and block.
+
+    Notes
+    -----
+    Limits: the current limit (peak), the rated (S1) current and torque, and the S1 power
+    ``rated torque x base speed`` of the spindle (a motor spindle's constant-power range
+    starts at its base speed); the feed drives' current limit.
+    """
+    sp = machine.spindle
+    name = machine.spindle_name
+    blocks = rec.events[rec.events["kind"] == "block"].sort_values("cycle", kind="stable")
+    bc = blocks["cycle"].to_numpy(dtype=np.int64)
+
+    def where(idx: int) -> dict[str, Any]:
+        cyc = int(rec.cycles[idx])
+        k = int(np.searchsorted(bc, cyc, side="right")) - 1
+        if k < 0:
+            return {"cycle": cyc, "time_s": float(rec.time_s[idx]), "line": None, "block": None}
+        row = blocks.iloc[k]
+        return {"cycle": cyc, "time_s": float(rec.time_s[idx]),
+                "line": _line_of_offset(program_text, int(row["seek_offset"])),
+                "block": str(row["gcode"])}
+
+    p_s1 = sp.rated_torque_nm * sp.base_speed_rpm * 2.0 * math.pi / 60.0
+    out: dict[str, Any] = {"cycle_time_s": float(rec.n_cycles * machine.cycle_time_s),
+                           "spindle": {}, "axes": {}, "warnings": [],
+                           "limits": {"spindle_current_limit_a": sp.current_limit_a,
+                                      "spindle_rated_current_a": sp.rated_current_a,
+                                      "spindle_rated_torque_nm": sp.rated_torque_nm,
+                                      "spindle_s1_power_w": p_s1}}
+    checks = [("CURRENT", "current_a", sp.current_limit_a, "current limit"),
+              ("TORQUE", "torque_nm", sp.rated_torque_nm, "rated torque"),
+              ("POWER", "power_w", p_s1, "S1 power")]
+    for code, key, limit, what in checks:
+        if not rec.has(code, name):
+            continue
+        v = np.abs(rec.signal(code, name).to_numpy(dtype=np.float64))
+        if not np.isfinite(v).any():
+            continue
+        i = int(np.nanargmax(v))
+        out["spindle"][key] = {"peak": float(v[i]), **where(i)}
+        if v[i] > limit:
+            w = where(i)
+            out["warnings"].append(
+                f"line {w['line']} ({w['block']}): spindle {key.rsplit('_', 1)[0]} "
+                f"{v[i]:.4g} exceeds the {what} {limit:.4g} at t = {w['time_s']:.2f} s")
+    for ax in machine.axes:
+        if not rec.has("CURRENT", ax.name):
+            continue
+        v = np.abs(rec.signal("CURRENT", ax.name).to_numpy(dtype=np.float64))
+        if not np.isfinite(v).any():
+            continue
+        i = int(np.nanargmax(v))
+        out["axes"][ax.name] = {"current_a": {"peak": float(v[i]), **where(i)},
+                                "current_limit_a": ax.current_limit_a}
+        if v[i] > ax.current_limit_a:
+            w = where(i)
+            out["warnings"].append(
+                f"line {w['line']} ({w['block']}): {ax.name} current {v[i]:.4g} A exceeds the "
+                f"current limit {ax.current_limit_a:.4g} A at t = {w['time_s']:.2f} s")
+    return out
+
+
+def _check_tools(prog: Program, tools: ToolTable, path: Path) -> None:
+    """Every T the program selects is in the table (the error names the line)."""
+    for b in prog.blocks:
+        if b.tool is not None and b.tool != 0 and "T" in b.words:
+            try:
+                tools.get(int(b.tool), line=b.line, text=b.text)
+            except ConfigError as exc:
+                raise ConfigError(f"{path}: {exc}") from None
+
+
+def _milling_in_drilling(prog: Program, surface_z_mm: float) -> list[str]:
+    """Lines of a drilling program (no tool table) that move in XY below the surface."""
+    out = []
+    for b in prog.blocks:
+        if b.kind not in ("linear", "arc_cw", "arc_ccw"):
+            continue
+        z0 = b.start.get("Z", math.inf)
+        z1 = b.target.get("Z", z0)
+        moves_xy = any(abs(b.target.get(a, b.start.get(a, 0.0)) - b.start.get(a, 0.0)) > 1e-9
+                       for a in ("X", "Y"))
+        if moves_xy and min(z0, z1) < surface_z_mm:
+            out.append(f"line {b.line} ({b.text.strip()}): moves in XY below the surface in a "
+                       "drilling program; without --tools it is simulated without a milling "
+                       "load (give a tool table to mill it)")
+    return out
+
+
+def _drill_conditions(prog: Program, tool: int) -> tuple[float, float, float]:
+    """Feed [mm/rev], speed [rpm] and depth [mm] of a drill's first cycle (for the truth)."""
+    active = 0
+    for b in prog.blocks:
+        if b.tool_change and b.tool is not None:
+            active = int(b.tool)
+        if active == tool and b.kind == "drill_cycle" and b.cycle is not None:
+            n = b.speed_rpm or 1.0
+            f = (b.feed_mm_per_rev if b.feed_mm_per_rev is not None
+                 else (b.feedrate_mm_min or 0.0) / n)
+            return float(f or 0.1), float(n), float(b.cycle.z_ref_mm - b.cycle.z_bottom_mm)
+    return 0.1, 1.0, 20.0
+
+
+def _tool_hooks(cfg: ScenarioConfig, prog: Program, tools: ToolTable, stock: Stock | None, *,
+                material: Material, surface_z_mm: float, faults: Sequence[Fault],
+                rng: np.random.Generator, progress: _Progress,
+                first_hole: int) -> ToolDispatch:
+    """One hook per tool of the table the program uses, by its kind."""
+    zmap = ZMap(stock) if stock is not None else None
+    used = sorted({int(b.tool) for b in prog.blocks if b.tool is not None})
+    hooks: dict[int, Any] = {}
+    sweeps: dict[int, tuple[ZMap, float]] = {}
+    drill_faults = True
+    for t in used:
+        if t not in tools:
+            continue
+        spec = tools.get(t)
+        common: dict[str, Any] = {"surface_z_mm": surface_z_mm, "rng": rng, "truth": None,
+                                  "daq": None}
+        if spec.kind == "drill":
+            c = dataclasses.replace(cfg, drill=spec.drill(cfg.drill))
+            feed, speed, depth = _drill_conditions(prog, t)
+            hooks[t] = DrillingProcess(c, material=material, feed_mm_per_rev=feed,
+                                       speed_rpm=speed, hole_depth_mm=depth,
+                                       faults=faults if drill_faults else (),
+                                       first_hole=first_hole, **common)
+            drill_faults = False
+            if zmap is not None:
+                sweeps[t] = (zmap, spec.diameter_mm)
+        elif spec.kind == "tap":
+            c = dataclasses.replace(cfg, tap=spec.tap(cfg.tap))
+            hooks[t] = TappingProcess(c, material=material, faults=(), **common)
+            if zmap is not None:
+                sweeps[t] = (zmap, spec.diameter_mm)
+        elif zmap is not None:
+            if material.milling is None:
+                raise ConfigError(f"material {material.name!r} has no milling coefficients and "
+                                  f"T{t} is an end mill: give a material file with [milling]")
+            hooks[t] = StockMillingProcess(cfg, material=material, zmap=zmap,
+                                           tool=spec.end_mill(), faults=(), **common)
+        else:
+            if material.milling is None:
+                raise ConfigError(f"material {material.name!r} has no milling coefficients and "
+                                  f"T{t} is an end mill: give a material file with [milling]")
+            c = dataclasses.replace(cfg, end_mill=spec.end_mill())
+            hooks[t] = MillingProcess(c, material=material, faults=(), **common)
+    if faults and drill_faults:
+        raise ConfigError("faults are simulated in drilling: the tool table has no drill this "
+                          "program uses")
+    return ToolDispatch(hooks, sweeps=sweeps, progress=progress)
+
+
+def part_program(
+    out: str | Path | None = None,
+    *,
+    program: str | Path,
+    seed: int = 0,
+    overrides: Mapping[str, Any] | None = None,
+    machine: Machine | None = None,
+    material: str | Material | None = None,
+    tools: ToolTable | None = None,
+    stock: Stock | None = None,
+    surface_z_mm: float = 0.0,
+    fmt: str = "c4a",
+    max_file_mb: float | None = None,
+    chunk_cycles: int = 50_000,
+    progress: ProgressFn | None = None,
+    start_time: pd.Timestamp | str | None = None,
+    first_hole: int = 0,
+    faults: Sequence[Fault | Mapping[str, Any]] = (),
+) -> ScenarioResult:
+    """Any part program of the supported G-code subset on a machine description.
+
+    Parameters
+    ----------
+    out : str or path, optional
+        Output directory; ``None`` keeps ``result.recording`` in memory.
+    program : str or path
+        The program file (``.mpf``).
+    seed : int
+        Seed of every random stream.
+    overrides : mapping, optional
+        Dotted overrides on top of ``machine``.
+    machine : Machine, optional
+        The machine (e.g. loaded from a machine file); default the thesis machine.
+    material : str or Material, optional
+        Workpiece material (``aisi1045``, ``grey_cast_iron``, ``al7050``, with the overrides
+        of ``material.<key>.*``, or a :class:`~cnctwin.sim.cutting.Material`); without it the
+        program runs in air (no process load). Without ``tools`` and ``stock``, a program
+        with a drilling cycle drills (every feed move below the surface with the drilling
+        model; XY moves below the surface are then named in the truth's ``limits.warnings``,
+        they are milled only with a tool table) and any other program mills a full slot
+        below ``surface_z_mm``.
+    tools : ToolTable, optional
+        The tool table: each cycle is cut by the active tool's kind (drill, tap, end mill
+        with its diameter and flutes), so a program that drills and mills simulates both. A
+        T number the table lacks raises :class:`ConfigError` naming the line.
+    stock : Stock, optional
+        The raw part: end mills cut what the Z-map (:class:`~cnctwin.engagement.ZMap`)
+        still holds (engagement angles and depth per cycle; a second pass cuts air), drills
+        start at its top (``surface_z_mm`` is then ``stock.z1_mm``). Needs ``tools``.
+    surface_z_mm : float, default 0
+        Workpiece top surface [mm] without a stock.
+    start_time : Timestamp or str, optional
+        UTC time of the first cycle; default the scenarios' common start time.
+    first_hole : int, default 0
+        Holes the drill has made before this program (its flank wear starts there).
+    faults : sequence, default ()
+        Faults of a drilling program (:class:`~cnctwin.sim.faults.ToolBreakage`,
+        :class:`~cnctwin.sim.faults.HardnessChange`, :class:`~cnctwin.sim.faults.Chatter`,
+        :class:`~cnctwin.sim.faults.LooseTool`, or dicts with ``type``: ``--option
+        faults='[{"type": "ToolBreakage", "hole": 3}]'``); hole numbers count the program's
+        holes from ``first_hole``. In ``truth.json`` under ``faults``.
+    fmt : str, default 'c4a'
+        Recording format: ``'c4a'`` (Capture4Analysis JSON) or ``'parquet'`` (chunk directory).
+    max_file_mb : float, optional
+        Split a Capture4Analysis recording into files of at most this size [MB]; None: one file.
+    chunk_cycles : int, default 50000
+        Cycles simulated and written per chunk (bounds memory).
+    progress : callable, optional
+        Called with (fraction done 0..1, message) while the scenario runs.
+
+    Returns
+    -------
+    ScenarioResult
+        Truth ``limits``: :func:`drive_limits_check` (cycle time, peaks and the warnings
+        naming the program line where a limit is exceeded); of a drilling program ``holes``:
+        every entry of the tool into the part at a new X/Y (``hole``, the number the
+        ``faults`` use, ``x_mm``, ``y_mm``, ``cut_first_cycle``; milling entries count here).
+
+    Raises
+    ------
+    GCodeError
+        An unsupported word or cycle, naming the line and the word.
+    """
+    path = Path(program)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read the program: {exc}") from None
+    try:
+        prog = parse_program(text)
+    except GCodeError as exc:
+        raise ConfigError(f"{path}: {exc}; the supported subset is listed in "
+                          "docs/simulator.md") from None
+    cfg = ScenarioConfig.build(overrides, machine=machine)
+    if stock is not None:
+        if tools is None:
+            raise ConfigError("--stock needs --tools TOOLS.toml: the Z-map cuts with each "
+                              "tool's diameter")
+        surface_z_mm = stock.z1_mm
+    if tools is not None:
+        _check_tools(prog, tools, path)
+    flist = _faults_from(faults)
+    if flist and material is None:
+        raise ConfigError("faults need a cutting load: give --material (a program in air has "
+                          "no process to break or wear)")
+    o = _prepare(out)
+    stem = path.stem
+    upper = text.upper()
+    hook: _Process | ToolDispatch
+    pf = _Progress(progress, stem)
+    rng = np.random.default_rng([seed, 1])
+    if material is None:
+        kind = "air"
+        hook = _NoLoad(surface_z_mm=surface_z_mm, faults=(), rng=rng, truth=None, daq=None,
+                       progress=pf)
+    else:
+        if isinstance(material, Material):
+            mat = material
+        elif material in cfg.materials:
+            mat = cfg.materials[material]
+        else:
+            raise ConfigError(f"unknown material {material!r}; known: {sorted(cfg.materials)}")
+        if tools is not None:
+            kind = "stock" if stock is not None else "tools"
+            hook = _tool_hooks(cfg, prog, tools, stock, material=mat,
+                               surface_z_mm=surface_z_mm, faults=flist, rng=rng, progress=pf,
+                               first_hole=first_hole)
+        elif any(w in upper for w in _DRILL_WORDS):
+            kind = "drilling"
+            speeds = [float(v) for v in re.findall(r"\bS(\d+(?:\.\d*)?)", upper)] or [1.0]
+            feeds = [float(v) for v in re.findall(r"\bF(\d*\.?\d+)", upper)] or [0.1]
+            hook = DrillingProcess(cfg, material=mat, feed_mm_per_rev=feeds[0],
+                                   speed_rpm=max(speeds), hole_depth_mm=20.0,
+                                   surface_z_mm=surface_z_mm, faults=flist, rng=rng,
+                                   truth=None, daq=None, progress=pf, first_hole=first_hole)
+        else:
+            if mat.milling is None:
+                raise ConfigError(f"material {material!r} has no milling coefficients; the "
+                                  "program has no drilling cycle, so it mills: choose al7050")
+            if flist:
+                raise ConfigError("faults are simulated in drilling programs (a drilling "
+                                  "cycle); this program mills")
+            kind = "milling"
+            hook = MillingProcess(cfg, material=mat, surface_z_mm=surface_z_mm, faults=(),
+                                  rng=rng, truth=None, daq=None, progress=pf)
+    mat_name = material.name if isinstance(material, Material) else material
+    res = ScenarioResult("part_program", truth={
+        **_base_truth("part_program", seed, overrides, cfg), "program": str(path),
+        "process": kind, "material": mat_name, "faults": [fault_to_dict(f) for f in flist],
+        **({"stock": stock.as_text()} if stock is not None else {}),
+        **({"tools": {str(k): dataclasses.asdict(v) for k, v in tools.tools.items()}}
+           if tools is not None else {})})
+    _write_program(o, path.name, text, res.paths)
+    sink, rpath = _make_sink(o, stem, fmt, max_file_mb)
+    try:
+        sim = simulate(prog, cfg.machine, seed=seed, start_cycle=START_CYCLE,
+                       start_time=START_TIME if start_time is None else start_time,
+                       cutting=hook, sink=sink, chunk_cycles=chunk_cycles)
+    except GCodeError as exc:  # found while running it (a speed above the machine's limit)
+        raise ConfigError(f"{path}: {exc} (the machine's limits: --machine FILE, or the "
+                          "thesis machine without one)") from None
+    _collect(res, sim, sink, rpath, None, None)
+    rec = res.recording
+    if isinstance(hook, DrillingProcess):  # every entry of the tool into the part at a new
+        # X/Y, with its cycle
+        res.truth["holes"] = [{k: (float(v) if isinstance(v, np.floating) else v)
+                               for k, v in row.items()} for row in hook.hole_rows()]
+    elif isinstance(hook, ToolDispatch):
+        rows = []
+        for t, h in sorted(hook.hooks.items()):
+            if isinstance(h, DrillingProcess | TappingProcess):
+                rows += [{"tool": t, **{k: (float(v) if isinstance(v, np.floating) else v)
+                                        for k, v in row.items()}} for row in h.hole_rows()]
+            if isinstance(h, StockMillingProcess) and h.plunge_cycles:
+                res.truth.setdefault("notes", []).append(
+                    f"T{t}: {h.plunge_cycles} cycles plunging straight down into material "
+                    "(end mill; no load model for a plunge: ramp or helix in, or drill first)")
+        res.truth["holes"] = rows
+    res.truth["limits"] = drive_limits_check(rec, cfg.machine, text)
+    if kind == "drilling":
+        res.truth["limits"]["warnings"] += _milling_in_drilling(prog, surface_z_mm)
+    _write_truth(o, res.truth, res.paths)
+    return res
+
+
