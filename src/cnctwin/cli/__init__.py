@@ -19,7 +19,8 @@ __all__ = ["main"]
 # Modules that contribute subcommands, in help order. Each has ``register(subparsers)``.
 _COMMAND_MODULES: tuple[str, ...] = (
     "cnctwin.cli.io", "cnctwin.cli.opcua", "cnctwin.cli.store", "cnctwin.cli.sim",
-    "cnctwin.cli.servo", "cnctwin.cli.calibrate", "cnctwin.cli.twin", "cnctwin.cli.usecases",
+    "cnctwin.cli.servo", "cnctwin.cli.calibrate", "cnctwin.cli.optimize", "cnctwin.cli.twin",
+    "cnctwin.cli.usecases",
     "cnctwin.cli.demo_command", "cnctwin.cli.edge", "cnctwin.cli.fleet", "cnctwin.cli.web")
 
 
