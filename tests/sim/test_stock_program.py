@@ -158,3 +158,22 @@ def test_a_tool_change_stops_the_spindle_and_takes_its_time(tmp_path: Path) -> N
     assert (t_s - t6) * 0.002 >= 4.0
     i = int(np.searchsorted(rec.cycles, t_s))
     assert abs(speed[i - 5]) < 50.0  # stopped before the new tool starts
+
+
+def test_limits_compare_ratings_with_what_they_rate(tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """A run-up peaks above the S1 torque for < 1 s: no warning; a 13 s slot at 15 mm depth
+    in steel (closed form ~29 Nm + friction > 25 Nm S1) warns, naming its line."""
+    runup = tmp_path / "runup.mpf"
+    runup.write_text("G90 G94\nT1 M6\nS3000 M3\nG4 F2\nM30\n")
+    assert main(["simulate", "--program", str(runup), "--out", str(tmp_path / "a")]) == 0
+    out, err = capsys.readouterr()
+    assert "warning" not in err
+    assert "spindle torque  peak" in out and "(limit 49.92)" in out and "line 3: S3000 M3" in out
+    heavy = tmp_path / "heavy.mpf"
+    heavy.write_text("G90 G94\nT2 M6\nS3000 M3\nG0 X-10 Y0 Z-15\nG1 X250 F1200\nG0 Z10\nM30\n")
+    assert main(["simulate", "--program", str(heavy), "--material", "aisi1045", "--out",
+                 str(tmp_path / "b")]) == 0
+    err = capsys.readouterr().err
+    assert "line 5 (G1 X250 F1200): spindle torque over 10 s" in err
+    assert "exceeds the rated (S1) torque 25 Nm" in err

@@ -212,13 +212,24 @@ def _print_limits(lim: dict[str, Any]) -> None:
     import sys
 
     sp = lim["spindle"]
-    parts = [f"cycle time {lim['cycle_time_s']:.2f} s"]
+    print(f"cycle time {lim['cycle_time_s']:.2f} s")
     for key, unit in (("torque_nm", "Nm"), ("power_w", "W"), ("current_a", "A")):
-        if key in sp:
-            v = sp[key]
-            parts.append(f"peak spindle {key.rsplit('_', 1)[0]} {v['peak']:.4g} {unit} "
-                         f"(line {v['line']})")
-    print("; ".join(parts))
+        if key not in sp:
+            continue
+        v = sp[key]
+        what = key.rsplit("_", 1)[0]
+        if v.get("limit") is not None:
+            print(f"  spindle {what:7s} peak {v['peak']:8.4g} {unit:2s} (limit {v['limit']:.4g})"
+                  f"  line {v['line']}: {v['block']}")
+        s1 = v.get("s1")
+        if s1 is not None:
+            print(f"  spindle {what:7s} S1   {s1['mean']:8.4g} {unit:2s} (limit "
+                  f"{s1['limit']:.4g}, over {s1['window_s']:g} s)  line {s1['line']}: "
+                  f"{s1['block']}")
+    for ax, v in lim.get("axes", {}).items():
+        c = v["current_a"]
+        print(f"  {ax:7s} current peak {c['peak']:8.4g} A  (limit {v['current_limit_a']:.4g})"
+              f"  line {c['line']}: {c['block']}")
     for w in lim["warnings"]:
         print(f"warning: {w}", file=sys.stderr)
 

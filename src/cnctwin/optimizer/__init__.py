@@ -9,11 +9,10 @@ the engagement of the programmed run, :mod:`cnctwin.optimizer.program_edit` the 
 
 from cnctwin.optimizer.constraints import CONSTRAINTS, Limits, feed_limits, limits_from_machine
 from cnctwin.optimizer.core import LinePlan, OptimizeResult, optimize_program, plan_feeds
-from cnctwin.optimizer.verify import S1_WINDOW_S, VerifyRun, load_violations, verify_run
+from cnctwin.optimizer.verify import VerifyRun, load_violations, verify_run
 
 __all__ = [
     "CONSTRAINTS",
-    "S1_WINDOW_S",
     "Limits",
     "LinePlan",
     "OptimizeResult",

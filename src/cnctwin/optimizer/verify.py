@@ -2,9 +2,10 @@
 
 Checked on the simulated recording (what the drives would see) and its per-cycle truth:
 
-* spindle S1 torque and power: the load averaged over :data:`S1_WINDOW_S` against the S1
-  curve at that speed (rated torque up to the base speed, rated power above); S1 is a
-  thermal rating, so a short run-up above it is not a violation;
+* spindle S1 torque and power: the load over :data:`~cnctwin.sim.part.S1_WINDOW_S` (RMS
+  torque, mean power; :func:`~cnctwin.sim.part.s1_load`) against the S1 curve at that speed
+  (rated torque up to the base speed, rated power above); S1 is a thermal rating, so a short
+  run-up above it is not a violation;
 * spindle peak torque (current limit x Kt) and current (current limit), instantaneous;
 * feed-axis current against each drive's current limit, instantaneous;
 * chip thickness of each end mill (feed per tooth x sin(phi)_max of the engagement) against
@@ -30,13 +31,9 @@ from cnctwin.machine import MachineFile, ToolTable
 from cnctwin.optimizer.constraints import Limits
 from cnctwin.sim.gcode import Program
 from cnctwin.sim.materials import MaterialSource
+from cnctwin.sim.part import S1_WINDOW_S, s1_load
 
 __all__ = ["S1_WINDOW_S", "VerifyRun", "load_violations", "verify_run"]
-
-S1_WINDOW_S = 10.0
-"""Averaging window of the S1 (thermal) checks [s]. [E] motor spindles' thermal time
-constants are minutes; 10 s is conservative for a part program's blocks."""
-
 
 @dataclass
 class VerifyRun:
@@ -70,17 +67,6 @@ class VerifyRun:
     path_feed_mm_min: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     line: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     result: Any = None
-
-
-def _moving_mean(v: NDArray[np.float64], n: int) -> NDArray[np.float64]:
-    if v.size == 0:
-        return v
-    n = max(1, min(n, v.size))
-    c = np.concatenate([[0.0], np.cumsum(v)])
-    out = np.empty(v.size)
-    out[n - 1:] = (c[n:] - c[:-n]) / n
-    out[:n - 1] = c[1:n] / np.arange(1, n)
-    return out
 
 
 def _lines_per_cycle(rec: Any, text: str) -> NDArray[np.int64]:
@@ -133,15 +119,15 @@ def load_violations(rec: Any, per_cycle: pd.DataFrame | None, text: str, *,
 
     torque = np.abs(rec.signal("TORQUE", sp).to_numpy(dtype=np.float64))
     speed = np.abs(rec.signal("CMD_SPEED", sp).to_numpy(dtype=np.float64))
-    tq_mean = _moving_mean(np.nan_to_num(torque), win)
-    n_mean = _moving_mean(np.nan_to_num(speed), win)
+    tq_mean = s1_load(torque, window_cycles=win, rms=True)
+    n_mean = s1_load(speed, window_cycles=win, rms=False)
     s1 = limits.s1_torque_nm(n_mean)
     i = int(np.argmax(tq_mean - s1))
     if tq_mean[i] > s1[i] * 1.001:
         add(i, "spindle S1 torque", tq_mean[i], s1[i])
     if rec.has("POWER", sp):
-        pw = _moving_mean(np.nan_to_num(np.abs(rec.signal("POWER", sp).to_numpy(
-            dtype=np.float64))), win)
+        pw = s1_load(np.abs(rec.signal("POWER", sp).to_numpy(dtype=np.float64)),
+                     window_cycles=win, rms=False)
         i = int(np.argmax(pw))
         if pw[i] > limits.s1_power_w * 1.001:
             add(i, "spindle S1 power", pw[i], limits.s1_power_w)

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from numpy.typing import NDArray
 
 from cnctwin.engagement import Stock, ZMap
 from cnctwin.exceptions import ConfigError, GCodeError
@@ -48,7 +49,7 @@ from cnctwin.sim.runner import (
 from cnctwin.sim.simulation import simulate
 from cnctwin.sim.stockcut import StockMillingProcess, ToolDispatch
 
-__all__ = ["drive_limits_check", "part_program"]
+__all__ = ["S1_WINDOW_S", "drive_limits_check", "part_program", "s1_load"]
 
 
 _DRILL_WORDS = ("CYCLE81", "CYCLE82", "CYCLE83", "G81", "G82", "G83")
@@ -59,8 +60,41 @@ def _line_of_offset(text: str, offset: int) -> int:
     return text.encode("utf-8")[: max(offset, 0)].count(b"\n") + 1
 
 
+S1_WINDOW_S = 10.0
+"""Averaging window of the S1 (thermal) checks [s]. [E] a motor spindle's thermal time
+constant is minutes; 10 s is conservative for the blocks of a part program."""
+
+
+def s1_load(v: NDArray[np.float64], *, window_cycles: int, rms: bool) -> NDArray[np.float64]:
+    """Load over the trailing S1 window: mean (power) or root mean square (current, torque).
+
+    Parameters
+    ----------
+    v : numpy.ndarray
+        Instantaneous load per cycle (NaN counts as 0).
+    window_cycles : int
+        Window length [cycles]; before the program starts the load counts as 0 (idle), so
+        a program shorter than the window is averaged over the whole window.
+    rms : bool
+        Root mean square (the copper losses of current and torque) instead of the mean.
+
+    Returns
+    -------
+    numpy.ndarray
+        Same length as ``v``.
+    """
+    x = np.nan_to_num(np.asarray(v, dtype=np.float64))
+    if x.size == 0:
+        return x
+    n = max(1, int(window_cycles))
+    y = x * x if rms else x
+    c = np.concatenate([np.zeros(n), np.cumsum(y)])
+    out = (c[n:] - c[:-n]) / n
+    return np.sqrt(np.maximum(out, 0.0)) if rms else out
+
+
 def drive_limits_check(rec: Recording, machine: Machine, program_text: str) -> dict[str, Any]:
-    """Peak spindle and axis loads of a simulated program against the drives' limits.
+    """Spindle and axis loads of a simulated program against the drives' limits.
 
     Parameters
     ----------
@@ -74,15 +108,21 @@ def drive_limits_check(rec: Recording, machine: Machine, program_text: str) -> d
     Returns
     -------
     dict
-        ``cycle_time_s``, ``spindle`` peaks (``torque_nm``, ``power_w``, ``current_a`` with the
-        line where each peaks) and ``limits``, per feed axis the peak current, and
-        ``warnings``: one line per exceeded limit naming the program line and block.
+        ``cycle_time_s``; ``spindle``: per quantity (``torque_nm``, ``power_w``,
+        ``current_a``) the instantaneous ``peak`` and the ``s1`` load (the largest
+        :func:`s1_load` over :data:`S1_WINDOW_S`: RMS of current and torque, mean power),
+        each with its ``limit`` and the line and block where it occurs;
+        ``limits``; per feed axis the peak current; ``warnings``: one line per exceeded
+        limit naming the program line and block.
 
     Notes
     -----
-    Limits: the current limit (peak), the rated (S1) current and torque, and the S1 power
-    ``rated torque x base speed`` of the spindle (a motor spindle's constant-power range
-    starts at its base speed); the feed drives' current limit.
+    Ratings are compared with what they rate: the S1 (continuous, thermal) torque, current
+    and power ``rated torque x base speed`` with the load over :data:`S1_WINDOW_S`
+    (:func:`s1_load`; a run-up that needs more than the rated torque for a few hundred
+    milliseconds is within the drive's rating), the peak torque (current limit x Kt) and the
+    current limit with the instantaneous values; the feed drives' current limit with the
+    instantaneous current.
     """
     sp = machine.spindle
     name = machine.spindle_name
@@ -100,28 +140,45 @@ def drive_limits_check(rec: Recording, machine: Machine, program_text: str) -> d
                 "block": str(row["gcode"])}
 
     p_s1 = sp.rated_torque_nm * sp.base_speed_rpm * 2.0 * math.pi / 60.0
+    t_peak = sp.current_limit_a * sp.kt_nm_per_a
     out: dict[str, Any] = {"cycle_time_s": float(rec.n_cycles * machine.cycle_time_s),
                            "spindle": {}, "axes": {}, "warnings": [],
                            "limits": {"spindle_current_limit_a": sp.current_limit_a,
                                       "spindle_rated_current_a": sp.rated_current_a,
                                       "spindle_rated_torque_nm": sp.rated_torque_nm,
-                                      "spindle_s1_power_w": p_s1}}
-    checks = [("CURRENT", "current_a", sp.current_limit_a, "current limit"),
-              ("TORQUE", "torque_nm", sp.rated_torque_nm, "rated torque"),
-              ("POWER", "power_w", p_s1, "S1 power")]
-    for code, key, limit, what in checks:
+                                      "spindle_peak_torque_nm": t_peak,
+                                      "spindle_s1_power_w": p_s1,
+                                      "s1_window_s": S1_WINDOW_S}}
+    win = round(S1_WINDOW_S / machine.cycle_time_s)
+    checks = [("CURRENT", "current_a", sp.current_limit_a, "current limit", sp.rated_current_a,
+               "rated (S1) current", "A"),
+              ("TORQUE", "torque_nm", t_peak, "peak torque", sp.rated_torque_nm,
+               "rated (S1) torque", "Nm"),
+              ("POWER", "power_w", None, "", p_s1, "S1 power", "W")]
+    for code, key, peak_lim, peak_what, s1_lim, s1_what, unit in checks:
         if not rec.has(code, name):
             continue
         v = np.abs(rec.signal(code, name).to_numpy(dtype=np.float64))
         if not np.isfinite(v).any():
             continue
         i = int(np.nanargmax(v))
-        out["spindle"][key] = {"peak": float(v[i]), **where(i)}
-        if v[i] > limit:
+        mean = s1_load(v, window_cycles=win, rms=code != "POWER")
+        j = int(np.argmax(mean))
+        out["spindle"][key] = {"peak": float(v[i]), **where(i), "limit": peak_lim,
+                               "s1": {"mean": float(mean[j]), "limit": s1_lim,
+                                      "window_s": S1_WINDOW_S, **where(j)}}
+        what = key.rsplit("_", 1)[0]
+        if peak_lim is not None and v[i] > peak_lim:
             w = where(i)
             out["warnings"].append(
-                f"line {w['line']} ({w['block']}): spindle {key.rsplit('_', 1)[0]} "
-                f"{v[i]:.4g} exceeds the {what} {limit:.4g} at t = {w['time_s']:.2f} s")
+                f"line {w['line']} ({w['block']}): spindle {what} {v[i]:.4g} {unit} exceeds "
+                f"the {peak_what} {peak_lim:.4g} {unit} at t = {w['time_s']:.2f} s")
+        if mean[j] > s1_lim:
+            w = where(j)
+            out["warnings"].append(
+                f"line {w['line']} ({w['block']}): spindle {what} over "
+                f"{S1_WINDOW_S:g} s {mean[j]:.4g} {unit} exceeds the {s1_what} {s1_lim:.4g} "
+                f"{unit} at t = {w['time_s']:.2f} s")
     for ax in machine.axes:
         if not rec.has("CURRENT", ax.name):
             continue
