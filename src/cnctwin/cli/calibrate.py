@@ -88,6 +88,30 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    help="HTML report (default: beside the machine file, "
                    "<machine>.axes-report.html)")
     a.set_defaults(func=_cmd_axes)
+    mt = csub.add_parser(
+        "material",
+        help="milling coefficients of your workpiece material from your own cuts",
+        description="Fit the linear edge-force coefficients (Ktc Krc Kac Kte Kre Kae) of a "
+        "material from recordings of end-mill cuts: cutting torque from the spindle current "
+        "(the calibrated spindle), forces from the feed axes, engagement from the recorded "
+        "tool path through the stock (Z-map). Cut slots and side steps at three or more "
+        "feeds per tooth at a steady spindle speed. Written with uncertainty and provenance "
+        "into the machine file's [materials.NAME]; simulate and optimize use it by name.",
+    )
+    mt.add_argument("files", nargs="+", type=Path, metavar="REC",
+                    help="recordings of the program, in machining order")
+    mt.add_argument("--material", required=True, metavar="NAME",
+                    help="name to store it under (a library name keeps its values where a "
+                    "coefficient is not identified)")
+    mt.add_argument("--program", type=Path, required=True, metavar="PART.mpf",
+                    help="the program the recordings ran (checked against the tool table)")
+    mt.add_argument("--tools", type=Path, required=True, metavar="TOOLS.toml",
+                    help="tool table")
+    mt.add_argument("--stock", required=True, metavar="X0,Y0,Z0,X1,Y1,Z1",
+                    help="the raw part before the first recording [mm]")
+    mt.add_argument("--machine", type=Path, required=True, metavar="M.toml",
+                    help="the calibrated machine file to read and update")
+    mt.set_defaults(func=_cmd_material)
 
 
 def _read(path: Path) -> Any:
@@ -286,4 +310,66 @@ def _cmd_axes(args: argparse.Namespace) -> int:
     elif cal.notes:
         out.print(f"{len(cal.notes)} notes on the recordings (--verbose shows them)")
     out.print(f"wrote {args.machine} and {report}")
+    return 0
+
+
+def _cmd_material(args: argparse.Namespace) -> int:
+    import datetime as dt
+    import math
+
+    from rich.console import Console
+    from rich.table import Table
+
+    from cnctwin.calibration.material import calibrate_material
+    from cnctwin.engagement import parse_stock
+    from cnctwin.machine import read_tool_table, save_machine
+    from cnctwin.sim.gcode import parse_program
+
+    if not args.machine.exists():
+        raise ConfigError(f"{args.machine}: no such machine file; calibrate the spindle first "
+                          "(cnctwin calibrate spindle ... --machine FILE): the cutting torque "
+                          "comes from its current")
+    mf = _load_or_new(args.machine)
+    tools = read_tool_table(args.tools)
+    stock = parse_stock(args.stock)
+    if not args.program.is_file():
+        raise ConfigError(f"{args.program}: no such program file")
+    try:
+        prog = parse_program(args.program.read_text(encoding="utf-8"), name=args.program.stem)
+    except ConfigError as exc:
+        raise ConfigError(f"{args.program}: {exc}") from None
+    for b in prog.blocks:
+        if b.tool is not None and "T" in b.words:
+            try:
+                tools.get(int(b.tool), line=b.line, text=b.text)
+            except ConfigError as exc:
+                raise ConfigError(f"{args.program}: {exc}") from None
+    console = Console(stderr=True)
+    with console.status("reading the recordings"):
+        recs = [_read(p) for p in args.files]
+    with console.status("fitting the milling coefficients"):
+        cal = calibrate_material(recs, name=args.material, mfile=mf, tools=tools, stock=stock)
+    prov = {"method": "cnctwin calibrate material (spindle current + axis forces, Z-map)",
+            "recordings": [str(p) for p in args.files],
+            "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")}
+    materials = {**mf.materials, args.material: cal.machine_table(provenance=prov)}
+    import dataclasses
+
+    save_machine(dataclasses.replace(mf, materials=materials), args.machine)
+    table = Table(title=f"material {args.material} (machine file [materials.{args.material}])")
+    for col in ("coefficient", "value", "std. unc.", "unit"):
+        table.add_column(col, justify="left" if col == "coefficient" else "right")
+    from cnctwin.calibration.material import UNITS
+
+    for key, unit in UNITS.items():
+        u = cal.uncertainty.get(key, math.nan)
+        table.add_row(key, f"{getattr(cal.coefficients, key):.5g}" if cal.identified.get(key)
+                      else f"not identified ({cal.reasons.get(key, '')}); kept "
+                      f"{getattr(cal.coefficients, key):.5g}",
+                      f"{u:.2g}" if math.isfinite(u) else "-", unit)
+    out = Console()
+    out.print(table)
+    for note in cal.notes:
+        out.print(f"note: {note}", markup=False)
+    out.print(f"wrote {args.machine}")
     return 0

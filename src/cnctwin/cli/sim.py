@@ -230,6 +230,11 @@ def _print_limits(lim: dict[str, Any]) -> None:
         c = v["current_a"]
         print(f"  {ax:7s} current peak {c['peak']:8.4g} A  (limit {v['current_limit_a']:.4g})"
               f"  line {c['line']}: {c['block']}")
+    for t, v in lim.get("tools", {}).items():
+        c = v["chip_mm"]
+        limit = "-" if c["limit"] is None else f"{c['limit']:.4g}"
+        print(f"  {t:7s} chip    peak {c['peak']:8.4g} mm (limit {limit})  line {c['line']}: "
+              f"{c['block']}")
     for w in lim["warnings"]:
         print(f"warning: {w}", file=sys.stderr)
 

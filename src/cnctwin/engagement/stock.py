@@ -33,6 +33,10 @@ from cnctwin.exceptions import ConfigError
 
 __all__ = ["Engagement", "Stock", "ZMap", "parse_stock"]
 
+MIN_DEPTH_MM = 0.01
+"""Material less than this above the tool bottom is not engaged [mm]: the tool's Z jitters by
+micrometres (encoder noise, servo) over a floor it has cut itself."""
+
 MAX_CELLS = 16_000_000
 """Largest grid a Z-map allocates (64 MB of float32); a finer cell is coarsened to fit."""
 
@@ -147,7 +151,7 @@ class Engagement:
 @numba.njit(cache=True, nogil=True)
 def _sweep_kernel(h: NDArray[np.float32], x0: float, y0: float, cell: float,
                   px: NDArray[np.float64], py: NDArray[np.float64], pz: NDArray[np.float64],
-                  radius: float, nbins: int, state: NDArray[np.float64],
+                  radius: float, nbins: int, min_depth: float, state: NDArray[np.float64],
                   out: NDArray[np.float64]) -> None:  # pragma: no cover - compiled
     """Sweep the tool: out[:, 0..5] = entry, exit, depth, centre depth, volume, direction.
 
@@ -185,7 +189,7 @@ def _sweep_kernel(h: NDArray[np.float32], x0: float, y0: float, cell: float,
         jc = math.floor((y - y0) / cell)
         if 0 <= ic < nx and 0 <= jc < ny:
             d = h[ic, jc] - z
-            if d > 0.0:
+            if d > min_depth:
                 out[i, 3] = d
         # periphery bins over the front half
         ct = math.cos(th)
@@ -205,7 +209,7 @@ def _sweep_kernel(h: NDArray[np.float32], x0: float, y0: float, cell: float,
             if ii < 0 or ii >= nx or jj < 0 or jj >= ny:
                 continue
             d = h[ii, jj] - z
-            if d > 1e-6:
+            if d > min_depth:
                 if first < 0:
                     first = k
                 last = k
@@ -299,7 +303,7 @@ class ZMap:
         out = np.empty((x.size, 6), dtype=np.float64)
         s = self.stock
         _sweep_kernel(self.heights_mm, s.x0_mm, s.y0_mm, self.cell_mm, x, y, z,
-                      0.5 * diameter_mm, int(bins), self._state, out)
+                      0.5 * diameter_mm, int(bins), MIN_DEPTH_MM, self._state, out)
         # the wall of a cut is resolved to about a cell: a periphery point within
         # sqrt(2 cell / R) of the tangent falls into the last removal's cells, so an arc that
         # reaches that close to 0 (or pi) reaches it (a slot reads 0..pi, not 0.15..2.99)

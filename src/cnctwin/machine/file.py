@@ -103,7 +103,7 @@ _ROTARY_UNITS = {"N": "Nm", "N/(mm/s)": "Nm/(deg/s)", "mm/s": "deg/s", "mm/min":
 _RECORD_KEYS = {"value", "uncertainty", "unit", "provenance", "identified", "reason",
                 "valid_range", "valid_quantity"}
 _TOP_KEYS = {"schema", "schema_version", "name", "cycle_time_s", "inner_steps", "spindle_name",
-             "tool_change_s", "axis_map", "axes", "spindle"}
+             "tool_change_s", "axis_map", "axes", "spindle", "materials"}
 
 
 def parameter_unit(key: str, *, rotary: bool = False) -> str:
@@ -209,11 +209,17 @@ class MachineFile:
         Dotted key -> :class:`ParameterRecord` for the values the file states as a table.
     path : Path or None
         The file it was read from.
+    materials : dict
+        Workpiece materials calibrated on this machine (``cnctwin calibrate material``):
+        name -> table with ``milling`` (coefficient -> record table ``value``,
+        ``uncertainty``, ``unit``, ``provenance``); read by
+        :func:`cnctwin.sim.materials.resolve_material`.
     """
 
     machine: Machine = field(default_factory=Machine.thesis_default)
     records: Mapping[str, ParameterRecord] = field(default_factory=dict)
     path: Path | None = None
+    materials: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     def value(self, key: str) -> Any:
         """The value of a dotted key (``spindle.kt_nm_per_a``, ``axes.X1.kv_m_min_per_mm``)."""
@@ -276,6 +282,8 @@ class MachineFile:
                     table[f.name] = v
             axes[ax.name] = table
         doc["axes"] = axes
+        if self.materials:
+            doc["materials"] = {k: dict(v) for k, v in self.materials.items()}
         return doc
 
     @classmethod
@@ -367,7 +375,8 @@ class MachineFile:
         except (TypeError, ValueError, AttributeError) as exc:
             raise ConfigError(f"{source}: {exc}") from None
         _validate_spindle(machine.spindle, source)
-        return cls(machine=machine, records=records, path=path)
+        return cls(machine=machine, records=records, path=path,
+                   materials=_materials(data.get("materials", {}), source))
 
 
 def _get(machine: Machine, key: str) -> Any:
@@ -567,6 +576,19 @@ def _literal(v: Any) -> str:
     raise ConfigError(f"cannot write {v!r} to a machine file")
 
 
+def _materials(data: Any, source: str) -> dict[str, dict[str, Any]]:
+    """The ``[materials.NAME]`` tables, checked for shape (the values: resolve_material)."""
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"{source}: materials must be a table of [materials.NAME] tables")
+    out: dict[str, dict[str, Any]] = {}
+    for name, table in data.items():
+        if not isinstance(table, Mapping) or not isinstance(table.get("milling"), Mapping):
+            raise ConfigError(f"{source}: materials.{name} needs a [materials.{name}.milling] "
+                              "table of coefficients")
+        out[str(name)] = dict(table)
+    return out
+
+
 def _dumps(doc: Mapping[str, Any]) -> str:
     """The document as TOML, one line per parameter (records as inline tables)."""
     lines = []
@@ -581,6 +603,11 @@ def _dumps(doc: Mapping[str, Any]) -> str:
     for name, table in doc.get("axes", {}).items():
         lines.append(f"\n[axes.{name}]")
         lines += [f"{k} = {_literal(v)}" for k, v in table.items()]
+    for name, table in doc.get("materials", {}).items():
+        lines.append(f"\n[materials.{name}]")
+        lines += [f"{k} = {_literal(v)}" for k, v in table.items() if k != "milling"]
+        lines.append(f"\n[materials.{name}.milling]")
+        lines += [f"{k} = {_literal(v)}" for k, v in table["milling"].items()]
     return "\n".join(x for x in lines if x != "") + "\n"
 
 

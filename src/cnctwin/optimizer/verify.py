@@ -78,8 +78,8 @@ def _lines_per_cycle(rec: Any, text: str) -> NDArray[np.int64]:
     return np.where(k >= 0, line_of[np.maximum(k, 0)], 0)
 
 
-def load_violations(rec: Any, per_cycle: pd.DataFrame | None, text: str, *,
-                    mfile: MachineFile, tools: ToolTable, limits: Limits
+def load_violations(rec: Any, text: str, *, mfile: MachineFile, limits: Limits,
+                    tool_peaks: dict[str, Any] | None = None
                     ) -> tuple[list[dict[str, Any]], NDArray[np.int64]]:
     """Every limit a simulated run exceeds, with the line where it peaks.
 
@@ -87,17 +87,15 @@ def load_violations(rec: Any, per_cycle: pd.DataFrame | None, text: str, *,
     ----------
     rec : Recording
         The simulated recording.
-    per_cycle : pandas.DataFrame or None
-        The simulator's per-cycle truth (``feed_per_tooth_mm``, ``entry_angle_rad``,
-        ``exit_angle_rad``, ``tool``); None skips the chip check.
     text : str
         The program text (lines).
     mfile : MachineFile
         The machine.
-    tools : ToolTable
-        Tool limits.
     limits : Limits
         Spindle S1 curve and peak torque.
+    tool_peaks : dict, optional
+        The simulation's ``limits["tools"]`` (peak chip thickness per end mill and its
+        limit, from :func:`cnctwin.sim.part.part_program`).
 
     Returns
     -------
@@ -145,24 +143,12 @@ def load_violations(rec: Any, per_cycle: pd.DataFrame | None, text: str, *,
         i = int(np.nanargmax(c))
         if c[i] > ax.current_limit_a * 1.001:
             add(i, f"{ax.name} current", c[i], ax.current_limit_a)
-    if per_cycle is not None and "feed_per_tooth_mm" in per_cycle:
-        pc = per_cycle.reindex(pd.Index(np.asarray(rec.cycles, dtype=np.int64)))
-        fz = pc["feed_per_tooth_mm"].to_numpy(dtype=np.float64)
-        p0 = pc["entry_angle_rad"].to_numpy(dtype=np.float64)
-        p1 = pc["exit_angle_rad"].to_numpy(dtype=np.float64)
-        tl = pc["tool"].to_numpy(dtype=np.float64)
-        smax = np.where((p0 <= math.pi / 2) & (p1 >= math.pi / 2), 1.0,
-                        np.maximum(np.sin(p0), np.sin(p1)))
-        chip = np.where(np.isfinite(p0), fz * smax, np.nan)
-        for tn in np.unique(tl[np.isfinite(tl)]):
-            spec = tools.tools.get(int(tn))
-            if spec is None or spec.max_chip_mm is None:
-                continue
-            sel = np.where(tl == tn, chip, np.nan)
-            if np.isfinite(sel).any():
-                i = int(np.nanargmax(sel))
-                if sel[i] > spec.max_chip_mm * 1.001:
-                    add(i, f"T{int(tn)} chip thickness", sel[i], spec.max_chip_mm)
+    for tname, tv in (tool_peaks or {}).items():
+        chip = tv["chip_mm"]
+        if chip["limit"] is not None and chip["peak"] > chip["limit"] * 1.001:
+            out.append({"line": chip["line"], "block": chip["block"] or "",
+                        "limit": f"{tname} chip thickness", "value": float(chip["peak"]),
+                        "allowed": float(chip["limit"]), "time_s": math.nan})
     return out, line
 
 
@@ -204,8 +190,8 @@ def verify_run(program: Program, mfile: MachineFile, material: MaterialSource,
                            progress=progress)
     rec = res.recording
     per_cycle = pd.concat(res.per_cycle) if res.per_cycle else None
-    viol, line = load_violations(rec, per_cycle, program.text, mfile=mfile, tools=tools,
-                                 limits=limits)
+    viol, line = load_violations(rec, program.text, mfile=mfile, limits=limits,
+                                 tool_peaks=res.truth["limits"].get("tools"))
     cyc = np.asarray(rec.cycles, dtype=np.int64)
     ct = np.zeros(cyc.size)
     if per_cycle is not None and "cutting_torque_nm" in per_cycle:

@@ -196,6 +196,28 @@ def drive_limits_check(rec: Recording, machine: Machine, program_text: str) -> d
     return out
 
 
+def _chip_check(lim: dict[str, Any], hook: ToolDispatch, rec: Recording,
+                tools: ToolTable | None, text: str) -> None:
+    """Peak chip thickness of each end mill (feed per tooth x sin(phi)_max) vs its limit."""
+    blocks = rec.events[rec.events["kind"] == "block"].sort_values("cycle", kind="stable")
+    bc = blocks["cycle"].to_numpy(dtype=np.int64)
+    out = lim.setdefault("tools", {})
+    for t, h in sorted(hook.hooks.items()):
+        if not isinstance(h, StockMillingProcess) or h.peak_chip_cycle is None:
+            continue
+        spec = tools.tools.get(t) if tools is not None else None
+        limit = spec.max_chip_mm if spec is not None else None
+        k = int(np.searchsorted(bc, h.peak_chip_cycle, side="right")) - 1
+        line = _line_of_offset(text, int(blocks.iloc[k]["seek_offset"])) if k >= 0 else None
+        block = str(blocks.iloc[k]["gcode"]) if k >= 0 else None
+        out[f"T{t}"] = {"chip_mm": {"peak": h.peak_chip_mm, "limit": limit, "line": line,
+                                    "block": block}}
+        if limit is not None and h.peak_chip_mm > limit:
+            lim["warnings"].append(
+                f"line {line} ({block}): T{t} chip thickness {h.peak_chip_mm:.4g} mm exceeds "
+                f"the tool's max_chip_mm {limit:.4g} mm")
+
+
 def _check_tools(prog: Program, tools: ToolTable, path: Path) -> None:
     """Every T the program selects is in the table (the error names the line)."""
     for b in prog.blocks:
@@ -465,6 +487,8 @@ def part_program(
                     "(end mill; no load model for a plunge: ramp or helix in, or drill first)")
         res.truth["holes"] = rows
     res.truth["limits"] = drive_limits_check(rec, cfg.machine, text)
+    if isinstance(hook, ToolDispatch):
+        _chip_check(res.truth["limits"], hook, rec, tools, text)
     if kind == "drilling":
         res.truth["limits"]["warnings"] += _milling_in_drilling(prog, surface_z_mm)
     _write_truth(o, res.truth, res.paths)

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from cnctwin.engagement import ZMap
 from cnctwin.sim.config import ScenarioConfig
-from cnctwin.sim.cutting import Material, milling_load
+from cnctwin.sim.cutting import Material, cycle_mean_milling_load
 from cnctwin.sim.faults import hardness_factor
 from cnctwin.sim.processes import _Process, _Progress
 from cnctwin.sim.simulation import CuttingInput, CuttingOutput
@@ -62,9 +62,11 @@ class StockMillingProcess(_Process):
     Feed per tooth from the XY speed of the expected actual position and the commanded
     spindle speed; entry/exit angles, axial depth and feed direction from
     :meth:`cnctwin.engagement.ZMap.sweep`; forces from
-    :func:`~cnctwin.sim.cutting.milling_load`. An end mill moving only down into material
-    (a plunge) is swept (the material goes) but has no load model: its cycles are counted in
-    :attr:`plunge_cycles` and flagged in the truth (``plunge_depth_mm``).
+    :func:`~cnctwin.sim.cutting.milling_load` integrated over each cycle's rotation
+    (:func:`~cnctwin.sim.cutting.cycle_mean_milling_load`). An end mill moving only down
+    into material (a plunge: no XY feed) is swept (the material goes) but has no load
+    model: its cycles are counted in :attr:`plunge_cycles` and flagged in the truth
+    (``plunge_depth_mm``).
     """
 
     def __init__(self, cfg: ScenarioConfig, *, material: Material, zmap: ZMap, tool: EndMill,
@@ -75,6 +77,8 @@ class StockMillingProcess(_Process):
         self.zmap = zmap
         self.tool = tool
         self.plunge_cycles = 0
+        self.peak_chip_mm = 0.0
+        self.peak_chip_cycle: int | None = None
 
     def __call__(self, ci: CuttingInput) -> CuttingOutput:
         dt = ci.cycle_time_s
@@ -87,10 +91,19 @@ class StockMillingProcess(_Process):
         c = np.where((n > 1.0) & (v_mm_min > 1e-3),
                      v_mm_min / np.maximum(n, 1.0) / self.tool.flutes, 0.0)
         hard = hardness_factor(self.faults, np.zeros(len(ci), dtype=np.int64))
-        load = milling_load(np.deg2rad(ci.spindle_pos_deg), c, eng.axial_depth_mm,
-                            eng.feed_direction_rad, tool=self.tool, material=self.material,
-                            entry_angle_rad=eng.entry_rad, exit_angle_rad=eng.exit_rad,
-                            hardness_factor=hard)
+        step = np.abs(ci.spindle_speed_rpm) / 60.0 * 2.0 * np.pi * dt
+        load = cycle_mean_milling_load(
+            np.deg2rad(ci.spindle_pos_deg), step, c, eng.axial_depth_mm,
+            eng.feed_direction_rad, tool=self.tool, material=self.material,
+            entry_angle_rad=eng.entry_rad, exit_angle_rad=eng.exit_rad, hardness_factor=hard)
+        p0, p1 = eng.entry_rad, eng.exit_rad
+        with np.errstate(invalid="ignore"):
+            smax = np.where((p0 <= np.pi / 2) & (p1 >= np.pi / 2), 1.0,
+                            np.maximum(np.sin(p0), np.sin(p1)))
+        chip = np.where(eng.engaged, c * smax, 0.0)
+        if chip.size and chip.max() > self.peak_chip_mm:
+            j = int(np.argmax(chip))
+            self.peak_chip_mm, self.peak_chip_cycle = float(chip[j]), int(ci.cycle[j])
         plunge = np.where(c <= 0.0, eng.center_depth_mm, 0.0)  # no XY feed: no milling load
         self.plunge_cycles += int(np.count_nonzero(plunge > 0.0))
         truth = {"axial_depth_mm": eng.axial_depth_mm, "feed_per_tooth_mm": c,
