@@ -202,10 +202,7 @@ def engagement_windows(rec: Recording, *, mfile: MachineFile, tools: ToolTable,
         ax = m.axis(axn)
         slide = _signal(rec, "TORQUE", axn)
         v = vel[axn]
-        fric = (ax.coulomb_n * np.tanh(v / max(ax.friction_smoothing_mm_s, 1e-6))
-                + ax.viscous_n_per_mm_s * v
-                + ax.stribeck_n * np.exp(-np.abs(v) / max(ax.stribeck_speed_mm_s, 1e-9))
-                * np.tanh(v / max(ax.friction_smoothing_mm_s, 1e-6)))
+        fric = ax.friction_n(v)
         ext[axn] = -(slide - fric - ax.mass_kg * acc[axn] / 1000.0)
     e0 = np.full(tool.size, np.nan)
     e1 = np.full(tool.size, np.nan)

@@ -463,6 +463,32 @@ class FeedAxis:
             return self.equiv_speedctrl_time_s
         return self.equiv_currctrl_time_s
 
+    def friction_n(self, velocity: Any) -> Any:
+        """Friction at the slide for a velocity, the law the simulator's drives use [N].
+
+        Parameters
+        ----------
+        velocity : float or array-like
+            Slide velocity [mm/s] (rotary: [deg/s], friction in [Nm]).
+
+        Returns
+        -------
+        float or numpy.ndarray
+            ``Fv v + s(v) (Fc + Fs exp(-(v / vs)^2))`` with the sign s(v) linear within
+            +-``friction_smoothing_mm_s`` (the Stribeck term only below 5 vs, as in the
+            kernel).
+        """
+        import numpy as np
+
+        v = np.asarray(velocity, dtype=np.float64)
+        eps = max(self.friction_smoothing_mm_s, 1e-12)
+        sg = np.where(np.abs(v) >= eps, np.sign(v), v / eps)
+        u = v / max(self.stribeck_speed_mm_s, 1e-12)
+        strib = np.where(np.abs(v) < 5.0 * self.stribeck_speed_mm_s,
+                         self.stribeck_n * np.exp(-u * u), 0.0)
+        out = self.viscous_n_per_mm_s * v + sg * (self.coulomb_n + strib)
+        return float(out) if out.ndim == 0 else out
+
     def validate(self) -> None:
         """Raise :class:`ConfigError` naming the field if a value is out of range."""
         prefix = f"axes.{self.name}"
