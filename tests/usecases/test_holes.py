@@ -8,12 +8,14 @@ from the analysis code itself.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
 from cnctwin.exceptions import SignalNotFoundError
+from cnctwin.iotools import read_recording
 from cnctwin.recording import Recording
 from cnctwin.sim import simulate
 from cnctwin.sim.programs import hole_pattern
@@ -252,3 +254,40 @@ def test_reverse_fluctuation_skips_a_long_reversal_transient() -> None:
     loose[bottom + 100:extraction:13] += 0.8  # slips every 26 ms (37 Hz), thesis Fig. 5.10
     fl, _ = _reverse_fluctuation(loose, z, z, speed, n_cut, bottom, extraction, fs)
     assert fl > 3.0 * fi
+
+
+def test_a_tool_table_keeps_an_end_mill_plunge_out_of_the_holes(tmp_path: Path) -> None:
+    """Issue 25.2: the edge reads the tool table; T2 (an end mill) plunges and mills a contour
+    outside a drilling cycle, then T1 drills two holes with CYCLE81: two holes, and the issue
+    list says why the plunge is not one. Through the CLI as at the edge (replay)."""
+    import json
+
+    from cnctwin.cli import main
+
+    (tmp_path / "tools.toml").write_text(
+        '[tools.1]\nkind = "drill"\ndiameter_mm = 8.5\n\n[tools.2]\nkind = "end_mill"\n'
+        'diameter_mm = 16\nflutes = 2\nhelix_deg = 30\nmax_chip_mm = 0.2\n')
+    (tmp_path / "p.mpf").write_text(
+        "G90 G94\nT2 M6\nS3000 M3\nG0 X10 Y10 Z5\nG1 Z-2 F100\nG1 X50 F600\nG0 Z10\n"
+        "T1 M6\nS2400 M3\nG95 F0.16\nMCALL CYCLE81(10, 0, 2, -12)\nX20 Y60\nX40 Y60\nMCALL\n"
+        "G0 Z50\nM30\n")
+    assert main(["simulate", "--program", str(tmp_path / "p.mpf"), "--material", "aisi1045",
+                 "--tools", str(tmp_path / "tools.toml"), "--stock", "0,0,-30,80,80,0",
+                 "--out", str(tmp_path / "sim")]) == 0
+    truth = json.loads((tmp_path / "sim" / "truth.json").read_text())
+    assert [h["tool"] for h in truth["holes"]] == [1, 1]
+    rec = tmp_path / "sim" / "p.json"
+    h = hole_record(read_recording(rec), tool_kinds={1: "drill", 2: "end_mill"})
+    assert len(h) == 2
+    assert any("T2 is an end mill (tool table)" in m for m in h.attrs["issues"])
+    from cnctwin.edge.model_file import save_spindle_model
+    from cnctwin.spindle import SpindleModel
+
+    model = save_spindle_model(SpindleModel.from_parameters("thesis_spinner_840dsl"),
+                               tmp_path / "spindle.json")
+    assert main(["edge", "run", "--source", str(rec), "--tools", str(tmp_path / "tools.toml"),
+                 "--model", str(model), "--out", str(tmp_path / "edge"),
+                 "--quiet", "--no-anomaly", "--no-twin"]) == 0
+    rows = [json.loads(x) for x in (tmp_path / "edge").glob("*.jsonl").__next__().read_text(
+        ).splitlines() if x.strip()]
+    assert sum(r.get("kind") == "hole" for r in rows) == 2

@@ -20,8 +20,8 @@ the tool table and the stock, and fits the linear edge-force coefficients (Altin
    (held by the moving axis; the moving axis' force ripple per motor revolution as a
    nuisance term) gives Krc, Kre, and the axial force (one offset per Z level) Kac, Kae.
    The force across the feed is not used: the axis that holds it stands and vibrates with
-   the tooth passing, and its Coulomb friction sticks and slips. Standard errors from the residuals, with the
-   relative uncertainty of Kt added in quadrature to Ktc and Kte.
+   the tooth passing, and its Coulomb friction sticks and slips. Standard errors from the
+   residuals, with the relative uncertainty of Kt added in quadrature to Ktc and Kte.
 
 A coefficient whose regressor does not vary enough (no partial immersion, one feed) is
 reported as not identified, with the reason, and keeps the base material's value.

@@ -176,6 +176,9 @@ def _add_run_options(r: argparse.ArgumentParser) -> None:
                    help="teach-in holes of --detector adaptive (6)")
     r.add_argument("--material", default="aisi1045",
                    help="Kienzle material for physics-torque (aisi1045, grey_cast_iron)")
+    r.add_argument("--tools", type=Path, metavar="TOOLS.toml",
+                   help="tool table ([tools.N] with kind, diameter_mm, ...): a plunge of an "
+                   "end mill outside a drilling cycle is not counted as a hole")
     r.add_argument("--drill-mm", type=float, default=8.5,
                    help="drill diameter for physics-torque [mm] (8.5)")
     r.add_argument("--point-angle-deg", type=float, default=140.0,
@@ -516,7 +519,7 @@ def _build(args: argparse.Namespace) -> Any:
     machine = args.machine or src.machine or "machine"
     procs: list[Any] = [TorqueProcessor(model)]
     if not args.no_holes:
-        procs.append(HoleProcessor(model))
+        procs.append(HoleProcessor(model, tool_kinds=getattr(args, "tool_kinds", None)))
     if not args.no_anomaly:
         from cnctwin.usecases.anomaly import (
             Detector,
@@ -667,6 +670,11 @@ def _run(args: argparse.Namespace) -> int:
     if missing:
         raise ConfigError(f"give {' and '.join('--' + k for k in missing)} (one machine), or "
                           "--config PLANT.toml (many machines)")
+    if getattr(args, "tools", None) is not None:  # read before any source starts
+        from cnctwin.machine import read_tool_table
+
+        table = read_tool_table(args.tools)
+        args.tool_kinds = {t: table.get(t).kind for t in table}
     rt = _build(args)
     main_thread = threading.current_thread() is threading.main_thread()
     old = signal.signal(signal.SIGTERM, lambda *a: rt.stop()) if main_thread else None

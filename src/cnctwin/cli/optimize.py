@@ -33,13 +33,13 @@ def register(sub: Any) -> None:
     p.add_argument("program", type=Path, metavar="PART.mpf", help="the part program")
     p.add_argument("--machine", type=Path, metavar="M.toml",
                    help="machine file (cnctwin calibrate); default the thesis machine")
-    p.add_argument("--material", required=True, metavar="NAME|FILE.toml",
+    p.add_argument("--material", metavar="NAME|FILE.toml",
                    help="workpiece material: one calibrated into --machine (cnctwin calibrate "
                    "material), a library name (aisi1045, grey_cast_iron, al7050) or a file")
-    p.add_argument("--tools", type=Path, required=True, metavar="TOOLS.toml",
+    p.add_argument("--tools", type=Path, metavar="TOOLS.toml",
                    help="tool table ([tools.N] with kind, diameter_mm, flutes, helix_deg, "
                    "max_chip_mm)")
-    p.add_argument("--stock", required=True, metavar="X0,Y0,Z0,X1,Y1,Z1",
+    p.add_argument("--stock", metavar="X0,Y0,Z0,X1,Y1,Z1",
                    help="raw part, lower and upper corner [mm]")
     p.add_argument("--out", type=Path, required=True, help="output directory")
     p.add_argument("--min-feed", type=float, default=10.0, metavar="MM_MIN",
@@ -64,6 +64,11 @@ def _cmd_optimize(args: argparse.Namespace) -> int:
 
     if not args.program.is_file():
         raise ConfigError(f"{args.program}: no such program file")
+    for opt, what in (("material", "the workpiece material (NAME or FILE.toml)"),
+                      ("tools", "the tool table (TOOLS.toml)"),
+                      ("stock", "the raw part X0,Y0,Z0,X1,Y1,Z1 in mm")):
+        if getattr(args, opt) is None:
+            raise ConfigError(f"{args.program}: give --{opt}: the optimizer needs {what}")
     mfile = load_machine(args.machine) if args.machine is not None else MachineFile()
     material = resolve_material(args.material, machine_materials=getattr(mfile, "materials", {}),
                                 machine_source=str(args.machine))

@@ -224,6 +224,9 @@ class HoleProcessor:
         cycle, depth, speed, feed; :class:`cnctwin.usecases.hole_load.HoleLoadJudge`, True:
         its defaults): a broken drill, a hole without load, a load rise or drop give an
         ``alarm`` (``detector`` ``HoleLoadJudge``, ``fault``, ``message``). False: none.
+    tool_kinds : mapping, optional
+        T number -> kind from the tool table (``cnctwin edge run --tools``): a plunge of an
+        end mill outside a drilling cycle is not a hole.
     """
 
     name = "holes"
@@ -233,7 +236,9 @@ class HoleProcessor:
                  window_s: float = 0.6, set_size: int = 6, settle_s: float = 1.0,
                  max_buffer_s: float = 300.0, min_speed_mm_s: float = 0.05,
                  live_context: bool = True,
-                 load_judge: HoleLoadJudge | bool = True) -> None:
+                 load_judge: HoleLoadJudge | bool = True,
+                 tool_kinds: Mapping[int, str] | None = None) -> None:
+        self.tool_kinds = dict(tool_kinds) if tool_kinds is not None else None
         self.load_judge: HoleLoadJudge | None = (
             HoleLoadJudge() if load_judge is True else load_judge or None)
         self.model = model
@@ -373,7 +378,8 @@ class HoleProcessor:
                                   speed_rpm=speed, events=events, spindle=self.spindle,
                                   z_axis=self.z_axis, xy_axes=self.xy_axes, model=self.model,
                                   window_s=self.window_s, set_size=self.set_size,
-                                  first_hole=self.holes, origin_ns=self._origin_ns)
+                                  first_hole=self.holes, origin_ns=self._origin_ns,
+                                  tool_kinds=self.tool_kinds)
         rows = found.rows
         if not rows:
             return []

@@ -519,6 +519,7 @@ def holes_from_arrays(
     origin_ns: int | None = None,
     min_travel_mm: float = 0.5,
     min_speed_rpm: float = 10.0,
+    tool_kinds: Mapping[int, str] | None = None,
 ) -> HoleRows:
     """The per-hole rows from plain arrays: the work of :func:`hole_record` without a
     :class:`~cnctwin.recording.Recording` (the edge runtime calls it on its buffer).
@@ -546,6 +547,10 @@ min_speed_rpm
     origin_ns : int, optional
         UTC time that ``start_s``/``end_s``/``extraction_s`` count from [ns]; default the
         first row.
+    tool_kinds : mapping, optional
+        T number -> kind from the tool table (``"drill"``, ``"tap"``, ``"end_mill"``): a
+        Z plunge outside a drilling cycle by an end mill is not a hole (an entry in
+        ``issues`` says so); without it such a plunge is judged by its load and position.
 
     Returns
     -------
@@ -634,6 +639,13 @@ min_speed_rpm
                 cut_start, surface, src = c, float(za[c]), "current"
             else:
                 cut_start, surface, src = lo, float(zm[lo]), "feed"
+        tool_no = tools[grp[0]]
+        if not name and tool_kinds is not None and tool_no is not None and tool_kinds.get(
+                int(tool_no)) == "end_mill":
+            issues.append(f"Z plunge at cycle {int(cycles[first.feed_start])} outside a "
+                          f"drilling cycle is not a hole: T{int(tool_no)} is an end mill "
+                          "(tool table)")
+            continue
         if not name:
             seg_tq = torque[lo : hi + 1]
             loaded = src == "current" or bool(
@@ -753,6 +765,7 @@ def hole_record(
     min_travel_mm: float = 0.5,
     min_speed_rpm: float = 10.0,
     store: bool = True,
+    tool_kinds: Mapping[int, str] | None = None,
 ) -> pd.DataFrame:
     """One row per hole: segmentation, current, torque, energy, thrust, deviations, tool.
 
@@ -787,6 +800,9 @@ def hole_record(
         speed signal (it cannot be told from a positioning move) [rpm].
     store : bool, default True
         Also store the table in ``rec.meta.attrs["holes"]``.
+    tool_kinds : mapping, optional
+        T number -> kind from the tool table: a plunge of an end mill outside a drilling
+        cycle is not a hole (:func:`holes_from_arrays`).
 
     Returns
     -------
@@ -833,7 +849,7 @@ def hole_record(
                               spindle=spindle, z_axis=z_axis, xy_axes=xy_axes, model=model,
                               window_s=window_s, set_size=set_size, first_hole=first_hole,
                               origin_ns=origin, min_travel_mm=min_travel_mm,
-                              min_speed_rpm=min_speed_rpm)
+                              min_speed_rpm=min_speed_rpm, tool_kinds=tool_kinds)
     df = found.to_frame()
     if store:
         rec.meta.attrs["holes"] = df
