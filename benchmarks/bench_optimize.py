@@ -23,15 +23,15 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import time  # noqa: E402
+import time
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from cnctwin.engagement import Stock, ZMap  # noqa: E402
-from cnctwin.machine import MachineFile, ToolSpec, ToolTable  # noqa: E402
-from cnctwin.optimizer import optimize_program  # noqa: E402
-from cnctwin.sim.gcode import parse_program  # noqa: E402
-from cnctwin.sim.materials import resolve_material  # noqa: E402
+from cnctwin.engagement import Stock, ZMap
+from cnctwin.machine import MachineFile, ToolSpec, ToolTable
+from cnctwin.optimizer import optimize_program
+from cnctwin.sim.gcode import parse_program
+from cnctwin.sim.materials import resolve_material
 
 BUDGET_S = 60.0
 """Issue 25: a 10 000-block program optimized in under 60 s on one core."""
