@@ -175,3 +175,33 @@ def _rec_time_s(cycle: int, cfg: ScenarioConfig) -> float:
     return (cycle - START_CYCLE) * cfg.machine.cycle_time_s
 
 
+def _write_recording(rec: Recording, out: Path, stem: str, fmt: str,
+                     max_file_mb: float | None, paths: list[Path]) -> Path:
+    """Write an in-memory recording as C4A (chained) or a Parquet chunk directory."""
+    if fmt not in _FORMATS:
+        raise ConfigError(f"fmt must be one of {_FORMATS}, not {fmt!r}")
+    if fmt == "c4a":
+        from cnctwin.iotools.capture4analysis import write_capture4analysis
+
+        path = out / f"{stem}.json"
+        paths += list(write_capture4analysis(rec, path, max_file_mb=max_file_mb))
+        return path
+    from cnctwin.sim.recorder import RecordedChunk
+
+    path = out / stem
+    sink = ParquetChunkSink(path)
+    cols = [c for c in rec.hf.columns if c != "time"]
+    sink.open(cols, rec.meta)
+    step = 50_000
+    cyc = rec.cycles
+    for a in range(0, cyc.size, step):
+        part = rec.hf.iloc[a:a + step]
+        lf = rec.lf if a == 0 and rec.lf is not None else pd.DataFrame(columns=["cycle"])
+        ev = rec.events if a == 0 and rec.events is not None else pd.DataFrame(columns=["kind"])
+        sink.write(RecordedChunk(cycles=cyc[a:a + step],
+                                 hf={c: part[c].to_numpy() for c in cols}, lf=lf, events=ev))
+    sink.close(rec.meta)
+    paths.append(path)
+    return path
+
+
