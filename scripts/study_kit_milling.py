@@ -27,12 +27,10 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from study_kit import _kt_law, _stats  # noqa: E402
+from study_kit import _kt_law, _stats
 
-from cnctwin.spindle import fit_flux_law  # noqa: E402
+from cnctwin.spindle import fit_flux_law
 
 BEGIN = "<!-- study_kit_milling: begin -->"
 END = "<!-- study_kit_milling: end -->"
