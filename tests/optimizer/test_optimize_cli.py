@@ -1,7 +1,9 @@
-"""Issue 25 acceptance, through the command line only, on a hidden material.
+"""Issue 25 acceptance, through the command line only, on a hidden machine and material.
 
-The six milling coefficients are drawn at random (+-30 % around the library's AISI 1045) and
-hidden in the simulator (``--set material.aisi1045.milling.*``). A calibration program
+The spindle (Kt, friction, inertia: ``random_spindle_overrides``) and the six milling
+coefficients (+-30 % around the library's AISI 1045) are drawn at random and hidden in the
+simulator (``--set``); the machine file is what ``cnctwin calibrate spindle`` makes of an
+air cut and one reference cut. A calibration program
 (slots and side steps at four feeds per tooth) is simulated and ``cnctwin calibrate
 material`` fits the coefficients into the machine file; a pocket program at a conservative
 feed (slot, side steps, corners, air moves; a different program) is optimized with them and
@@ -21,8 +23,10 @@ import numpy as np
 import pytest
 
 from cnctwin.cli import main
-from cnctwin.machine import MachineFile, save_machine
+from cnctwin.sim.scenarios import random_spindle_overrides
 
+SPEEDS = list(range(200, 5001, 400)) + list(range(4600, 199, -400))
+REFERENCE = "drill_1_aisi1045_2400rpm_0p16"
 KEYS = ("ktc_n_per_mm2", "krc_n_per_mm2", "kac_n_per_mm2", "kte_n_per_mm", "kre_n_per_mm",
         "kae_n_per_mm")
 LIBRARY = (1931.0, 755.7, 645.4, 56.58, 25.51, 21.91)
@@ -128,15 +132,25 @@ def _feeds(text: str) -> dict[int, float]:
 
 @pytest.fixture(scope="module")
 def hidden(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
+    """Hidden spindle (random_spindle_overrides) and hidden material; the machine file is the
+    spindle calibration a user makes (air cut + one reference cut with a dynamometer)."""
     tmp = tmp_path_factory.mktemp("opt")
     rng = np.random.default_rng(2025)
     truth = {k: float(b * rng.uniform(0.7, 1.3)) for k, b in zip(KEYS, LIBRARY, strict=True)}
-    sets = [a for k, v in truth.items() for a in ("--set", f"material.aisi1045.milling.{k}={v}")]
+    spindle = [a for k, v in random_spindle_overrides(25).items() for a in ("--set", f"{k}={v}")]
+    sets = spindle + [a for k, v in truth.items()
+                      for a in ("--set", f"material.aisi1045.milling.{k}={v}")]
     (tmp / "tools.toml").write_text(TOOLS)
     (tmp / "cal.mpf").write_text(CALIBRATION)
     (tmp / "pocket.mpf").write_text(POCKET)
     machine = tmp / "m.toml"
-    save_machine(MachineFile(), machine)  # the user's (spindle-calibrated) machine file
+    _run(["simulate", "air_cut_sweep", "--out", str(tmp / "ac"), "--seed", "25", *spindle,
+          "--option", f"speeds_rpm={SPEEDS}"])
+    _run(["simulate", "drilling_validation", "--out", str(tmp / "dv"), "--seed", "25",
+          *spindle, "--option", 'cuts=[["aisi1045", 2400, 0.16]]'])
+    _run(["calibrate", "spindle", "--air-cut", str(tmp / "ac" / "air_cut_sweep.json"),
+          "--reference", str(tmp / "dv" / f"{REFERENCE}.json"), "--dynamometer",
+          str(tmp / "dv" / f"dynamometer_{REFERENCE[6:]}.csv"), "--machine", str(machine)])
     _run(["simulate", "--program", str(tmp / "cal.mpf"), "--material", "aisi1045", "--tools",
           str(tmp / "tools.toml"), "--stock", CAL_STOCK, "--machine", str(machine), "--seed",
           "7", "--out", str(tmp / "cal"), *sets])

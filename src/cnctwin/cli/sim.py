@@ -48,7 +48,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    help="machine file (cnctwin calibrate) to simulate; default the thesis machine")
     p.add_argument("--material", default=None, metavar="NAME|FILE.toml",
                    help="with --program: workpiece material (aisi1045, grey_cast_iron, al7050, "
-                   "one calibrated into --machine, or a material file with [milling]); "
+                   "one calibrated into --machine, or a material file with [milling]; "
+                   "--set material.NAME.* uses the library's NAME with those values); "
                    "default air (no cutting load)")
     p.add_argument("--tools", type=Path, metavar="TOOLS.toml",
                    help="with --program: tool table ([tools.N] with kind, diameter_mm, ...); "
@@ -179,6 +180,12 @@ def _program_inputs(args: argparse.Namespace, mfile: Any) -> dict[str, Any]:
     if args.material is not None:
         own = getattr(mfile, "materials", {}) if mfile is not None else {}
         spec = str(args.material)
+        # --set material.NAME.* states the simulated truth: the library's NAME with those
+        # values, not the machine file's calibrated NAME
+        overridden = any(o.split("=", 1)[0].strip().startswith(f"material.{spec}.")
+                         for o in args.overrides)
+        if spec in own and overridden:
+            own = {}
         if spec.lower().endswith(".toml") or Path(spec).is_file() or spec in own:
             out["material"] = resolve_material(
                 spec, machine_materials=own, machine_source=str(args.machine)).material

@@ -16,7 +16,7 @@ over the engaged bins. An arc that reaches within sqrt(2 cell / R) of a tangent 
 reach it (the wall is resolved to about a cell). A full slot gives 0..pi; a side step of
 radial width ae on the left gives 0..arccos(1 - ae/R) (up milling), on the right
 pi - arccos(1 - ae/R)..pi (down milling); a second pass over cut material gives no
-engagement. Exit angles of a side step are resolved to a bin (2 deg) plus the cell's share
+engagement. Exit angles of a side step are resolved to a bin (1 deg) plus the cell's share
 of ae.
 """
 
@@ -119,7 +119,7 @@ class Engagement:
         Height of the material above the tool bottom under the tool centre, before the cycle
         removed it [mm] (a plunge or a drill cuts there); 0 in air.
     removed_mm3 : numpy.ndarray
-        Volume removed in the cycle [mm^3] (removal runs each quarter cell of travel, so the
+        Volume removed in the cycle [mm^3] (removal runs each half cell of travel, so the
         volume comes in steps; sum it over a block for the removal rate).
     feed_direction_rad : numpy.ndarray
         Direction of the XY motion, atan2(vy, vx) [rad] (held while the tool moves only in Z).
@@ -160,7 +160,7 @@ def _sweep_kernel(h: NDArray[np.float32], x0: float, y0: float, cell: float,
     """
     nx, ny = h.shape
     n = px.size
-    step = 0.25 * cell
+    step = 0.5 * cell
     r2 = radius * radius
     ztop = state[7]
     for i in range(n):
@@ -219,20 +219,30 @@ def _sweep_kernel(h: NDArray[np.float32], x0: float, y0: float, cell: float,
             out[i, 0] = first * math.pi / nbins
             out[i, 1] = (last + 1) * math.pi / nbins
             out[i, 2] = dsum / cnt
-        # removal each quarter cell of travel (or of descent)
+        # removal each half cell of travel (or of descent). Along a continuing path only the
+        # half of the disc ahead (and two cells behind) can still hold material: the rest
+        # lay within R of the earlier removals; after a descent, a jump or at the start the
+        # whole disc
         mx = x - state[0]
         my = y - state[1]
-        if mx * mx + my * my >= step * step or z <= state[2] - step or (
-                cnt == 0 and out[i, 3] > 0.0):
+        d2 = mx * mx + my * my
+        descended = z <= state[2] - step
+        if d2 >= step * step or descended or (cnt == 0 and out[i, 3] > 0.0):
+            full = descended or d2 > r2 or not math.isfinite(d2)
             i0 = max(math.floor((x - radius - x0) / cell), 0)
             i1 = min(math.floor((x + radius - x0) / cell) + 1, nx)
             j0 = max(math.floor((y - radius - y0) / cell), 0)
             j1 = min(math.floor((y + radius - y0) / cell) + 1, ny)
+            back = -2.0 * cell
             vol = 0.0
             for a in range(i0, i1):
                 cx = x0 + (a + 0.5) * cell - x
+                if not full and cx * ct < back - radius * abs(st):
+                    continue  # the whole column lies behind
                 for b in range(j0, j1):
                     cy = y0 + (b + 0.5) * cell - y
+                    if not full and cx * ct + cy * st < back:
+                        continue
                     if cx * cx + cy * cy <= r2 and h[a, b] > z:
                         vol += h[a, b] - z
                         h[a, b] = z
@@ -249,7 +259,7 @@ class ZMap:
     ----------
     stock : Stock
         The raw part.
-    cell_mm : float, default 0.2
+    cell_mm : float, default 0.1
         Grid cell [mm] (coarsened, with a note in :attr:`cell_mm`, when the part would need
         more than :data:`MAX_CELLS` cells).
 
@@ -261,7 +271,7 @@ class ZMap:
         The cell actually used [mm].
     """
 
-    def __init__(self, stock: Stock, *, cell_mm: float = 0.2) -> None:
+    def __init__(self, stock: Stock, *, cell_mm: float = 0.1) -> None:
         if not (math.isfinite(cell_mm) and cell_mm > 0.0):
             raise ConfigError(f"cell_mm must be a positive number, got {cell_mm!r}")
         lx = stock.x1_mm - stock.x0_mm
@@ -275,7 +285,7 @@ class ZMap:
         self._state = np.array([np.inf, np.inf, np.inf, 0.0, 0.0, 0.0, 0.0, stock.z1_mm])
 
     def sweep(self, x_mm: ArrayLike, y_mm: ArrayLike, z_mm: ArrayLike, *,
-              diameter_mm: float, bins: int = 90) -> Engagement:
+              diameter_mm: float, bins: int = 180) -> Engagement:
         """Move a flat-bottomed cylindrical tool along a path, removing material.
 
         Parameters
@@ -285,8 +295,8 @@ class ZMap:
             continue the path (the feed direction and the last removal carry over).
         diameter_mm : float
             Tool diameter [mm] (a drill removes its diameter down to its tip).
-        bins : int, default 90
-            Angular bins over the front half (2 deg each by default).
+        bins : int, default 180
+            Angular bins over the front half (1 deg each by default).
 
         Returns
         -------
