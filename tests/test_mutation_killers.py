@@ -227,3 +227,124 @@ def test_mtconnect_agent_with_a_token_guards_every_request() -> None:
             assert status == 200, path
     finally:
         agent.close()
+
+
+# --------------------------------------------------------------- spindle calibration budget
+def test_b_and_tau_f_carry_the_whole_relative_uncertainty_of_kt() -> None:
+    # mutation: B and tau_f without Kt's term. Hand truth: with no statistical or model-form
+    # part, u(B) = B x u(Kt)/Kt and u(tau_f) = tau_f x u(Kt)/Kt; Kt's own reference term is
+    # the torque reference's
+    from cnctwin.calibration.spindle import _budget
+
+    rows, unc = _budget((("kt_nm_per_a", 1.2, 0.0, 0.0, "Nm/A"),
+                         ("b_nm_per_rpm", 8e-5, 0.0, 0.0, "Nm/rpm"),
+                         ("tau_f_nm", 0.4, 0.0, 0.0, "Nm")), rel_kt=0.05, u_kt_ref=0.03)
+    assert unc["b_nm_per_rpm"] == pytest.approx(4e-6, rel=1e-12)
+    assert unc["tau_f_nm"] == pytest.approx(0.02, rel=1e-12)
+    assert unc["kt_nm_per_a"] == pytest.approx(0.03, rel=1e-12)
+    # and in quadrature with the statistical part: sqrt(3^2 + 4^2) = 5
+    _, unc = _budget((("tau_f_nm", 1.0, 0.03, 0.0, "Nm"),), rel_kt=0.04, u_kt_ref=0.0)
+    assert unc["tau_f_nm"] == pytest.approx(0.05, rel=1e-12)
+
+
+def test_the_base_speed_uncertainty_carries_kt(tmp_path: Path) -> None:
+    # mutation: the base speed's uncertainty from the per-cut scatter only (no Kt term).
+    # Three cuts exactly on a constant-power law with n_b = 3000 rpm and no scatter: the
+    # base speed's uncertainty comes from Kt's 2 % alone, so it is well above zero and doubles
+    # with 4 %
+    import pandas as pd
+
+    from cnctwin.calibration.spindle import _speed_law
+    from cnctwin.machine import ParameterRecord, Provenance
+    from cnctwin.spindle import SpindleModel
+
+    n = np.array([2000.0, 4000.0, 6000.0])
+    kt = np.where(n <= 3000.0, 1.0, 3000.0 / n)
+    speeds = pd.DataFrame({"speed_rpm": n, "kt_nm_per_a": kt, "kt_se": np.full(3, 1e-9)})
+    u_nb = []
+    for rel in (0.02, 0.04):
+        model = SpindleModel.from_parameters("thesis_spinner_840dsl", kt_nm_per_a=1.0)
+        unc = {"kt_nm_per_a": rel, "b_nm_per_rpm": 1e-6, "tau_f_nm": 0.01}
+        prov = Provenance.now("test", ["a.json"])
+        records = {k: ParameterRecord(v, 0.01, prov) for k, v in (
+            ("spindle.kt_nm_per_a", 1.0), ("spindle.viscous_friction_nm_per_rpm", 8e-5),
+            ("spindle.coulomb_friction_nm", 0.35))}
+        _speed_law(model, speeds, unc, records, prov, [])
+        rec = records["spindle.flux_base_speed_rpm"]
+        assert rec.identified and rec.value == pytest.approx(3000.0, rel=0.02)
+        assert rec.uncertainty is not None
+        u_nb.append(rec.uncertainty)
+    assert u_nb[0] > 20.0  # rpm: Kt's 2 % moves the knee by tens of rpm
+    assert u_nb[1] == pytest.approx(2 * u_nb[0], rel=0.25)
+
+
+# --------------------------------------------------------------- axes: PT2 jerk filter pair
+def test_pt2_pair_tolerance_is_15_percent() -> None:
+    # mutation: 0.15 -> 0.05. Two PT1s 13 % apart are one PT2 (their sum pooled); 20 % apart
+    # they are not
+    from types import SimpleNamespace as NS
+
+    from cnctwin.calibration.axes import _pt2_pair
+
+    def ident(a: float, b: float) -> NS:
+        return NS(jerk_type="pt2", cycle_time_s=0.002,
+                  params={"setpoint_pt1_s": NS(value=a, stderr=1e-4),
+                          "setpoint_pt1b_s": NS(value=b, stderr=1e-4)})
+
+    got = _pt2_pair([ident(0.010, 0.0087)])
+    assert got is not None and got[0] == pytest.approx(0.0187, rel=1e-12)
+    assert _pt2_pair([ident(0.010, 0.0080)]) is None
+
+
+# --------------------------------------------------------------- OPC 40501
+def test_active_program_is_the_last_main_program_called() -> None:
+    # mutation: the first NC call of the chunk instead of the last. A chunk in which PART1
+    # ends and PART2 is called shows PART2
+    from types import SimpleNamespace as NS
+
+    import pandas as pd
+
+    from cnctwin.edge.opcua import OpcUaSink
+
+    ev = pd.DataFrame({"cycle": [1, 5], "kind": ["call", "call"],
+                       "path": ["/_N_MPF_DIR/_N_PART1_MPF", "/_N_MPF_DIR/_N_PART2_MPF"]})
+    fake = NS(_nodes={"MT.ProgramName": "node"}, _program=None,
+              _dv=lambda value, vt, t_ns: value)
+    chunk = NS(events=ev, time_ns=np.array([0, 10], dtype=np.int64))
+    out = OpcUaSink._program_update(fake, chunk)  # type: ignore[arg-type]
+    assert out == [("node", "PART2.MPF")]
+
+
+# --------------------------------------------------------------- twin compare: the spindle
+@pytest.fixture(scope="module")
+def slow_air_cut() -> object:
+    """The spindle turning in air at 300 and 1500 rpm (3 s each), the thesis machine."""
+    from cnctwin.sim.scenarios import air_cut_sweep
+
+    return air_cut_sweep(None, speeds_rpm=[300.0, 1500.0], seed=5).recording
+
+
+def test_compare_checks_the_spindle_air_current_with_its_stribeck_term(
+        slow_air_cut: object) -> None:
+    # mutations: the spindle's air current never compared (compare_recording), the Stribeck
+    # term left out of the twin's friction. The simulated machine is the file's own: not
+    # flagged; at 300 rpm the Stribeck term is 0.15 exp(-300/400) Nm = 0.071 Nm of 0.40 Nm
+    # (18 %), so a twin without it is off by more than the 5 % limit. Coulomb friction x 1.3
+    # in the file (+0.105 Nm: 26 % at 300 rpm) is flagged.
+    import dataclasses
+
+    from cnctwin.compare import compare_recording
+    from cnctwin.machine import MachineFile
+
+    mf = MachineFile()
+    s = mf.machine.spindle
+    strib = s.stribeck_torque_nm * np.exp(-300.0 / s.stribeck_speed_rpm)
+    total = s.viscous_friction_nm_per_rpm * 300.0 + s.coulomb_friction_nm + strib
+    assert strib / total > 0.10  # the hand check of the premise above
+    same = compare_recording(slow_air_cut, mf, parameters=False)  # type: ignore[arg-type]
+    assert same.spindle is not None and not same.spindle.flagged, same.spindle
+    worse = dataclasses.replace(mf, machine=mf.machine.with_overrides(
+        {"spindle.coulomb_friction_nm": 1.3 * s.coulomb_friction_nm}))
+    got = compare_recording(slow_air_cut, worse, parameters=False)  # type: ignore[arg-type]
+    assert got.spindle is not None and got.spindle.flagged
+    assert "spindle" in got.to_dict()["flagged"]

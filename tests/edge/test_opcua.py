@@ -156,6 +156,9 @@ def test_opcua_matches_batch(wear_recording: Recording, spindle_model: SpindleMo
             final["ProgramName"] = await (await ap.get_child([f"{mt}:Name"])).read_value()
             final["MT.HoleCount"] = await (await ap.get_child([f"{idx}:HoleCount"])).read_value()
             msgs = await machine.get_child([f"{mt}:Notification", f"{mt}:Messages"])
+            # OPC 40501-1 8.6.2: Notification/Messages is a MessagesType
+            final["msgs_type"] = (await c.get_node(await msgs.read_type_definition())
+                                  .read_browse_name()).Name
             final["AlarmActive"] = await (await msgs.get_child([f"{idx}:AlarmActive"])
                                           ).read_value()
             ser = await machine.get_child([f"{di}:Identification", f"{di}:SerialNumber"])
@@ -242,6 +245,7 @@ def test_opcua_matches_batch(wear_recording: Recording, spindle_model: SpindleMo
     calls = rec.events[rec.events["kind"] == "call"]["path"].dropna()
     assert "/_N_MPF_DIR/_N_PROGRAM_MPF" in set(calls)
     assert final["ProgramName"] == "PROGRAM.MPF"
+    assert final["msgs_type"] == "MessagesType"
 
 
 def test_opcua_machine_tool_alarm() -> None:

@@ -315,20 +315,11 @@ def calibrate_spindle(
     b, tf = model.b_nm_per_rpm, model.tau_f_nm
     u_b_stat = kt * line.slope_std if np.isfinite(line.slope_std) else 0.0
     u_tf_stat = kt * line.offset_std if np.isfinite(line.offset_std) else 0.0
-    budget_rows = []
-    unc: dict[str, float] = {}
-    for name, value, stat, model_form, unit in (
-        ("kt_nm_per_a", kt, u_kt_stat, u_kt_model, "Nm/A"),
-        ("b_nm_per_rpm", b, u_b_stat, spread("b_nm_per_rpm"), "Nm/rpm"),
-        ("tau_f_nm", tf, u_tf_stat, spread("tau_f_nm"), "Nm"),
-    ):
-        ref = abs(value) * rel_kt if name != "kt_nm_per_a" else u_kt_ref
-        # B and tau_f are a/b times Kt: Kt's whole uncertainty carries over (reference incl.)
-        comb = math.sqrt(stat**2 + model_form**2 + ref**2)
-        unc[name] = comb
-        budget_rows.append({"parameter": name, "value": value, "unit": unit,
-                            "statistical": stat, "model_form": model_form,
-                            "reference": ref, "combined": comb})
+    budget_rows, unc = _budget(
+        (("kt_nm_per_a", kt, u_kt_stat, u_kt_model, "Nm/A"),
+         ("b_nm_per_rpm", b, u_b_stat, spread("b_nm_per_rpm"), "Nm/rpm"),
+         ("tau_f_nm", tf, u_tf_stat, spread("tau_f_nm"), "Nm")),
+        rel_kt=rel_kt, u_kt_ref=u_kt_ref)
     notes: list[str] = []
     if reference_uncertainty_pct == 0.0:
         notes.append("the torque reference's own uncertainty is not included; give "
@@ -507,6 +498,25 @@ def _speed_table(chain: TwinChain, refs: list[Recording],
                      "torque_nm": float(np.mean(np.abs(full["torque_nm"]))),
                      "current_a": float(np.mean(np.abs(full["current_a"])))})
     return pd.DataFrame(rows)
+
+
+def _budget(rows: Sequence[tuple[str, float, float, float, str]], *, rel_kt: float,
+            u_kt_ref: float) -> tuple[list[dict[str, Any]], dict[str, float]]:
+    """The uncertainty budget of Kt, B and tau_f: statistical, model form, reference.
+
+    B and tau_f are the air-cut line's slope and offset in amperes times Kt, so Kt's whole
+    relative uncertainty (its reference included) carries over to them; Kt's own reference
+    term is the torque reference's uncertainty.
+    """
+    out = []
+    unc: dict[str, float] = {}
+    for name, value, stat, model_form, unit in rows:
+        ref = abs(value) * rel_kt if name != "kt_nm_per_a" else u_kt_ref
+        comb = math.sqrt(stat**2 + model_form**2 + ref**2)
+        unc[name] = comb
+        out.append({"parameter": name, "value": value, "unit": unit, "statistical": stat,
+                    "model_form": model_form, "reference": ref, "combined": comb})
+    return out, unc
 
 
 def _speed_law(model: SpindleModel, speeds: pd.DataFrame, unc: dict[str, float],
