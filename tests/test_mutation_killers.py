@@ -236,7 +236,7 @@ def test_b_and_tau_f_carry_the_whole_relative_uncertainty_of_kt() -> None:
     # the torque reference's
     from cnctwin.calibration.spindle import _budget
 
-    rows, unc = _budget((("kt_nm_per_a", 1.2, 0.0, 0.0, "Nm/A"),
+    _, unc = _budget((("kt_nm_per_a", 1.2, 0.0, 0.0, "Nm/A"),
                          ("b_nm_per_rpm", 8e-5, 0.0, 0.0, "Nm/rpm"),
                          ("tau_f_nm", 0.4, 0.0, 0.0, "Nm")), rel_kt=0.05, u_kt_ref=0.03)
     assert unc["b_nm_per_rpm"] == pytest.approx(4e-6, rel=1e-12)

@@ -452,3 +452,21 @@ def test_fit_friction_range_is_inclusive_and_errors_match_scipy() -> None:
     ref = linregress(n, i)
     assert full.offset_std == pytest.approx(ref.intercept_stderr, rel=1e-9)
     assert full.r2 == pytest.approx(ref.rvalue**2, rel=1e-12)
+
+
+def test_streaming_against_the_hand_formula() -> None:
+    """An independent truth for the streaming estimator (not the vectorized one): thesis Eq.
+    4.4 by hand. A speed ramp 2000 -> 2500 rpm over 1 s at 500 Hz (dOmega/dt = 500 rpm/s =
+    52.36 rad/s^2) with I = 4 A: tau = 1.04 x 4 - 8.42e-5 n - 0.35 - 0.01 x 52.36 Nm; at the
+    ramp's middle (n = 2250 rpm) 4.16 - 0.18945 - 0.35 - 0.5236 = 3.0970 Nm."""
+    model = SpindleModel(1.04, 8.42e-5, 0.35, j_kgm2=0.01)
+    n = np.linspace(2000.0, 2500.0, 501)
+    i = np.full(n.size, 4.0)
+    est = StreamingTorqueEstimator(model, fs_hz=500.0)
+    out = np.concatenate([est.update(i[k:k + 7], n[k:k + 7]) for k in range(0, n.size, 7)]
+                         + [est.flush()])
+    dw = 500.0 * 2.0 * np.pi / 60.0  # rad/s^2
+    hand = 1.04 * 4.0 - 8.42e-5 * n - 0.35 - 0.01 * dw
+    np.testing.assert_allclose(out[1:-1], hand[1:-1], rtol=0, atol=1e-9)  # inner samples
+    assert out[250] == pytest.approx(4.16 - 8.42e-5 * 2250.0 - 0.35 - 0.01 * dw, abs=1e-9)
+    assert out[250] == pytest.approx(3.0970, abs=1e-4)

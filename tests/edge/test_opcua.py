@@ -235,7 +235,10 @@ def test_opcua_matches_batch(wear_recording: Recording, spindle_model: SpindleMo
             (di, "Identification")} <= final["mt_children"]
     assert final["SerialNumber"] == "mill-1"
     assert final["MT.ActualSpeed"] == final["SpindleSpeed"].Value.Value
-    assert final["IsRotating"] is (abs(final["SpindleSpeed"].Value.Value) > 1.0)
+    # IsRotating from the recording itself (its last commanded spindle speed), not from the
+    # value the server published
+    last_rpm = float(rec.hf["CMD_SPEED|SP1"].to_numpy()[-1])
+    assert final["IsRotating"] is (abs(last_rpm) > 1.0)
     a, b = final["MT.CuttingTorque"], final["CuttingTorque"].Value.Value
     assert a == b or (math.isnan(a) and math.isnan(b))  # NaN: the last window only brakes
     assert final["MT.HoleCount"] == 3

@@ -127,3 +127,25 @@ def test_the_documented_example_is_a_valid_machine_file(tmp_path: Path) -> None:
     assert mf.is_identified("spindle.kt_nm_per_a")
     assert not mf.is_identified("spindle.inertia_kg_m2")
     assert mf.machine.name == "dmc60h-cell3"
+
+
+def test_round_trip_keeps_seven_significant_digits(tmp_path: Path) -> None:
+    """Values with every digit the file promises (7 significant; uncertainty 3): a writer
+    that rounds harder, or a reader that parses to float32, loses them. Values of two
+    significant digits (the test above) cannot tell."""
+    vals = {"spindle.kt_nm_per_a": (1.043219, 0.00421),
+            "spindle.viscous_friction_nm_per_rpm": (8.423517e-05, 7.41e-07),
+            "axes.X1.kv_m_min_per_mm": (2.487613, 0.00312),
+            "axes.Y1.coulomb_n": (149.8172, 1.87)}
+    mf = MachineFile().with_records({k: _identified(v, u) for k, (v, u) in vals.items()})
+    back = load_machine(save_machine(mf, tmp_path / "m.toml"))
+    for key, (v, u) in vals.items():
+        rec = back.record(key)
+        assert rec is not None
+        assert rec.value == v, key  # exactly: 7 digits written, 7 read
+        assert rec.uncertainty == u, key
+        assert back.value(key) == v
+    # more digits than the file keeps are rounded to 7 significant, not truncated
+    mf = MachineFile().with_records({"spindle.kt_nm_per_a": _identified(1.04321987, 0.004)})
+    back = load_machine(save_machine(mf, tmp_path / "m2.toml"))
+    assert back.value("spindle.kt_nm_per_a") == 1.04322
