@@ -489,17 +489,17 @@ class OpcUaSink:
 
             mt = await add_machine_tool(server, m, idx)
             same = lambda dv: dv  # noqa: E731
-            rotating = lambda dv: ua.DataValue(  # noqa: E731
-                ua.Variant(bool(abs(float(dv.Value.Value)) > 1.0), ua.VariantType.Boolean),
-                SourceTimestamp=dv.SourceTimestamp, ServerTimestamp=dv.ServerTimestamp)
             self._mirror = {
-                nodes["SpindleSpeed"]: [(mt["ActualSpeed"], same), (mt["IsRotating"], rotating)],
+                nodes["SpindleSpeed"]: [(mt["ActualSpeed"], same)],
                 nodes["CuttingTorque"]: [(mt["CuttingTorque"], same)],
                 nodes["HoleCount"]: [(mt["HoleCount"], same)],
                 nodes["Alarm.Active"]: [(mt["AlarmActive"], same)],
                 nodes["Alarm.Message"]: [(mt["AlarmMessage"], same)],
             }
             nodes["MT.ProgramName"] = mt["ProgramName"]
+            # IsRotating is the state at the window's end (a spindle that stopped inside the
+            # window is not rotating, though the window's mean speed is not zero)
+            nodes["MT.IsRotating"] = mt["IsRotating"]
         await server.start()
         self._server = server
 
@@ -564,10 +564,13 @@ class OpcUaSink:
         c, t, n = cyc[:n_done], tau[:n_done], spd[:n_done]
         _, t_mean, t_peak, last = decimate_peak(c, t, window_cycles=m)
         _, n_mean, _, _ = decimate_peak(c, n, window_cycles=m)
+        n_end = n[np.minimum(np.searchsorted(c, last), c.size - 1)]
         out: list[tuple[Any, Any]] = []
         nd = self._nodes
         for j in range(last.size):
             ts = self._time_ns(int(last[j]))
+            if "MT.IsRotating" in nd:
+                out.append((nd["MT.IsRotating"], self._dv(bool(abs(n_end[j]) > 1.0), "b", ts)))
             out += [(nd["SpindleSpeed"], self._dv(n_mean[j], "d", ts)),
                     (nd["CuttingTorque"], self._dv(t_mean[j], "d", ts)),
                     (nd["CuttingTorquePeak"], self._dv(t_peak[j], "d", ts)),
