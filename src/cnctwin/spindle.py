@@ -1663,9 +1663,11 @@ def inertia_uncertainty(
     ``tau_m - tau_friction(n) = J dOmega/dt`` fitted on the run-ups alone and on the
     run-downs alone: an error of the friction law (its temperature, its form) adds to the
     accelerating torque on the way up and takes from it on the way down, so the two fits
-    differ by twice its effect on J. u(J) combines half their difference (that model error)
-    with the statistical standard error of the pooled fit (its residual inflated by the
-    residual's autocorrelation, the samples being low-passed).
+    differ by twice its effect on J. u(J) combines half their difference, a bound on that
+    model error taken as rectangular (divided by sqrt 3, GUM 4.3.7), with the statistical
+    standard error of the pooled fit (its residual inflated by the residual's
+    autocorrelation, the samples being low-passed). Measured coverage of the resulting 95 %
+    interval: docs/validation-calibration.md.
     """
     speed, _ = spindle_speed_rpm(rec, spindle)
     cur = rec.signal(f"CURRENT|{spindle}").to_numpy(dtype=np.float64)
@@ -1687,7 +1689,10 @@ def inertia_uncertainty(
     rho = float(np.corrcoef(r[1:], r[:-1])[0, 1]) if r.size > 3 else 0.0
     infl = math.sqrt((1.0 + rho) / (1.0 - rho)) if -1.0 < rho < 1.0 else 1.0
     se = float(np.std(r) / math.sqrt(float(np.dot(acc[m], acc[m])))) * infl
-    return math.hypot(se, 0.5 * abs(j_up - j_down))
+    # the friction-law error moves the two fits apart symmetrically about the pooled one: the
+    # pooled J lies within +-|j_up - j_down| / 2 of the truth from this cause, a bound taken
+    # as a rectangular distribution (GUM 4.3.7: u = a / sqrt 3)
+    return math.hypot(se, 0.5 * abs(j_up - j_down) / math.sqrt(3.0))
 
 
 # ====================================================================== speed changes

@@ -5,7 +5,8 @@ simulated (air cut, one drilling cut with the dynamometer, the axis test program
 ``cnctwin calibrate spindle`` and ``cnctwin calibrate axes`` recover them from the files:
 
 * accuracy: Kt, viscous and Coulomb friction within 2 %, Kv within 5 %, jerk time within 10 %
-  of the hidden values (issue 12), every seed;
+  of the hidden values (issue 12), every seed; the spindle inertia within 10 % and the X1/Y1
+  Coulomb friction within 5 % (issue 29; the axes' viscous friction: coverage only);
 * honesty: each hidden value inside its stated 95 % interval (value +- 1.96 standard
   uncertainties) in at least 7 of the 8 seeds (the 20-seed campaign with its coverage per
   parameter is ``benchmarks/bench_calibration_coverage.py``, docs/validation-calibration.md; 8 seeds
@@ -32,21 +33,29 @@ from pathlib import Path
 
 import pytest
 
-from cnctwin.machine import Machine, load_machine
+from cnctwin.machine import Machine, MachineFile, load_machine
 from tests.calibration._campaign import calibrate, hidden_machine, simulate_campaign
 
 N_SEEDS = 8
 MIN_INSIDE = 7
 DT = 0.002
 
-TOLERANCE = {  # relative, issue 12
+TOLERANCE = {  # relative, issue 12; issue 29: J and the axis friction, their coverage too
     "spindle.kt_nm_per_a": 0.02,
     "spindle.viscous_friction_nm_per_rpm": 0.02,
     "spindle.coulomb_friction_nm": 0.02,
+    "spindle.inertia_kg_m2": 0.10,
     "axes.X1.kv_m_min_per_mm": 0.05,
     "axes.Y1.kv_m_min_per_mm": 0.05,
     "axes.X1.jerk_time_s": 0.10,
     "axes.Y1.jerk_time_s": 0.10,
+    "axes.X1.coulomb_n": 0.05,
+    "axes.Y1.coulomb_n": 0.05,
+    # the viscous axis friction from the axis test's few speeds: 8-12 % mean, 45 % max error
+    # over 100 draws (docs/validation-calibration.md), its interval covers: only that is
+    # asserted
+    "axes.X1.viscous_n_per_mm_s": float("inf"),
+    "axes.Y1.viscous_n_per_mm_s": float("inf"),
 }
 
 
@@ -63,6 +72,8 @@ def _run_seed(seed: int, base: Path) -> dict[str, tuple[float, float, float, flo
     for key in TOLERANCE:
         rec = mf.record(key)
         assert rec is not None, f"seed {seed}: {key} not in the machine file"
+        if key not in hidden:  # not drawn: the thesis machine's value (viscous axis friction)
+            hidden[key] = MachineFile().value(key)
         two_cycles = key.endswith("jerk_time_s") and round(float(hidden[key]) / DT) <= 2
         if two_cycles and not rec.identified:
             assert "half-cycle delay" in rec.reason
