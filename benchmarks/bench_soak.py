@@ -65,17 +65,49 @@ def calibrated_machine(d: Path, seed: int) -> tuple[Path, list[str]]:
     return m, sets
 
 
-def draw(d: Path, machine: Path, sets: list[str], seed: int, operations: int) -> SoakTally:
-    """One production draw: simulate, replay through edge run, tally."""
-    prog = production_program(seed, operations=operations)
+TOOLS = """[tools.1]
+kind = "drill"
+diameter_mm = 8.5
+
+[tools.2]
+kind = "tap"
+diameter_mm = 8
+pitch_mm = 1.25
+
+[tools.3]
+kind = "end_mill"
+diameter_mm = 10
+flutes = 2
+helix_deg = 30
+max_chip_mm = 0.1
+
+[tools.4]
+kind = "drill"
+diameter_mm = 8.5
+"""
+STOCK = "0,0,-40,210,210,0"
+
+
+def draw(d: Path, machine: Path, sets: list[str], seed: int, operations: int,
+         milling: bool = False) -> SoakTally:
+    """One production draw: simulate, replay through edge run, tally. ``milling``: the
+    milling operations with an end mill (T3) through a stock, tool table at the edge."""
+    prog = production_program(seed, operations=operations, end_mill=3 if milling else None)
     part = d / f"part{seed}.mpf"
     part.write_text(prog.text, encoding="utf-8")
     sim = d / f"sim{seed}"
+    extra: list[object] = []
+    edge_extra: list[object] = []
+    if milling:
+        tools = d / "tools.toml"
+        tools.write_text(TOOLS, encoding="utf-8")
+        extra = ["--tools", tools, "--stock", STOCK]
+        edge_extra = ["--tools", tools]
     cli("simulate", "--program", part, "--machine", machine, "--material", "aisi1045",
-        "--seed", seed, *sets, "--out", sim)
+        "--seed", seed, *sets, *extra, "--out", sim)
     st = d / f"edge{seed}"
     cli("edge", "run", "--source", sim / f"part{seed}.json", "--machine", machine,
-        "--out", st, "--no-twin")
+        "--out", st, "--no-twin", *edge_extra)
     return tally_run(st / "results.jsonl", read_recording(sim / f"part{seed}.json"),
                      holes_expected=prog.holes, machine_file=machine,
                      noise_a=current_noise_a(sim / "truth.json"))
@@ -213,7 +245,8 @@ def run_faults(draws: int, operations: int, machine_seed: int, first_seed: int,
     return out
 
 
-def run(draws: int, operations: int, machine_seed: int, first_seed: int) -> list[SoakTally]:
+def run(draws: int, operations: int, machine_seed: int, first_seed: int,
+        milling: bool = False) -> list[SoakTally]:
     out: list[SoakTally] = []
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
@@ -225,7 +258,7 @@ def run(draws: int, operations: int, machine_seed: int, first_seed: int) -> list
               f"{'air |tq| max':>12} {'bound':>6} {'over':>5}")
         for k in range(draws):
             s = first_seed + k
-            t = draw(d, machine, sets, s, operations)
+            t = draw(d, machine, sets, s, operations, milling)
             out.append(t)
             print(f"{s:>5} {t.machine_s / 60:6.1f} {t.alarms:6d} "
                   f"{t.holes_found:4d}/{t.holes_expected:<4d} {t.plunge_holes:6d} "
@@ -256,6 +289,9 @@ if __name__ == "__main__":
     ap.add_argument("--faults", action="store_true",
                     help="inject one fault per draw (breakage, load rise, friction rise, "
                     "loose tap)")
+    ap.add_argument("--milling", action="store_true",
+                    help="the milling operations with an end mill (T3) through a stock, with "
+                    "a tool table in the simulator and at the edge")
     ap.add_argument("--kinds", default=",".join(FAULT_KINDS),
                     help="with --faults: the fault kinds, in turn (comma-separated)")
     a = ap.parse_args()
@@ -263,4 +299,4 @@ if __name__ == "__main__":
         run_faults(a.draws, a.operations, a.machine_seed, a.first_seed,
                    tuple(k.strip() for k in a.kinds.split(",") if k.strip()))
     else:
-        print(summary(run(a.draws, a.operations, a.machine_seed, a.first_seed)))
+        print(summary(run(a.draws, a.operations, a.machine_seed, a.first_seed, a.milling)))

@@ -587,8 +587,8 @@ class ProductionProgram:
     surface_z_mm: float = 0.0
 
 
-def production_program(seed: int, *, operations: int = 8, tapping: bool = True
-                       ) -> ProductionProgram:
+def production_program(seed: int, *, operations: int = 8, tapping: bool = True,
+                       end_mill: int | None = None) -> ProductionProgram:
     """Varied production from a seed: drilling, peck drilling, tapping, milling entries and
     contours, tool changes, speed changes, dwells and air moves, in random order.
 
@@ -600,6 +600,13 @@ def production_program(seed: int, *, operations: int = 8, tapping: bool = True
         Number of operations [-].
     tapping : bool, default True
         Include rigid tapping (CYCLE84) among the choices.
+    end_mill : int, optional
+        T number of an end mill: the milling operations change to it (``T.. M6``, 3000 rpm,
+        0.05 mm per tooth of a 2-flute cutter: 300 mm/min) and back to the drilling tool
+        after, and a tool change alternates between two drills (T1, T4; T2 stays the tap);
+        simulate with a tool table and a stock so they cut (``--tools``,
+        ``--stock 0,0,-40,210,210,0``). Without it the drill makes the milling moves (the
+        drilling model gives them no milling load: the original soak).
 
     Returns
     -------
@@ -668,6 +675,9 @@ def production_program(seed: int, *, operations: int = 8, tapping: bool = True
             w, h = float(rng.uniform(10, 40)), float(rng.uniform(10, 40))
             d = float(rng.choice([0.5, 1.0, 2.0]))
             f = float(rng.choice([200.0, 400.0, 800.0]))
+            if end_mill is not None:
+                f = float(rng.choice([200.0, 300.0, 400.0]))
+                lines += ["G0 Z50", f"T{end_mill} M6", "S3000 M3"]
             lines.append(f"G0 X{_fmt(x0)} Y{_fmt(y0)} Z2")
             if kind == "mill":  # straight plunge, then the contour at depth
                 lines.append(f"G1 Z{_fmt(-d)} F100")
@@ -680,13 +690,18 @@ def production_program(seed: int, *, operations: int = 8, tapping: bool = True
                 lines.append(f"G1 X{_fmt(x0)} Y{_fmt(y0)}")
             lines += [f"G1 X{_fmt(x0 + w)} F{_fmt(f)}", f"G1 Y{_fmt(y0 + h)}",
                       f"G1 X{_fmt(x0)}", f"G1 Y{_fmt(y0)}", "G0 Z10"]
+            if end_mill is not None:  # back to the drilling tool at its speed
+                lines += ["G0 Z50", f"T{tool} M6", f"S{_fmt(speed)} M3"]
             ops.append(f"{kind} contour {_fmt(w)} x {_fmt(h)} mm at {_fmt(d)} mm")
         elif kind == "speed":
             speed = float(rng.choice([800.0, 1600.0, 2400.0, 3600.0, 4800.0]))
             lines += [f"S{_fmt(speed)} M3", f"G4 F{_fmt(float(rng.uniform(0.5, 2.0)))}"]
             ops.append(f"speed {_fmt(speed)} rpm")
         elif kind == "tool":
-            tool = 3 - tool if tool in (1, 2) else 1
+            if end_mill is None:
+                tool = 3 - tool if tool in (1, 2) else 1
+            else:  # a second drill (T4): T2 is the tap, the end mill has its own number
+                tool = 5 - tool if tool in (1, 4) else 1
             lines += ["G0 Z50", "M5", f"T{tool} M6", f"S{_fmt(speed)} M3", "G4 F1"]
             ops.append(f"tool change T{tool}")
         else:
