@@ -189,3 +189,27 @@ def test_tapping_program_m8(cycle: str) -> None:
     assert tr.spindle_speed_cmd_rpm.min() == pytest.approx(-400.0)
     with pytest.raises(ConfigError):
         tapping_program(thread="M7")
+
+
+def test_production_with_an_end_mill_changes_to_it_for_the_milling() -> None:
+    """end_mill=3: every milling operation runs with T3 (changed to and back), the drawn
+    tool changes alternate between two drills (T1, T4), the holes are those of the plain
+    draw (the same random choices)."""
+    from cnctwin.sim.gcode import parse_program
+    from cnctwin.sim.programs import production_program
+
+    for seed in range(2000, 2010):
+        plain = production_program(seed, operations=12)
+        mill = production_program(seed, operations=12, end_mill=3)
+        assert mill.holes == plain.holes
+        prog = parse_program(mill.text)
+        active = 0
+        for b in prog.blocks:
+            if b.tool_change and b.tool is not None:
+                active = int(b.tool)
+            if b.kind in ("linear", "arc_cw", "arc_ccw") and b.target.get("Z", 1.0) < 0:
+                assert active == 3, (seed, b.line, b.text)
+            if b.kind == "drill_cycle":
+                assert active in (1, 4), (seed, b.line, b.text)
+            if b.kind == "tap_cycle":
+                assert active == 2, (seed, b.line, b.text)

@@ -676,7 +676,7 @@ def production_program(seed: int, *, operations: int = 8, tapping: bool = True,
             d = float(rng.choice([0.5, 1.0, 2.0]))
             f = float(rng.choice([200.0, 400.0, 800.0]))
             if end_mill is not None:
-                f = float(rng.choice([200.0, 300.0, 400.0]))
+                f = {200.0: 200.0, 400.0: 300.0, 800.0: 400.0}[f]  # no extra random draw
                 lines += ["G0 Z50", f"T{end_mill} M6", "S3000 M3"]
             lines.append(f"G0 X{_fmt(x0)} Y{_fmt(y0)} Z2")
             if kind == "mill":  # straight plunge, then the contour at depth
