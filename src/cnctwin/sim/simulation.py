@@ -225,7 +225,8 @@ def _chunks_from(program: Any, machine: Machine, chunk_cycles: int) -> Iterator[
         for lo in range(0, max(n, 1), chunk_cycles):
             yield _Chunk(lo, _slice_trajectory(program, lo, min(n, lo + chunk_cycles)))
         return
-    if isinstance(program, list | tuple):  # already chunked trajectories
+    if isinstance(program, list | tuple | Iterator):  # already chunked trajectories (an
+        # iterator: produced while the simulation runs, e.g. a feed override in a closed loop)
         off = 0
         for t in program:
             yield _Chunk(off, t)

@@ -70,12 +70,13 @@ class StockMillingProcess(_Process):
     """
 
     def __init__(self, cfg: ScenarioConfig, *, material: Material, zmap: ZMap, tool: EndMill,
-                 **kw: Any) -> None:
+                 hardness_along_x: tuple[tuple[float, float], ...] = (), **kw: Any) -> None:
         super().__init__(**kw)
         self.cfg = cfg
         self.material = material
         self.zmap = zmap
         self.tool = tool
+        self.hardness_along_x = tuple(sorted((float(x), float(f)) for x, f in hardness_along_x))
         self.plunge_cycles = 0
         self.peak_chip_mm = 0.0
         self.peak_chip_cycle: int | None = None
@@ -90,7 +91,13 @@ class StockMillingProcess(_Process):
         n = np.abs(ci.spindle_speed_rpm)
         c = np.where((n > 1.0) & (v_mm_min > 1e-3),
                      v_mm_min / np.maximum(n, 1.0) / self.tool.flutes, 0.0)
-        hard = hardness_factor(self.faults, np.zeros(len(ci), dtype=np.int64))
+        hard = np.broadcast_to(hardness_factor(self.faults, np.zeros(len(ci), dtype=np.int64)),
+                               (len(ci),)).astype(np.float64)
+        if self.hardness_along_x:  # hidden hardness steps along the part: factor from X on
+            xs = np.array([p[0] for p in self.hardness_along_x])
+            fs = np.array([p[1] for p in self.hardness_along_x])
+            k = np.searchsorted(xs, x, side="right") - 1
+            hard = hard * np.where(k >= 0, fs[np.maximum(k, 0)], 1.0)
         step = np.abs(ci.spindle_speed_rpm) / 60.0 * 2.0 * np.pi * dt
         load = cycle_mean_milling_load(
             np.deg2rad(ci.spindle_pos_deg), step, c, eng.axial_depth_mm,
@@ -110,6 +117,7 @@ class StockMillingProcess(_Process):
                  "entry_angle_rad": eng.entry_rad, "exit_angle_rad": eng.exit_rad,
                  "radial_immersion": eng.radial_fraction, "removed_mm3": eng.removed_mm3,
                  "plunge_depth_mm": plunge, "cutting_torque_nm": load.torque_nm,
+                 "hardness_factor": hard,
                  "fx_n": load.fx_n, "fy_n": load.fy_n, "axial_force_n": load.thrust_n}
         keep = eng.engaged | (plunge > 0.0)
         return self._emit(ci, load, {"X1": load.fx_n, "Y1": load.fy_n, "Z1": load.thrust_n},

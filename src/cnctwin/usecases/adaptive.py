@@ -1,0 +1,169 @@
+"""Adaptive feed: hold the cutting torque at a target by the feed override (issue 26).
+
+The edge proposes a feed override from the spindle's cutting torque (the calibrated soft
+sensor: Kt I - B n - tau_f - J dOmega/dt); the control applies it within its bounds. The
+controller is model-based: in the linear edge-force model (``mean_milling_load``) the mean
+cutting torque at a fixed engagement is T = A + B c, with the feed per tooth c proportional
+to the override, so T(o) = T_e + (T_now - T_e) o / o_now, T_e the edge share (the torque at
+zero chip). The override that gives the target is therefore
+
+    o_new = o_now (T_target - T_e) / (T_now - T_e),
+
+moved by a fraction ``gain`` of the way per update (0 < gain <= 1: 1 is a dead-beat step of
+the model; less damps the measurement noise and the engagement changes the model does not
+see). ``edge_share`` (T_e / T_target, default 0.25: the edge force's share of the tangential
+force at a typical chip, docs/optimizer.md) sets T_e; the loop is stable for any share in
+0..1 with gain <= 1 because the update is monotone in T_now.
+
+Air (torque below ``air_nm``): the override goes to its maximum (cutting air costs time).
+Overload (torque above ``overload_nm`` for ``overload_s``): the override goes to its minimum
+and ``state.overload`` asks for a feed hold. Breakage (the torque falls to the air level in
+the middle of a cut that ran above half the target for ``min_cut_s``, while the program still
+feeds): ``state.breakage`` asks for a stop.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from cnctwin.exceptions import ConfigError
+from cnctwin.spindle import SpindleModel
+
+__all__ = ["AdaptiveFeedController", "AdaptiveState"]
+
+
+@dataclass
+class AdaptiveState:
+    """What the controller decided at its last update.
+
+    Attributes
+    ----------
+    override_pct : float
+        Requested feed override [%].
+    torque_nm : float
+        Mean cutting torque of the last update's samples [Nm] (NaN: no usable sample).
+    cutting : bool
+        The tool cut (torque above the air level).
+    overload : bool
+        The torque stayed above the overload limit: feed hold requested.
+    breakage : bool
+        The cut's torque collapsed to air in the middle of a cut: stop requested.
+    history : list of tuple
+        (override, torque, cutting) per update.
+    """
+
+    override_pct: float = 100.0
+    torque_nm: float = math.nan
+    cutting: bool = False
+    overload: bool = False
+    breakage: bool = False
+    history: list[tuple[float, float, bool]] = field(default_factory=list)
+
+
+class AdaptiveFeedController:
+    """Feed override from the spindle's cutting torque (model-based, see module docstring).
+
+    Parameters
+    ----------
+    model : SpindleModel
+        The calibrated spindle (the soft sensor).
+    target_nm : float
+        Cutting torque to hold [Nm].
+    min_pct, max_pct : float, default 50 and 120
+        Override bounds [%].
+    air_nm : float, default 0.15 x target
+        Below: air [Nm].
+    overload_nm : float, default 1.5 x target
+        Above for ``overload_s``: overload [Nm].
+    overload_s : float, default 0.2
+        [s].
+    gain : float, default 0.5
+        Share of the model's step taken per update (0 < gain <= 1).
+    edge_share : float, default 0.25
+        Edge-force share of the target torque [-].
+    fs_hz : float, default 500
+        Sample rate of the signals [Hz].
+    min_cut_s : float, default 0.5
+        Cutting time before a collapse counts as a breakage [s].
+    """
+
+    def __init__(self, model: SpindleModel, *, target_nm: float, min_pct: float = 50.0,
+                 max_pct: float = 120.0, air_nm: float | None = None,
+                 overload_nm: float | None = None, overload_s: float = 0.2, gain: float = 0.5,
+                 edge_share: float = 0.25, fs_hz: float = 500.0, min_cut_s: float = 0.5) -> None:
+        if not (math.isfinite(target_nm) and target_nm > 0):
+            raise ConfigError(f"target_nm must be a positive torque, got {target_nm!r}")
+        if not (0.0 < min_pct <= max_pct):
+            raise ConfigError(f"override bounds {min_pct}..{max_pct} %: give 0 < min <= max")
+        if not (0.0 < gain <= 1.0):
+            raise ConfigError(f"gain must be in (0, 1], got {gain}")
+        if not (0.0 <= edge_share < 1.0):
+            raise ConfigError(f"edge_share must be in [0, 1), got {edge_share}")
+        self.model = model
+        self.target_nm = float(target_nm)
+        self.min_pct, self.max_pct = float(min_pct), float(max_pct)
+        self.air_nm = 0.15 * target_nm if air_nm is None else float(air_nm)
+        self.overload_nm = 1.5 * target_nm if overload_nm is None else float(overload_nm)
+        self.overload_s = float(overload_s)
+        self.gain = float(gain)
+        self.edge_nm = edge_share * target_nm
+        self.fs_hz = float(fs_hz)
+        self.min_cut_s = float(min_cut_s)
+        self.state = AdaptiveState(override_pct=100.0)
+        self._over_s = 0.0
+        self._cut_s = 0.0
+
+    def update(self, current_a: ArrayLike, speed_rpm: ArrayLike, *,
+               feeding: bool = True) -> AdaptiveState:
+        """One control step from the samples since the last one.
+
+        Parameters
+        ----------
+        current_a, speed_rpm : array-like
+            Spindle current [A] and speed [rpm] of the samples since the last update.
+        feeding : bool, default True
+            The program feeds (a feed move is running): a collapse of the torque then is a
+            breakage, not the end of a cut.
+
+        Returns
+        -------
+        AdaptiveState
+        """
+        i = np.asarray(current_a, dtype=np.float64)
+        n = np.asarray(speed_rpm, dtype=np.float64)
+        st = self.state
+        if i.size == 0:
+            return st
+        with np.errstate(invalid="ignore"):
+            tau = self.model.cutting_torque(i, n, fs_hz=self.fs_hz) * np.sign(n)
+        ok = np.isfinite(tau) & (np.abs(n) > 50.0)
+        t_now = float(np.mean(tau[ok])) if ok.any() else math.nan
+        dt = i.size / self.fs_hz
+        st.torque_nm = t_now
+        was_cutting = st.cutting
+        st.cutting = bool(math.isfinite(t_now) and t_now > self.air_nm)
+        o = st.override_pct
+        if not st.cutting:
+            if was_cutting and feeding and self._cut_s >= self.min_cut_s:
+                st.breakage = True
+            self._cut_s = 0.0
+            self._over_s = 0.0
+            o_new = self.max_pct
+        else:
+            self._cut_s += dt
+            self._over_s = self._over_s + dt if t_now > self.overload_nm else 0.0
+            if self._over_s >= self.overload_s:
+                st.overload = True
+                o_new = self.min_pct
+            else:
+                # the linear edge-force model: T(o) = T_e + (T_now - T_e) o / o_now
+                denom = max(t_now - self.edge_nm, 1e-3 * self.target_nm)
+                o_model = o * (self.target_nm - self.edge_nm) / denom
+                o_new = o + self.gain * (o_model - o)
+        st.override_pct = float(min(max(o_new, self.min_pct), self.max_pct))
+        st.history.append((st.override_pct, t_now, st.cutting))
+        return st
