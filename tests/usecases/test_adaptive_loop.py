@@ -145,3 +145,41 @@ def test_the_adaptive_part_is_shorter_and_stays_in_bounds(runs: dict[str, Any]) 
     hard = t["hardness_factor"].to_numpy(dtype=np.float64)
     sel = (np.nan_to_num(torque) > 0.5) & (hard == 1.0)
     assert np.mean(torque[sel]) == pytest.approx(2.38, rel=0.05)
+
+
+def _current_for(model: SpindleModel, torque_nm: float, n_rpm: float, k: int = 50) -> np.ndarray:
+    """The spindle current that gives this cutting torque at a steady speed (Eq. 4.4 by hand)."""
+    return np.full(k, (torque_nm + model.b_nm_per_rpm * n_rpm + model.tau_f_nm)
+                   / model.kt_nm_per_a)
+
+
+def test_controller_on_a_plant_by_hand_air_overload_and_breakage() -> None:
+    """A plant T(o) = 1.0 + 2.0 o/100 Nm (edge 1 Nm, chip 2 Nm at 100 %) and target 2.6 Nm:
+    the model's override is (2.6 - 1.0)/2.0 = 80 %; with edge_share 1/2.6 the controller's
+    model is the plant's, so gain 1 reaches it in one step and gain 0.5 halves the error each
+    step. Air gives the maximum; 0.3 s above 1.5 x target a feed hold; a collapse to air after
+    0.5 s of cut while feeding a stop."""
+    model = SpindleModel(1.04, 8.42e-5, 0.35)
+    n = np.full(50, 3000.0)
+    ctrl = AdaptiveFeedController(model, target_nm=2.6, gain=1.0, edge_share=1.0 / 2.6)
+    st = ctrl.update(_current_for(model, 1.0 + 2.0, 3000.0), n)
+    assert st.cutting and st.override_pct == pytest.approx(80.0, abs=1e-6)
+    half = AdaptiveFeedController(model, target_nm=2.6, gain=0.5, edge_share=1.0 / 2.6)
+    o = 100.0
+    for _ in range(8):
+        o = half.update(_current_for(model, 1.0 + 2.0 * o / 100.0, 3000.0), n).override_pct
+    assert o == pytest.approx(80.0, abs=0.5)
+    # air: the maximum
+    assert half.update(_current_for(model, 0.05, 3000.0), n, feeding=False).override_pct == 120.0
+    assert not half.state.breakage  # the cut ended while not feeding: no breakage
+    # overload: 0.3 s at 5 Nm (> 3.9 Nm) -> feed hold, the minimum
+    ov = AdaptiveFeedController(model, target_nm=2.6)
+    for _ in range(3):
+        st = ov.update(_current_for(model, 5.0, 3000.0), n)
+    assert st.overload and st.override_pct == 50.0
+    # breakage: 0.6 s of cut at the target, then air while the program feeds -> stop
+    br = AdaptiveFeedController(model, target_nm=2.6)
+    for _ in range(6):
+        br.update(_current_for(model, 2.6, 3000.0), n)
+    assert not br.state.breakage
+    assert br.update(_current_for(model, 0.05, 3000.0), n, feeding=True).breakage
