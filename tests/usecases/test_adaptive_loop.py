@@ -183,3 +183,56 @@ def test_controller_on_a_plant_by_hand_air_overload_and_breakage() -> None:
         br.update(_current_for(model, 2.6, 3000.0), n)
     assert not br.state.breakage
     assert br.update(_current_for(model, 0.05, 3000.0), n, feeding=True).breakage
+
+
+def test_edge_run_adaptive_emits_override_messages(tmp_path: Any,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """``edge run --adaptive``: on a replayed program that mills with T2 and drills with T1,
+    the results stream carries ``override`` messages for T2 only (the adapted tool), with the
+    interface's keys, inside the bounds; air raises the override to the maximum. Bad
+    configurations: one line, exit 2."""
+    import json
+
+    from cnctwin.cli import main
+    from cnctwin.edge.model_file import save_spindle_model
+
+    (tmp_path / "tools.toml").write_text(
+        '[tools.1]\nkind = "drill"\ndiameter_mm = 8.5\n\n[tools.2]\nkind = "end_mill"\n'
+        'diameter_mm = 16\nflutes = 2\nhelix_deg = 30\nmax_chip_mm = 0.2\n')
+    (tmp_path / "p.mpf").write_text(
+        "G90 G94 G64\nT2 M6\nS3000 M3\nG0 X-12 Y20 Z5\nG0 Z-2\nG1 X70 F450\nG0 Z10\n"
+        "T1 M6\nS2400 M3\nG95 F0.16\nMCALL CYCLE81(10, 0, 2, -12)\nX20 Y60\nMCALL\nG0 Z50\nM30\n")
+    assert main(["simulate", "--program", str(tmp_path / "p.mpf"), "--material", "aisi1045",
+                 "--tools", str(tmp_path / "tools.toml"), "--stock", "0,0,-30,80,80,0",
+                 "--out", str(tmp_path / "sim")]) == 0
+    s = Machine.thesis_default().spindle
+    model = save_spindle_model(
+        SpindleModel(s.kt_nm_per_a, s.viscous_friction_nm_per_rpm, s.coulomb_friction_nm,
+                     j_kgm2=s.inertia_kg_m2), tmp_path / "spindle.json")
+    cfg = tmp_path / "adaptive.toml"
+    cfg.write_text("min_pct = 50\nmax_pct = 120\n[tools.2]\ntarget_nm = 2.6\n")
+    capsys.readouterr()
+    assert main(["edge", "run", "--source", str(tmp_path / "sim" / "p.json"), "--model",
+                 str(model), "--adaptive", str(cfg), "--out", str(tmp_path / "edge"),
+                 "--quiet", "--no-anomaly", "--no-twin"]) == 0
+    rows = [json.loads(x) for f in sorted((tmp_path / "edge").glob("*.jsonl"))
+            for x in f.read_text().splitlines() if x.strip()]
+    ov = [r for r in rows if r.get("kind") == "override"]
+    assert ov and {r["tool"] for r in ov} == {2}
+    assert {"cycle", "tool", "override_pct", "target", "measured"} <= set(ov[0])
+    assert all(50.0 <= r["override_pct"] <= 120.0 for r in ov)
+    assert all(r["target"] == 2.6 for r in ov)
+    cut = [r for r in ov if r.get("cutting")]
+    assert cut and any(r["override_pct"] > 100.0 for r in cut)  # 2.38 Nm < 2.6: faster
+    # bad configurations
+    for text, needle in (("min_pct = 130\nmax_pct = 120\n[tools.2]\ntarget_nm = 2\n",
+                          "override bounds min_pct 130 .. max_pct 120"),
+                         ("[tools.2]\n", "tools.2: give target_nm or teach_in"),
+                         ("[tools.2]\ntarget = 2\n", "tools.2.target is not a key")):
+        cfg.write_text(text)
+        capsys.readouterr()
+        assert main(["edge", "run", "--source", str(tmp_path / "sim" / "p.json"), "--model",
+                     str(model), "--adaptive", str(cfg), "--out", str(tmp_path / "e2"),
+                     "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert needle in err and len(err.strip().splitlines()) == 1, err

@@ -176,6 +176,10 @@ def _add_run_options(r: argparse.ArgumentParser) -> None:
                    help="teach-in holes of --detector adaptive (6)")
     r.add_argument("--material", default="aisi1045",
                    help="Kienzle material for physics-torque (aisi1045, grey_cast_iron)")
+    r.add_argument("--adaptive", type=Path, metavar="ADAPTIVE.toml",
+                   help="adaptive feed: per tool a target cutting torque (or teach-in); the "
+                   "requested feed override goes on the results stream (kind override); "
+                   "docs/adaptive.md")
     r.add_argument("--tools", type=Path, metavar="TOOLS.toml",
                    help="tool table ([tools.N] with kind, diameter_mm, ...): a plunge of an "
                    "end mill outside a drilling cycle is not counted as a hole")
@@ -520,6 +524,10 @@ def _build(args: argparse.Namespace) -> Any:
     procs: list[Any] = [TorqueProcessor(model)]
     if not args.no_holes:
         procs.append(HoleProcessor(model, tool_kinds=getattr(args, "tool_kinds", None)))
+    if getattr(args, "adaptive_config", None) is not None:
+        from cnctwin.edge.adaptive import AdaptiveProcessor
+
+        procs.append(AdaptiveProcessor(model, args.adaptive_config))
     if not args.no_anomaly:
         from cnctwin.usecases.anomaly import (
             Detector,
@@ -670,6 +678,10 @@ def _run(args: argparse.Namespace) -> int:
     if missing:
         raise ConfigError(f"give {' and '.join('--' + k for k in missing)} (one machine), or "
                           "--config PLANT.toml (many machines)")
+    if getattr(args, "adaptive", None) is not None:  # read before any source starts
+        from cnctwin.edge.adaptive import read_adaptive_config
+
+        args.adaptive_config = read_adaptive_config(args.adaptive)
     if getattr(args, "tools", None) is not None:  # read before any source starts
         from cnctwin.machine import read_tool_table
 

@@ -50,6 +50,8 @@ RESULT_KINDS: dict[str, str] = {
     "twin": "a window of the stream against the calibrated twin (cnctwin.compare): residual "
             "ratio and departures per axis",
     "gap": "the CYCLE counter jumped: cycles missing (never invented)",
+    "override": "adaptive feed: the feed override requested for the active tool (tool, "
+                "override_pct, target, measured; cnctwin.edge.adaptive)",
     "status": "runtime status (rates, lag, counts, queue, gaps)",
     "run": "a run of the runtime began (first message of every run; consumers and the live "
            "page start a new view, so two runs into one state directory are never mixed)",

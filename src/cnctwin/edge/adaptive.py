@@ -1,0 +1,237 @@
+"""Adaptive feed at the edge: ``cnctwin edge run --adaptive ADAPTIVE.toml`` (issue 26).
+
+Per tool (the active tool from the NC events) a target cutting torque, given or taught in;
+every chunk the controller (:class:`cnctwin.usecases.adaptive.AdaptiveFeedController`)
+turns the chunk's spindle current into a requested feed override, emitted on the results
+stream as ``{"kind": "override", "cycle", "tool", "override_pct", "target", "measured"}``;
+an overload or a breakage is also an ``alarm`` (detector ``AdaptiveFeed``). Writing the
+override to the control (OPC UA node, MQTT for a PLC gateway, with a heartbeat) is the next
+step (docs/adaptive.md). A tool the file does not name is not adapted (no override message).
+
+ADAPTIVE.toml::
+
+    min_pct = 50          # override bounds [%]
+    max_pct = 120
+    gain = 0.5            # share of the model's step per update
+    [tools.2]
+    target_nm = 2.6       # hold this cutting torque with T2
+    [tools.3]
+    teach_in = true       # the first steady cut with T3 (>= 1 s) sets its target
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cnctwin.edge.pipeline import Chunk, Result
+from cnctwin.exceptions import ConfigError
+from cnctwin.recording import CounterGap
+from cnctwin.spindle import SpindleModel
+from cnctwin.usecases.adaptive import AdaptiveFeedController
+
+__all__ = ["AdaptiveConfig", "AdaptiveProcessor", "read_adaptive_config"]
+
+_TOP = {"min_pct", "max_pct", "gain", "tools"}
+_TOOL = {"target_nm", "teach_in", "min_pct", "max_pct"}
+
+
+@dataclass(frozen=True)
+class AdaptiveConfig:
+    """What ADAPTIVE.toml says.
+
+    Attributes
+    ----------
+    min_pct, max_pct : float
+        Override bounds [%].
+    gain : float
+        Controller gain (0..1].
+    tools : dict
+        T number -> ``{"target_nm": float | None, "teach_in": bool, "min_pct", "max_pct"}``.
+    source : str
+        The file.
+    """
+
+    min_pct: float = 50.0
+    max_pct: float = 120.0
+    gain: float = 0.5
+    tools: dict[int, dict[str, Any]] = field(default_factory=dict)
+    source: str = "adaptive config"
+
+
+def _num(src: str, key: str, v: Any) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise ConfigError(f"{src}: {key} must be a number, got {v!r}")
+    return float(v)
+
+
+def read_adaptive_config(path: str | Path) -> AdaptiveConfig:
+    """Read and check ADAPTIVE.toml.
+
+    Parameters
+    ----------
+    path : str or path
+        The file.
+
+    Returns
+    -------
+    AdaptiveConfig
+
+    Raises
+    ------
+    ConfigError
+        Unreadable, not TOML, an unknown key, bounds inverted or outside 0-200 %, a tool
+        without a target or teach-in, a target that is not positive; the message names the
+        file and the key.
+    """
+    p = Path(path)
+    src = str(p)
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ConfigError(f"{src}: cannot read the adaptive configuration: "
+                          f"{exc.strerror or exc}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{src}: not TOML: {exc}") from None
+    bad = sorted(set(data) - _TOP)
+    if bad:
+        raise ConfigError(f"{src}: unknown key {bad[0]!r}; keys: {', '.join(sorted(_TOP))}")
+    lo = _num(src, "min_pct", data.get("min_pct", 50.0))
+    hi = _num(src, "max_pct", data.get("max_pct", 120.0))
+    if not (0.0 < lo <= hi <= 200.0):
+        raise ConfigError(f"{src}: override bounds min_pct {lo:g} .. max_pct {hi:g}: give "
+                          "0 < min_pct <= max_pct <= 200")
+    gain = _num(src, "gain", data.get("gain", 0.5))
+    if not (0.0 < gain <= 1.0):
+        raise ConfigError(f"{src}: gain {gain:g} must be in (0, 1]")
+    tools: dict[int, dict[str, Any]] = {}
+    raw = data.get("tools", {})
+    if not isinstance(raw, dict) or not raw:
+        raise ConfigError(f"{src}: no [tools.N] table: name the tools to adapt (target_nm = .. "
+                          "or teach_in = true)")
+    for key, t in raw.items():
+        try:
+            num = int(key)
+        except ValueError:
+            raise ConfigError(f"{src}: [tools.{key}]: the key is the T number") from None
+        if not isinstance(t, dict):
+            raise ConfigError(f"{src}: [tools.{key}] must be a table")
+        unknown = sorted(set(t) - _TOOL)
+        if unknown:
+            raise ConfigError(f"{src}: tools.{key}.{unknown[0]} is not a key; keys: "
+                              f"{', '.join(sorted(_TOOL))}")
+        target = t.get("target_nm")
+        teach = bool(t.get("teach_in", False))
+        if target is None and not teach:
+            raise ConfigError(f"{src}: tools.{key}: give target_nm or teach_in = true")
+        if target is not None and not _num(src, f"tools.{key}.target_nm", target) > 0:
+            raise ConfigError(f"{src}: tools.{key}.target_nm must be a positive torque [Nm]")
+        tlo = _num(src, f"tools.{key}.min_pct", t.get("min_pct", lo))
+        thi = _num(src, f"tools.{key}.max_pct", t.get("max_pct", hi))
+        if not (lo <= tlo <= thi <= hi):
+            raise ConfigError(f"{src}: tools.{key} bounds {tlo:g} .. {thi:g} % must lie within "
+                              f"the file's {lo:g} .. {hi:g} %")
+        tools[num] = {"target_nm": None if target is None else float(target),
+                      "teach_in": teach, "min_pct": tlo, "max_pct": thi}
+    return AdaptiveConfig(min_pct=lo, max_pct=hi, gain=gain, tools=tools, source=src)
+
+
+class AdaptiveProcessor:
+    """Requested feed override per chunk for the adapted tools (an edge processor).
+
+    Parameters
+    ----------
+    model : SpindleModel
+        The calibrated spindle (the soft sensor).
+    config : AdaptiveConfig
+        Targets and bounds per tool.
+    spindle : str, default 'SP1'
+        Spindle axis.
+    teach_s : float, default 1.0
+        Steady cutting time that teaches a tool's target [s].
+    """
+
+    name = "adaptive"
+
+    def __init__(self, model: SpindleModel, config: AdaptiveConfig, *, spindle: str = "SP1",
+                 teach_s: float = 1.0) -> None:
+        self.model = model
+        self.config = config
+        self.spindle = spindle
+        self.teach_s = teach_s
+        self._tool = 0
+        self._ctrl: dict[int, AdaptiveFeedController] = {}
+        self._teach: dict[int, list[float]] = {}
+        self._alarmed: set[tuple[int, str]] = set()
+
+    def _controller(self, tool: int, fs: float) -> AdaptiveFeedController | None:
+        spec = self.config.tools.get(tool)
+        if spec is None:
+            return None
+        if tool not in self._ctrl and spec["target_nm"] is not None:
+            self._ctrl[tool] = AdaptiveFeedController(
+                self.model, target_nm=spec["target_nm"], min_pct=spec["min_pct"],
+                max_pct=spec["max_pct"], gain=self.config.gain, fs_hz=fs)
+        return self._ctrl.get(tool)
+
+    def _track_tool(self, chunk: Chunk) -> None:
+        ev = chunk.events
+        if len(ev) and "active_tool" in ev:
+            t = ev["active_tool"].dropna()
+            if len(t):
+                self._tool = int(t.iloc[-1])
+
+    def process(self, chunk: Chunk) -> list[Result]:
+        """Results for this chunk: one ``override`` (and an ``alarm`` on overload/breakage)."""
+        self._track_tool(chunk)
+        i_col, n_col = f"CURRENT|{self.spindle}", f"CMD_SPEED|{self.spindle}"
+        if i_col not in chunk.signals or n_col not in chunk.signals or chunk.cycles.size == 0:
+            return []
+        fs = 1.0 / chunk.cycle_time_s
+        spec = self.config.tools.get(self._tool)
+        if spec is None:
+            return []
+        i = np.asarray(chunk.signals[i_col], dtype=np.float64)
+        n = np.asarray(chunk.signals[n_col], dtype=np.float64)
+        ctrl = self._controller(self._tool, fs)
+        if ctrl is None:  # teach-in: the mean torque of the first steady cut
+            with np.errstate(invalid="ignore"):
+                tau = self.model.cutting_torque(i, n, fs_hz=fs) * np.sign(n)
+            ok = np.isfinite(tau) & (np.abs(n) > 50.0) & (tau > 0.3)
+            seen = self._teach.setdefault(self._tool, [])
+            if ok.mean() > 0.9:
+                seen.extend(tau[ok].tolist())
+            if len(seen) >= self.teach_s * fs:
+                spec = {**spec, "target_nm": float(np.mean(seen))}
+                self.config.tools[self._tool] = spec
+                ctrl = self._controller(self._tool, fs)
+            if ctrl is None:
+                return []
+        st = ctrl.update(i, n)
+        cyc = int(chunk.cycles[-1])
+        out = [Result("override", cyc, {
+            "tool": self._tool, "override_pct": st.override_pct, "target": ctrl.target_nm,
+            "measured": None if not math.isfinite(st.torque_nm) else st.torque_nm,
+            "cutting": st.cutting, "units": {"target": "Nm", "measured": "Nm",
+                                             "override_pct": "%"}})]
+        for flag, fault, msg in (
+                (st.overload, "overload", "cutting torque above 1.5 x the target: feed hold"),
+                (st.breakage, "breakage", "the cut's torque fell to air while feeding: stop")):
+            if flag and (self._tool, fault) not in self._alarmed:
+                self._alarmed.add((self._tool, fault))
+                out.append(Result("alarm", cyc, {"detector": "AdaptiveFeed", "fault": fault,
+                                                 "tool": self._tool, "message": msg}))
+        return out
+
+    def gap(self, gap: CounterGap) -> list[Result]:
+        """A gap: the controllers keep their state (the next chunk measures anew)."""
+        return []
+
+    def finish(self) -> list[Result]:
+        """Nothing held back."""
+        return []
