@@ -22,7 +22,6 @@ ADAPTIVE.toml::
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -31,6 +30,7 @@ import numpy as np
 
 from cnctwin.edge.pipeline import Chunk, Result
 from cnctwin.exceptions import ConfigError
+from cnctwin.machine.tooltable import read_toml
 from cnctwin.recording import CounterGap
 from cnctwin.spindle import SpindleModel
 from cnctwin.usecases.adaptive import AdaptiveFeedController
@@ -89,15 +89,8 @@ def read_adaptive_config(path: str | Path) -> AdaptiveConfig:
         without a target or teach-in, a target that is not positive; the message names the
         file and the key.
     """
-    p = Path(path)
-    src = str(p)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ConfigError(f"{src}: cannot read the adaptive configuration: "
-                          f"{exc.strerror or exc}") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{src}: not TOML: {exc}") from None
+    src = str(path)
+    data = read_toml(path, what="adaptive configuration")
     bad = sorted(set(data) - _TOP)
     if bad:
         raise ConfigError(f"{src}: unknown key {bad[0]!r}; keys: {', '.join(sorted(_TOP))}")

@@ -24,7 +24,13 @@ from cnctwin.machine.file import (
     save_machine,
 )
 from cnctwin.machine.tools import Drill, EndMill, Tap
-from cnctwin.machine.tooltable import TOOL_KINDS, ToolSpec, ToolTable, read_tool_table
+from cnctwin.machine.tooltable import (
+    TOOL_KINDS,
+    ToolSpec,
+    ToolTable,
+    read_toml,
+    read_tool_table,
+)
 
 __all__ = [
     "KV_UNIT_PER_S",
@@ -45,6 +51,7 @@ __all__ = [
     "dynamic_response_adaptation_times",
     "load_machine",
     "parameter_unit",
+    "read_toml",
     "read_tool_table",
     "save_machine",
 ]

@@ -38,7 +38,7 @@ from typing import Any
 from cnctwin.exceptions import ConfigError
 from cnctwin.machine.tools import Drill, EndMill, Tap
 
-__all__ = ["TOOL_KINDS", "ToolSpec", "ToolTable", "read_tool_table"]
+__all__ = ["TOOL_KINDS", "ToolSpec", "ToolTable", "read_toml", "read_tool_table"]
 
 TOOL_KINDS: tuple[str, ...] = ("end_mill", "drill", "tap")
 """Values of ``kind``."""
@@ -230,6 +230,29 @@ def _tool(src: str, t: str, entry: Any) -> ToolSpec:
     return ToolSpec(**kw)
 
 
+def read_toml(path: str | Path, *, what: str) -> dict[str, Any]:
+    """A TOML file as a dict, or one :class:`ConfigError` naming the file and what it is.
+
+    Parameters
+    ----------
+    path : str or path
+        The file.
+    what : str
+        What the file should be (``"tool table"``), for the message.
+
+    Returns
+    -------
+    dict
+    """
+    p = Path(path)
+    try:
+        return tomllib.loads(p.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read the {what}: {exc.strerror or exc}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{p}: not a TOML {what}: {exc}") from None
+
+
 def read_tool_table(path: str | Path) -> ToolTable:
     """Read a tool table (TOML, ``[tools.N]`` per T number).
 
@@ -249,14 +272,8 @@ def read_tool_table(path: str | Path) -> ToolTable:
         without its unit (``diameter`` instead of ``diameter_mm``); the message names the file,
         the tool and the key.
     """
-    p = Path(path)
-    src = str(p)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ConfigError(f"{src}: cannot read the tool table: {exc.strerror or exc}") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{src}: not a TOML tool table: {exc}") from None
+    src = str(path)
+    data = read_toml(path, what="tool table")
     tools = data.get("tools")
     if not isinstance(tools, Mapping) or not tools:
         raise ConfigError(f"{src}: no [tools.N] tables; give one per T number with kind and "

@@ -21,13 +21,13 @@ one wins over the library's). A material file::
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
 from cnctwin.exceptions import ConfigError
+from cnctwin.machine.tooltable import read_toml
 from cnctwin.sim.cutting import MATERIALS, Material, MillingCoefficients
 
 __all__ = ["MILLING_KEYS", "MaterialSource", "material_from_mapping", "resolve_material"]
@@ -151,13 +151,7 @@ def resolve_material(spec: str, *, machine_materials: Mapping[str, Any] | None =
     s = str(spec)
     if s.lower().endswith(".toml") or Path(s).is_file():
         p = Path(s)
-        try:
-            data = tomllib.loads(p.read_text(encoding="utf-8"))
-        except OSError as exc:
-            raise ConfigError(f"{p}: cannot read the material file: {exc.strerror or exc}"
-                              ) from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"{p}: not a TOML material file: {exc}") from None
+        data = read_toml(p, what="material file")
         name = str(data.get("name", p.stem))
         return MaterialSource(material_from_mapping(data, name=name, source=str(p)),
                               origin="file", where=str(p), uncertainty=_uncertainty(data))
