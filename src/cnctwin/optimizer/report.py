@@ -8,12 +8,21 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+import numpy as np
 import pandas as pd
 
 from cnctwin.optimizer.core import OptimizeResult
 from cnctwin.report import Report
 
 __all__ = ["optimize_report"]
+
+
+def _mean(x: np.ndarray, n: int = 50) -> np.ndarray:
+    """Centred moving mean over ``n`` samples (NaN as 0)."""
+    v = np.nan_to_num(np.asarray(x, dtype=np.float64))
+    if v.size < n:
+        return v
+    return np.convolve(v, np.ones(n) / n, mode="same")
 
 
 def optimize_report(res: OptimizeResult, path: str | Path, *, program: str = "") -> Path:
@@ -54,14 +63,22 @@ def optimize_report(res: OptimizeResult, path: str | Path, *, program: str = "")
         sec.text("The optimized program, simulated on the machine, exceeds no limit.")
     if res.runs:
         fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=False)
+        top = 0.0
         for key, style in (("programmed", "C0"), ("optimized", "C1")):
             run = res.runs[key]
-            axes[0].plot(run.time_s - run.time_s[0], run.cutting_torque_nm, style, lw=0.6,
+            t = run.time_s - run.time_s[0]
+            # 0.1 s means: the tooth passing and the 2 ms sampling averaged out
+            axes[0].plot(t, _mean(run.cutting_torque_nm), style, lw=0.8,
                          label=f"{key} ({run.cycle_time_s:.1f} s)")
-            axes[1].plot(run.time_s - run.time_s[0], run.path_feed_mm_min, style, lw=0.6,
-                         label=key)
-        axes[0].set_ylabel("cutting torque [Nm]")
-        axes[1].set_ylabel("path feed [mm/min]")
+            feed = _mean(run.path_feed_mm_min)
+            axes[1].plot(t, feed, style, lw=0.8, label=key)
+            cutting = _mean(run.cutting_torque_nm) > 0.05
+            if cutting.any():
+                top = max(top, float(np.percentile(feed[cutting], 99)))
+        if top > 0:  # the cutting feeds, not the rapid moves' peaks, set the scale
+            axes[1].set_ylim(0, 1.3 * top)
+        axes[0].set_ylabel("cutting torque, 0.1 s mean [Nm]")
+        axes[1].set_ylabel("path feed, 0.1 s mean [mm/min]")
         axes[1].set_xlabel("time [s]")
         axes[0].legend(loc="upper right")
         fig.tight_layout()
