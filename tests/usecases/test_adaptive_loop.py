@@ -222,6 +222,8 @@ def test_edge_run_adaptive_emits_override_messages(tmp_path: Any,
     assert {"cycle", "tool", "override_pct", "target", "measured"} <= set(ov[0])
     assert all(50.0 <= r["override_pct"] <= 120.0 for r in ov)
     assert all(r["target"] == 2.6 for r in ov)
+    assert [r["heartbeat"] for r in ov] == list(range(1, len(ov) + 1))  # one per message
+    assert all((r["min_pct"], r["max_pct"]) == (50.0, 120.0) for r in ov)
     cut = [r for r in ov if r.get("cutting")]
     assert cut and any(r["override_pct"] > 100.0 for r in cut)  # 2.38 Nm < 2.6: faster
     # bad configurations

@@ -3,7 +3,9 @@
 Per tool (the active tool from the NC events) a target cutting torque, given or taught in;
 every chunk the controller (:class:`cnctwin.usecases.adaptive.AdaptiveFeedController`)
 turns the chunk's spindle current into a requested feed override, emitted on the results
-stream as ``{"kind": "override", "cycle", "tool", "override_pct", "target", "measured"}``;
+stream as ``{"kind": "override", "cycle", "tool", "override_pct", "target", "measured",
+"heartbeat", "min_pct", "max_pct"}`` (``heartbeat`` counts up by one per message: a PLC
+gateway subscribed through ``--publish`` falls back to 100 % when it stops, docs/adaptive.md);
 an overload or a breakage is also an ``alarm`` (detector ``AdaptiveFeed``). Writing the
 override to the control (OPC UA node, MQTT for a PLC gateway, with a heartbeat) is the next
 step (docs/adaptive.md). A tool the file does not name is not adapted (no override message).
@@ -161,6 +163,7 @@ class AdaptiveProcessor:
         self._ctrl: dict[int, AdaptiveFeedController] = {}
         self._teach: dict[int, list[float]] = {}
         self._alarmed: set[tuple[int, str]] = set()
+        self.heartbeat = 0
 
     def _controller(self, tool: int, fs: float) -> AdaptiveFeedController | None:
         spec = self.config.tools.get(tool)
@@ -207,8 +210,10 @@ class AdaptiveProcessor:
                 return []
         st = ctrl.update(i, n)
         cyc = int(chunk.cycles[-1])
+        self.heartbeat += 1
         out = [Result("override", cyc, {
             "tool": self._tool, "override_pct": st.override_pct, "target": ctrl.target_nm,
+            "heartbeat": self.heartbeat, "min_pct": ctrl.min_pct, "max_pct": ctrl.max_pct,
             "measured": None if not math.isfinite(st.torque_nm) else st.torque_nm,
             "cutting": st.cutting, "units": {"target": "Nm", "measured": "Nm",
                                              "override_pct": "%"}})]
