@@ -6,7 +6,9 @@ turns the chunk's spindle current into a requested feed override, emitted on the
 stream as ``{"kind": "override", "cycle", "tool", "override_pct", "target", "measured",
 "heartbeat", "min_pct", "max_pct"}`` (``heartbeat`` counts up by one per message: a PLC
 gateway subscribed through ``--publish`` falls back to 100 % when it stops, docs/adaptive.md);
-an overload or a breakage is also an ``alarm`` (detector ``AdaptiveFeed``). Writing the
+an overload is also an ``alarm`` (detector ``AdaptiveFeed``); a breakage needs the
+engagement model's expectation (program and stock at the edge: next), so the edge does not
+judge it yet (a tool leaving the part looks the same). Writing the
 override to the control (OPC UA node, MQTT for a PLC gateway, with a heartbeat) is the next
 step (docs/adaptive.md). A tool the file does not name is not adapted (no override message).
 

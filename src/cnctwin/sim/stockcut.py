@@ -70,13 +70,16 @@ class StockMillingProcess(_Process):
     """
 
     def __init__(self, cfg: ScenarioConfig, *, material: Material, zmap: ZMap, tool: EndMill,
-                 hardness_along_x: tuple[tuple[float, float], ...] = (), **kw: Any) -> None:
+                 hardness_along_x: tuple[tuple[float, float], ...] = (),
+                 break_at_x_mm: float | None = None, **kw: Any) -> None:
         super().__init__(**kw)
         self.cfg = cfg
         self.material = material
         self.zmap = zmap
         self.tool = tool
         self.hardness_along_x = tuple(sorted((float(x), float(f)) for x, f in hardness_along_x))
+        self.break_at_x_mm = break_at_x_mm
+        self.broken_cycle: int | None = None
         self.plunge_cycles = 0
         self.peak_chip_mm = 0.0
         self.peak_chip_cycle: int | None = None
@@ -103,6 +106,13 @@ class StockMillingProcess(_Process):
             np.deg2rad(ci.spindle_pos_deg), step, c, eng.axial_depth_mm,
             eng.feed_direction_rad, tool=self.tool, material=self.material,
             entry_angle_rad=eng.entry_rad, exit_angle_rad=eng.exit_rad, hardness_factor=hard)
+        if self.break_at_x_mm is not None:  # the cutter breaks: from there on it cuts nothing
+            gone = (x >= self.break_at_x_mm) | (self.broken_cycle is not None)
+            if gone.any() and self.broken_cycle is None:
+                self.broken_cycle = int(ci.cycle[int(np.argmax(gone))])
+            if gone.any():
+                for arr in (load.torque_nm, load.fx_n, load.fy_n, load.thrust_n):
+                    arr[gone] = 0.0
         p0, p1 = eng.entry_rad, eng.exit_rad
         with np.errstate(invalid="ignore"):
             smax = np.where((p0 <= np.pi / 2) & (p1 >= np.pi / 2), 1.0,

@@ -18,8 +18,9 @@ force at a typical chip, docs/optimizer.md) sets T_e; the loop is stable for any
 Air (torque below ``air_nm``): the override goes to its maximum (cutting air costs time).
 Overload (torque above ``overload_nm`` for ``overload_s``): the override goes to its minimum
 and ``state.overload`` asks for a feed hold. Breakage (the torque falls to the air level in
-the middle of a cut that ran above half the target for ``min_cut_s``, while the program still
-feeds): ``state.breakage`` asks for a stop.
+the middle of a cut that ran for ``min_cut_s`` where the engagement model still expects a
+cut, also within the last fifth of an update's samples, so the request comes with the update
+in which it happened): ``state.breakage`` asks for a stop and the override goes to its minimum.
 """
 
 from __future__ import annotations
@@ -118,16 +119,18 @@ class AdaptiveFeedController:
         self._cut_s = 0.0
 
     def update(self, current_a: ArrayLike, speed_rpm: ArrayLike, *,
-               feeding: bool = True) -> AdaptiveState:
+               expect_cut: bool | None = None) -> AdaptiveState:
         """One control step from the samples since the last one.
 
         Parameters
         ----------
         current_a, speed_rpm : array-like
             Spindle current [A] and speed [rpm] of the samples since the last update.
-        feeding : bool, default True
-            The program feeds (a feed move is running): a collapse of the torque then is a
-            breakage, not the end of a cut.
+        expect_cut : bool, optional
+            The engagement model (the program through the stock, ``cnctwin.engagement``)
+            expects the tool in the material at the end of these samples: a collapse of the
+            torque then is a breakage, not the end of a cut. None (not known): breakage is
+            not judged (a tool leaving the part looks the same).
 
         Returns
         -------
@@ -142,17 +145,27 @@ class AdaptiveFeedController:
             tau = self.model.cutting_torque(i, n, fs_hz=self.fs_hz) * np.sign(n)
         ok = np.isfinite(tau) & (np.abs(n) > 50.0)
         t_now = float(np.mean(tau[ok])) if ok.any() else math.nan
+        # a collapse inside the chunk: its last fifth already at the air level (the stop
+        # request then comes with this chunk, not the next)
+        tail = slice(max(int(0.8 * i.size), 0), None)
+        ok_t = ok[tail]
+        t_tail = float(np.mean(tau[tail][ok_t])) if ok_t.any() else math.nan
         dt = i.size / self.fs_hz
         st.torque_nm = t_now
         was_cutting = st.cutting
         st.cutting = bool(math.isfinite(t_now) and t_now > self.air_nm)
+        if (st.cutting and expect_cut and math.isfinite(t_tail) and t_tail < self.air_nm
+                and self._cut_s >= self.min_cut_s):
+            st.breakage = True  # collapsed within this chunk
         o = st.override_pct
         if not st.cutting:
-            if was_cutting and feeding and self._cut_s >= self.min_cut_s:
+            if was_cutting and expect_cut and self._cut_s >= self.min_cut_s:
                 st.breakage = True
             self._cut_s = 0.0
             self._over_s = 0.0
-            o_new = self.max_pct
+            o_new = self.min_pct if st.breakage else self.max_pct
+        elif st.breakage:
+            o_new = self.min_pct  # stop requested: no faster feed into a broken tool
         else:
             self._cut_s += dt
             self._over_s = self._over_s + dt if t_now > self.overload_nm else 0.0
