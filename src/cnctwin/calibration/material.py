@@ -30,7 +30,6 @@ reported as not identified, with the reason, and keeps the base material's value
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -39,7 +38,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cnctwin.engagement import Stock, ZMap
+from cnctwin.engagement import Stock, ZMap, runs_of
 from cnctwin.exceptions import IdentificationError
 from cnctwin.machine import MachineFile, ToolTable
 from cnctwin.recording import Recording
@@ -133,7 +132,6 @@ class _Windows:
     cutting: NDArray[np.bool_]
     ripple: NDArray[np.float64]  # X sin (Fx_f, Fy_f), X cos (..), Y sin (..), Y cos (..)
     z_level: NDArray[np.float64]
-    side_level: NDArray[np.float64]
 
 
 _REG = ("G_c_Sn", "G_span", "G_c_S2", "G_Sc", "G_c_Ss", "G_Sn", "R")
@@ -215,10 +213,7 @@ def engagement_windows(rec: Recording, *, mfile: MachineFile, tools: ToolTable,
     depth = np.zeros(tool.size)
     z_teeth = np.zeros(tool.size)
     radius = np.zeros(tool.size)
-    cuts = np.flatnonzero(np.diff(tool)) + 1
-    b = np.concatenate([[0], cuts, [tool.size]])
-    for lo, hi in itertools.pairwise(b):
-        t = int(tool[lo])
+    for t, lo, hi in runs_of(tool):
         if t not in tools:
             continue
         spec = tools.get(t)
@@ -287,7 +282,7 @@ def engagement_windows(rec: Recording, *, mfile: MachineFile, tools: ToolTable,
         return _Windows(torque=empty, fx=empty, fy=empty, fz=empty,
                         reg=np.zeros((0, len(_REG))), cutting=np.zeros(0, dtype=bool),
                         ripple=np.zeros((0, 8)),
-                        z_level=empty, side_level=empty)
+                        z_level=empty)
 
     def wmean(x: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.array([float(np.mean(x[i * w:(i + 1) * w])) for i in rows])
@@ -296,9 +291,7 @@ def engagement_windows(rec: Recording, *, mfile: MachineFile, tools: ToolTable,
     ripw = np.vstack([wmean(ripple[:, j]) for j in range(ripple.shape[1])]).T
     return _Windows(torque=wmean(torque), fx=wmean(fxf), fy=wmean(fyf), fz=wmean(ext["Z1"]),
                     reg=regw, cutting=np.array(kind), ripple=ripw,
-                    z_level=np.round(wmean(pos["Z1"]), 2),
-                    side_level=np.round(wmean(-pos["X1"] * st + pos["Y1"] * ct), 1)
-                    + 1e3 * np.round(wmean(th), 1))
+                    z_level=np.round(wmean(pos["Z1"]), 2))
 
 
 def _lstsq(a: NDArray[np.float64], y: NDArray[np.float64]

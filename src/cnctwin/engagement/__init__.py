@@ -7,6 +7,6 @@ giving per control cycle the engagement (entry and exit angle, axial depth, remo
 that the mechanistic milling model needs, and removing the material.
 """
 
-from cnctwin.engagement.stock import Engagement, Stock, ZMap, parse_stock
+from cnctwin.engagement.stock import Engagement, Stock, ZMap, parse_stock, runs_of
 
-__all__ = ["Engagement", "Stock", "ZMap", "parse_stock"]
+__all__ = ["Engagement", "Stock", "ZMap", "parse_stock", "runs_of"]

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cnctwin.engagement import Stock
+from cnctwin.engagement import Stock, runs_of
 from cnctwin.exceptions import ConfigError
 from cnctwin.machine import MachineFile, ToolTable
 from cnctwin.optimizer.constraints import (
@@ -118,14 +118,6 @@ class OptimizeResult:
     runs: dict[str, Any] = field(default_factory=dict)
 
 
-def _runs(values: NDArray[np.int64]) -> list[tuple[int, int, int]]:
-    if values.size == 0:
-        return []
-    cuts = np.flatnonzero(np.diff(values)) + 1
-    b = np.concatenate([[0], cuts, [values.size]])
-    return [(int(values[lo]), int(lo), int(hi)) for lo, hi in itertools.pairwise(b)]
-
-
 def _old_feed(blk: Block) -> float | None:
     if blk.feed_mode == "G95":
         if blk.feed_mm_per_rev is None or not blk.speed_rpm:
@@ -193,7 +185,7 @@ def plan_feeds(program: Program, trace: EngagementTrace, tools: ToolTable,
     incremental = any("91" in b.words.get("G", ()) for b in program.blocks)
     plan: dict[int, list[Piece]] = {}
     lines: list[LinePlan] = []
-    for bi, lo, hi in _runs(trace.block_index):
+    for bi, lo, hi in runs_of(trace.block_index):
         if bi in plan or bi >= len(program.blocks):
             continue
         blk = program.blocks[bi]

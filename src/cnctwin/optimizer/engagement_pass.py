@@ -8,7 +8,6 @@ through the Z-map gives it for every control cycle; the feed limits
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -16,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from cnctwin.engagement import Stock, ZMap
+from cnctwin.engagement import Stock, ZMap, runs_of
 from cnctwin.machine import Machine, ToolTable
 from cnctwin.sim.gcode import Program
 from cnctwin.sim.simulation import iter_chunks
@@ -114,10 +113,7 @@ def engagement_pass(program: Program, machine: Machine, tools: ToolTable, stock:
         e1 = np.full(nn, np.nan)
         a = np.zeros(nn)
         vol = np.zeros(nn)
-        cuts = np.flatnonzero(np.diff(tool)) + 1
-        bounds = np.concatenate([[0], cuts, [nn]])
-        for lo, hi in itertools.pairwise(bounds):
-            t = int(tool[lo])
+        for t, lo, hi in runs_of(tool):
             if t not in tools:
                 continue
             spec = tools.get(t)

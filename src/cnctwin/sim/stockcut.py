@@ -11,7 +11,6 @@ hole.
 from __future__ import annotations
 
 import dataclasses
-import itertools
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -19,7 +18,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from cnctwin.engagement import ZMap
+from cnctwin.engagement import ZMap, runs_of
 from cnctwin.sim.config import ScenarioConfig
 from cnctwin.sim.cutting import Material, cycle_mean_milling_load
 from cnctwin.sim.faults import hardness_factor
@@ -159,13 +158,10 @@ class ToolDispatch:
     def __call__(self, ci: CuttingInput) -> CuttingOutput:
         n = len(ci)
         tool = np.asarray(ci.tool, dtype=np.int64)
-        cuts = np.flatnonzero(np.diff(tool)) + 1
-        bounds = np.concatenate([[0], cuts, [n]])
         torque = np.zeros(n)
         forces: dict[str, NDArray[np.float64]] = {}
         truths: list[pd.DataFrame] = []
-        for lo, hi in itertools.pairwise(bounds):
-            t = int(tool[lo])
+        for t, lo, hi in runs_of(tool):
             hook = self.hooks.get(t)
             if t in self.sweeps:
                 zmap, dia = self.sweeps[t]
