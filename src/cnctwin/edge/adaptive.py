@@ -167,13 +167,15 @@ class AdaptiveProcessor:
         self._alarmed: set[tuple[int, str]] = set()
         self.heartbeat = 0
 
-    def _controller(self, tool: int, fs: float) -> AdaptiveFeedController | None:
+    def _controller(self, tool: int, fs: float, *, taught_nm: float | None = None
+                    ) -> AdaptiveFeedController | None:
         spec = self.config.tools.get(tool)
         if spec is None:
             return None
-        if tool not in self._ctrl and spec["target_nm"] is not None:
+        target = spec["target_nm"] if spec["target_nm"] is not None else taught_nm
+        if tool not in self._ctrl and target is not None:
             self._ctrl[tool] = AdaptiveFeedController(
-                self.model, target_nm=spec["target_nm"], min_pct=spec["min_pct"],
+                self.model, target_nm=target, min_pct=spec["min_pct"],
                 max_pct=spec["max_pct"], gain=self.config.gain, fs_hz=fs)
         return self._ctrl.get(tool)
 
@@ -205,9 +207,8 @@ class AdaptiveProcessor:
             if ok.mean() > 0.9:
                 seen.extend(tau[ok].tolist())
             if len(seen) >= self.teach_s * fs:
-                spec = {**spec, "target_nm": float(np.mean(seen))}
-                self.config.tools[self._tool] = spec
-                ctrl = self._controller(self._tool, fs)
+                # the taught target lives in this tool's controller, not in the config
+                ctrl = self._controller(self._tool, fs, taught_nm=float(np.mean(seen)))
             if ctrl is None:
                 return []
         st = ctrl.update(i, n)
