@@ -31,7 +31,7 @@ from cnctwin.machine import MachineFile, ToolTable
 from cnctwin.optimizer.constraints import Limits
 from cnctwin.sim.gcode import Program
 from cnctwin.sim.materials import MaterialSource
-from cnctwin.sim.part import S1_WINDOW_S, s1_load
+from cnctwin.sim.part import S1_WINDOW_S, block_lines, s1_load
 
 __all__ = ["S1_WINDOW_S", "VerifyRun", "load_violations", "verify_run"]
 
@@ -69,15 +69,6 @@ class VerifyRun:
     result: Any = None
 
 
-def _lines_per_cycle(rec: Any, text: str) -> NDArray[np.int64]:
-    blocks = rec.events[rec.events["kind"] == "block"].sort_values("cycle", kind="stable")
-    bc = blocks["cycle"].to_numpy(dtype=np.int64)
-    offs = blocks["seek_offset"].to_numpy(dtype=np.int64)
-    line_of = np.array([text.count("\n", 0, int(o)) + 1 for o in offs], dtype=np.int64)
-    k = np.searchsorted(bc, np.asarray(rec.cycles, dtype=np.int64), side="right") - 1
-    return np.where(k >= 0, line_of[np.maximum(k, 0)], 0)
-
-
 def load_violations(rec: Any, text: str, *, mfile: MachineFile, limits: Limits,
                     tool_peaks: dict[str, Any] | None = None
                     ) -> tuple[list[dict[str, Any]], NDArray[np.int64]]:
@@ -105,7 +96,7 @@ def load_violations(rec: Any, text: str, *, mfile: MachineFile, limits: Limits,
     """
     m = mfile.machine
     sp = m.spindle_name
-    line = _lines_per_cycle(rec, text)
+    line = block_lines(rec, text).per_cycle(rec.cycles)
     t = np.asarray(rec.time_s, dtype=np.float64)
     win = round(S1_WINDOW_S / m.cycle_time_s)
     out: list[dict[str, Any]] = []

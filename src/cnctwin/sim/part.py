@@ -7,6 +7,7 @@ import dataclasses
 import math
 import re
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -49,15 +50,65 @@ from cnctwin.sim.runner import (
 from cnctwin.sim.simulation import simulate
 from cnctwin.sim.stockcut import StockMillingProcess, ToolDispatch
 
-__all__ = ["S1_WINDOW_S", "drive_limits_check", "part_program", "s1_load"]
+__all__ = ["S1_WINDOW_S", "BlockLines", "block_lines", "drive_limits_check", "part_program",
+           "s1_load"]
 
 
 _DRILL_WORDS = ("CYCLE81", "CYCLE82", "CYCLE83", "G81", "G82", "G83")
 
 
-def _line_of_offset(text: str, offset: int) -> int:
-    """1-based program line of a byte offset (the block events' ``seek_offset``)."""
-    return text.encode("utf-8")[: max(offset, 0)].count(b"\n") + 1
+@dataclass(frozen=True)
+class BlockLines:
+    """Which program line (and block text) runs in a cycle, from a recording's block events.
+
+    Attributes
+    ----------
+    cycles : numpy.ndarray of int64
+        First cycle of each block event, sorted.
+    lines : numpy.ndarray of int64
+        1-based program line of each (from the byte offset ``seek_offset``).
+    blocks : list of str
+        The block text of each (``gcode``).
+    """
+
+    cycles: NDArray[np.int64]
+    lines: NDArray[np.int64]
+    blocks: list[str]
+
+    def at(self, cycle: int) -> tuple[int | None, str | None]:
+        """The line and block text executing in ``cycle`` (None before the first block)."""
+        k = int(np.searchsorted(self.cycles, int(cycle), side="right")) - 1
+        return (None, None) if k < 0 else (int(self.lines[k]), self.blocks[k])
+
+    def per_cycle(self, cycles: NDArray[np.int64]) -> NDArray[np.int64]:
+        """The line per cycle (0 before the first block)."""
+        k = np.searchsorted(self.cycles, np.asarray(cycles, dtype=np.int64), side="right") - 1
+        if self.lines.size == 0:
+            return np.zeros(k.size, dtype=np.int64)
+        return np.where(k >= 0, self.lines[np.maximum(k, 0)], 0)
+
+
+def block_lines(rec: Recording, program_text: str) -> BlockLines:
+    """The :class:`BlockLines` of a recording of ``program_text``.
+
+    Parameters
+    ----------
+    rec : Recording
+        Its block events (``cycle``, ``seek_offset``, ``gcode``).
+    program_text : str
+        The program (line numbers from the byte offsets).
+
+    Returns
+    -------
+    BlockLines
+    """
+    blocks = rec.events[rec.events["kind"] == "block"].sort_values("cycle", kind="stable")
+    data = program_text.encode("utf-8")
+    offs = blocks["seek_offset"].to_numpy(dtype=np.int64)
+    return BlockLines(cycles=blocks["cycle"].to_numpy(dtype=np.int64),
+                      lines=np.array([data[: max(int(o), 0)].count(b"\n") + 1 for o in offs],
+                                     dtype=np.int64),
+                      blocks=[str(g) for g in blocks["gcode"]])
 
 
 S1_WINDOW_S = 10.0
@@ -126,18 +177,12 @@ def drive_limits_check(rec: Recording, machine: Machine, program_text: str) -> d
     """
     sp = machine.spindle
     name = machine.spindle_name
-    blocks = rec.events[rec.events["kind"] == "block"].sort_values("cycle", kind="stable")
-    bc = blocks["cycle"].to_numpy(dtype=np.int64)
+    bl = block_lines(rec, program_text)
 
     def where(idx: int) -> dict[str, Any]:
         cyc = int(rec.cycles[idx])
-        k = int(np.searchsorted(bc, cyc, side="right")) - 1
-        if k < 0:
-            return {"cycle": cyc, "time_s": float(rec.time_s[idx]), "line": None, "block": None}
-        row = blocks.iloc[k]
-        return {"cycle": cyc, "time_s": float(rec.time_s[idx]),
-                "line": _line_of_offset(program_text, int(row["seek_offset"])),
-                "block": str(row["gcode"])}
+        line, block = bl.at(cyc)
+        return {"cycle": cyc, "time_s": float(rec.time_s[idx]), "line": line, "block": block}
 
     p_s1 = sp.rated_torque_nm * sp.base_speed_rpm * 2.0 * math.pi / 60.0
     t_peak = sp.current_limit_a * sp.kt_nm_per_a
@@ -199,17 +244,14 @@ def drive_limits_check(rec: Recording, machine: Machine, program_text: str) -> d
 def _chip_check(lim: dict[str, Any], hook: ToolDispatch, rec: Recording,
                 tools: ToolTable | None, text: str) -> None:
     """Peak chip thickness of each end mill (feed per tooth x sin(phi)_max) vs its limit."""
-    blocks = rec.events[rec.events["kind"] == "block"].sort_values("cycle", kind="stable")
-    bc = blocks["cycle"].to_numpy(dtype=np.int64)
+    bl = block_lines(rec, text)
     out = lim.setdefault("tools", {})
     for t, h in sorted(hook.hooks.items()):
         if not isinstance(h, StockMillingProcess) or h.peak_chip_cycle is None:
             continue
         spec = tools.tools.get(t) if tools is not None else None
         limit = spec.max_chip_mm if spec is not None else None
-        k = int(np.searchsorted(bc, h.peak_chip_cycle, side="right")) - 1
-        line = _line_of_offset(text, int(blocks.iloc[k]["seek_offset"])) if k >= 0 else None
-        block = str(blocks.iloc[k]["gcode"]) if k >= 0 else None
+        line, block = bl.at(h.peak_chip_cycle)
         out[f"T{t}"] = {"chip_mm": {"peak": h.peak_chip_mm, "limit": limit, "line": line,
                                     "block": block}}
         if limit is not None and h.peak_chip_mm > limit:
