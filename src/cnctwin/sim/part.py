@@ -332,16 +332,13 @@ def _tool_hooks(cfg: ScenarioConfig, prog: Program, tools: ToolTable, stock: Sto
             hooks[t] = TappingProcess(c, material=material, faults=(), **common)
             if zmap is not None:
                 sweeps[t] = (zmap, spec.diameter_mm)
+        elif material.milling is None:
+            raise ConfigError(f"material {material.name!r} has no milling coefficients and "
+                              f"T{t} is an end mill: give a material file with [milling]")
         elif zmap is not None:
-            if material.milling is None:
-                raise ConfigError(f"material {material.name!r} has no milling coefficients and "
-                                  f"T{t} is an end mill: give a material file with [milling]")
             hooks[t] = StockMillingProcess(cfg, material=material, zmap=zmap,
                                            tool=spec.end_mill(), faults=(), **common)
         else:
-            if material.milling is None:
-                raise ConfigError(f"material {material.name!r} has no milling coefficients and "
-                                  f"T{t} is an end mill: give a material file with [milling]")
             c = dataclasses.replace(cfg, end_mill=spec.end_mill())
             hooks[t] = MillingProcess(c, material=material, faults=(), **common)
     if faults and drill_faults:
