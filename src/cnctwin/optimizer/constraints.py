@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cnctwin.machine import MachineFile, ToolSpec
-from cnctwin.sim.cutting import MillingCoefficients
+from cnctwin.sim.cutting import MillingCoefficients, max_chip_factor
 from cnctwin.spindle import SpindleModel
 
 __all__ = [
@@ -198,8 +198,7 @@ def feed_limits(entry_rad: NDArray[np.float64], exit_rad: NDArray[np.float64],
     # mean torque A + B c, peak P + Q c [Nm]
     big_a = z * a * r / (2.0 * math.pi) * k.kte_n_per_mm * span / 1000.0 * g
     big_b = z * a * r / (2.0 * math.pi) * k.ktc_n_per_mm2 * sn / 1000.0 * g
-    smax = np.where((p0 <= math.pi / 2) & (p1 >= math.pi / 2), 1.0,
-                    np.maximum(np.sin(p0), np.sin(p1)))
+    smax = max_chip_factor(p0, p1)
     kmax = np.ceil(span * z / (2.0 * math.pi) - 1e-9)
     peak_p = kmax * a * r * k.kte_n_per_mm / 1000.0 * g
     peak_q = kmax * a * r * k.ktc_n_per_mm2 * smax / 1000.0 * g

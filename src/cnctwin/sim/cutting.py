@@ -41,6 +41,7 @@ __all__ = [
     "get_material",
     "kienzle_kc",
     "lip_height_difference_um",
+    "max_chip_factor",
     "mean_milling_load",
     "milling_from_kienzle",
     "milling_load",
@@ -906,6 +907,27 @@ def cycle_mean_milling_load(
     return out
 
 
+def max_chip_factor(entry_angle_rad: ArrayLike, exit_angle_rad: ArrayLike
+                    ) -> NDArray[np.float64]:
+    """Largest sin(phi) over the immersion ``entry..exit`` (chip thickness = c x this) [-].
+
+    Parameters
+    ----------
+    entry_angle_rad, exit_angle_rad : array-like
+        Immersion in the feed frame [rad] (0..pi; NaN gives NaN).
+
+    Returns
+    -------
+    numpy.ndarray
+        1 where the immersion contains pi/2, else the larger of sin(entry), sin(exit).
+    """
+    p0 = np.asarray(entry_angle_rad, dtype=np.float64)
+    p1 = np.asarray(exit_angle_rad, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        return np.where((p0 <= math.pi / 2) & (p1 >= math.pi / 2), 1.0,
+                        np.maximum(np.sin(p0), np.sin(p1)))
+
+
 @dataclass(frozen=True)
 class MeanMillingLoad:
     """Milling load averaged over a spindle revolution (what :func:`mean_milling_load` returns).
@@ -1000,8 +1022,7 @@ def mean_milling_load(
     fyf = g * (k.ktc_n_per_mm2 * c * ss + k.kte_n_per_mm * sn - k.krc_n_per_mm2 * c * s2
                - k.kre_n_per_mm * sc)
     fa = g * (k.kac_n_per_mm2 * c * sn + k.kae_n_per_mm * (p1 - p0))
-    smax = np.where((p0 <= math.pi / 2) & (p1 >= math.pi / 2), 1.0,
-                    np.maximum(np.sin(p0), np.sin(p1)))
+    smax = max_chip_factor(p0, p1)
     ct, st = np.cos(th), np.sin(th)
     return MeanMillingLoad(
         torque_nm=torque, fx_n=fxf * ct - fyf * st, fy_n=fxf * st + fyf * ct, axial_n=fa,

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from cnctwin.engagement import ZMap, runs_of
 from cnctwin.sim.config import ScenarioConfig
-from cnctwin.sim.cutting import Material, cycle_mean_milling_load
+from cnctwin.sim.cutting import Material, cycle_mean_milling_load, max_chip_factor
 from cnctwin.sim.faults import hardness_factor
 from cnctwin.sim.processes import _Process, _Progress
 from cnctwin.sim.simulation import CuttingInput, CuttingOutput
@@ -112,11 +112,7 @@ class StockMillingProcess(_Process):
             if gone.any():
                 for arr in (load.torque_nm, load.fx_n, load.fy_n, load.thrust_n):
                     arr[gone] = 0.0
-        p0, p1 = eng.entry_rad, eng.exit_rad
-        with np.errstate(invalid="ignore"):
-            smax = np.where((p0 <= np.pi / 2) & (p1 >= np.pi / 2), 1.0,
-                            np.maximum(np.sin(p0), np.sin(p1)))
-        chip = np.where(eng.engaged, c * smax, 0.0)
+        chip = np.where(eng.engaged, c * max_chip_factor(eng.entry_rad, eng.exit_rad), 0.0)
         if chip.size and chip.max() > self.peak_chip_mm:
             j = int(np.argmax(chip))
             self.peak_chip_mm, self.peak_chip_cycle = float(chip[j]), int(ci.cycle[j])
