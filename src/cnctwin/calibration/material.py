@@ -42,7 +42,7 @@ from cnctwin.engagement import Stock, ZMap, runs_of
 from cnctwin.exceptions import IdentificationError
 from cnctwin.machine import MachineFile, ToolTable
 from cnctwin.recording import Recording
-from cnctwin.sim.cutting import Material, MillingCoefficients
+from cnctwin.sim.cutting import Material, MillingCoefficients, arc_integrals
 from cnctwin.sim.materials import MILLING_KEYS
 from cnctwin.spindle import SpindleModel
 
@@ -237,10 +237,7 @@ def engagement_windows(rec: Recording, *, mfile: MachineFile, tools: ToolTable,
     p1 = np.where(on, e1, 0.0)
     a = np.where(on, depth, 0.0)
     g = z_teeth * a / (2.0 * math.pi)
-    sn = np.cos(p0) - np.cos(p1)
-    sc = np.sin(p1) - np.sin(p0)
-    ss = (p1 - p0) / 2.0 - (np.sin(2.0 * p1) - np.sin(2.0 * p0)) / 4.0
-    s2 = (np.sin(p1) ** 2 - np.sin(p0) ** 2) / 2.0
+    _, sn, sc, ss, s2 = arc_integrals(p0, p1)
     reg = np.vstack([g * c * sn * radius / 1000.0, g * (p1 - p0) * radius / 1000.0,
                      g * c * s2, g * sc, g * c * ss, g * sn, radius]).T
     ct, st = np.cos(th), np.sin(th)

@@ -33,6 +33,7 @@ __all__ = [
     "Material",
     "MeanMillingLoad",
     "MillingCoefficients",
+    "arc_integrals",
     "cycle_mean_milling_load",
     "drill_thrust_n",
     "drill_torque_nm",
@@ -800,6 +801,30 @@ def milling_load(
     )
 
 
+def arc_integrals(start_rad: ArrayLike, end_rad: ArrayLike
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                             NDArray[np.float64], NDArray[np.float64]]:
+    """The integrals of the tooth-angle functions of the edge-force model over u..v.
+
+    Parameters
+    ----------
+    start_rad, end_rad : array-like
+        The arc u..v of tooth angles [rad].
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``(v - u, int sin, int cos, int sin^2, int sin cos)`` =
+        ``(v - u, cos u - cos v, sin v - sin u, (v - u)/2 - (sin 2v - sin 2u)/4,
+        (sin^2 v - sin^2 u)/2)``.
+    """
+    u = np.asarray(start_rad, dtype=np.float64)
+    v = np.asarray(end_rad, dtype=np.float64)
+    return (v - u, np.cos(u) - np.cos(v), np.sin(v) - np.sin(u),
+            (v - u) / 2.0 - (np.sin(2.0 * v) - np.sin(2.0 * u)) / 4.0,
+            (np.sin(v) ** 2 - np.sin(u) ** 2) / 2.0)
+
+
 def cycle_mean_milling_load(
     spindle_angle_rad: ArrayLike,
     angle_step_rad: ArrayLike,
@@ -885,11 +910,12 @@ def cycle_mean_milling_load(
             ok = active & (v > u)
             u = np.where(ok, u - shift, 0.0)
             v = np.where(ok, v - shift, 0.0)
-            i1 += v - u
-            isn += np.cos(u) - np.cos(v)
-            ics += np.sin(v) - np.sin(u)
-            is2 += (v - u) / 2.0 - (np.sin(2.0 * v) - np.sin(2.0 * u)) / 4.0
-            isc += (np.sin(v) ** 2 - np.sin(u) ** 2) / 2.0
+            d1, dsn, dcs, ds2, dsc = arc_integrals(u, v)
+            i1 += d1
+            isn += dsn
+            ics += dcs
+            is2 += ds2
+            isc += dsc
     g = a * hard / st
     torque = g * (k.ktc_n_per_mm2 * c * isn + k.kte_n_per_mm * i1) * t.diameter_mm / 2000.0
     fxf = -g * (k.ktc_n_per_mm2 * c * isc + k.kte_n_per_mm * ics
@@ -1011,10 +1037,7 @@ def mean_milling_load(
     p1 = np.where(on, p1, 0.0)
     a = np.where(on, a, 0.0)
     k = coefficients
-    sn = np.cos(p0) - np.cos(p1)
-    sc = np.sin(p1) - np.sin(p0)
-    ss = (p1 - p0) / 2.0 - (np.sin(2.0 * p1) - np.sin(2.0 * p0)) / 4.0
-    s2 = (np.sin(p1) ** 2 - np.sin(p0) ** 2) / 2.0
+    _, sn, sc, ss, s2 = arc_integrals(p0, p1)
     g = flutes * a * hard / (2.0 * math.pi)
     torque = g * (diameter_mm / 2000.0) * (k.ktc_n_per_mm2 * c * sn + k.kte_n_per_mm * (p1 - p0))
     fxf = g * (-k.ktc_n_per_mm2 * c * s2 - k.kte_n_per_mm * sc - k.krc_n_per_mm2 * c * ss
