@@ -180,6 +180,13 @@ def _add_run_options(r: argparse.ArgumentParser) -> None:
                    help="adaptive feed: per tool a target cutting torque (or teach-in); the "
                    "requested feed override goes on the results stream (kind override); "
                    "docs/adaptive.md")
+    r.add_argument("--stock", metavar="X0,Y0,Z0,X1,Y1,Z1",
+                   help="with --adaptive and --tools: the raw part [mm]; the recorded tool "
+                   "positions through its Z-map tell a breakage (torque falls to air while the "
+                   "model expects a cut) from a tool leaving the part")
+    r.add_argument("--interval-s", type=float, default=0.1,
+                   help="with --source opc.tcp://...: the server's interval between values "
+                   "(default 0.1 s; a live simulator says its own in its node file)")
     r.add_argument("--tools", type=Path, metavar="TOOLS.toml",
                    help="tool table ([tools.N] with kind, diameter_mm, ...): a plunge of an "
                    "end mill outside a drilling cycle is not counted as a hole")
@@ -514,10 +521,26 @@ def _build(args: argparse.Namespace) -> Any:
         if args.nodes is None:
             raise ConfigError("an OPC UA source needs --nodes FILE (the node file: [signals] "
                               "column = node id; docs/opcua-client.md)")
-        src = OpcUaSource(args.source, read_node_map(args.nodes),
-                          options=client_options(args), idle_timeout_s=args.idle_timeout_s,
-                          machine=args.machine)
-        src.start()
+        nodes = read_node_map(args.nodes)
+        options = client_options(args)
+        writer = None
+        if getattr(args, "adaptive_config", None) is not None and nodes.write:
+            from cnctwin.edge.control_write import ControlWriter
+
+            cfg = args.adaptive_config
+            # checked before anything is read or written: the session, every write node
+            writer = ControlWriter(args.source, nodes.write, options=options,
+                                   min_pct=cfg.min_pct, max_pct=cfg.max_pct).start()
+        src = OpcUaSource(args.source, nodes, options=options,
+                          idle_timeout_s=args.idle_timeout_s, machine=args.machine,
+                          interval_s=args.interval_s)
+        try:
+            src.start()
+        except BaseException:
+            if writer is not None:
+                writer.close()
+            raise
+        args.control_writer = writer
     else:
         src = ReplaySource(args.source, chunk_cycles=args.chunk_cycles, speed=args.speed)
     machine = args.machine or src.machine or "machine"
@@ -527,7 +550,9 @@ def _build(args: argparse.Namespace) -> Any:
     if getattr(args, "adaptive_config", None) is not None:
         from cnctwin.edge.adaptive import AdaptiveProcessor
 
-        procs.append(AdaptiveProcessor(model, args.adaptive_config))
+        procs.append(AdaptiveProcessor(model, args.adaptive_config,
+                                       stock=getattr(args, "stock_spec", None),
+                                       diameters=getattr(args, "tool_diameters", None)))
     if not args.no_anomaly:
         from cnctwin.usecases.anomaly import (
             Detector,
@@ -602,6 +627,8 @@ def _build(args: argparse.Namespace) -> Any:
                                publish_hz=args.opcua_publish_hz, security=ua_security))
     if args.mtconnect or args.shdr:
         sinks.append(_mtconnect_sink(args, machine))
+    if getattr(args, "control_writer", None) is not None:
+        sinks.append(args.control_writer)
     rt = EdgeRuntime(src, procs, sinks, state_dir=out, machine=machine,
                      checkpoint_every_s=args.checkpoint_s, status_every_s=args.status_s)
     info = rt.resume()  # a run that ended without finishing (crash, kill -9) continues
@@ -687,6 +714,19 @@ def _run(args: argparse.Namespace) -> int:
 
         table = read_tool_table(args.tools)
         args.tool_kinds = {t: table.get(t).kind for t in table}
+        args.tool_diameters = {t: table.get(t).diameter_mm for t in table}
+        cfg = getattr(args, "adaptive_config", None)
+        unknown = sorted(set(cfg.tools) - set(table)) if cfg is not None else []
+        if unknown:
+            raise ConfigError(f"{args.adaptive}: tools.{unknown[0]} is not in the tool table "
+                              f"{args.tools} (tools: {', '.join(map(str, sorted(table)))})")
+    if getattr(args, "stock", None) is not None:
+        from cnctwin.engagement import parse_stock
+
+        if getattr(args, "adaptive_config", None) is None or args.tools is None:
+            raise ConfigError("--stock goes with --adaptive and --tools (the engagement model "
+                              "that tells a breakage from a tool leaving the part)")
+        args.stock_spec = parse_stock(args.stock)
     rt = _build(args)
     main_thread = threading.current_thread() is threading.main_thread()
     old = signal.signal(signal.SIGTERM, lambda *a: rt.stop()) if main_thread else None

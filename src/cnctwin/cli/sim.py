@@ -66,7 +66,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         default=[],
         metavar="KEY=VALUE",
         help="override a parameter, e.g. spindle.kt_nm_per_a=1.1 or "
-        "material.aisi1045.kc1_n_per_mm2=1600 (repeatable)",
+        "material.aisi1045.kc1_n_per_mm2=1600 (repeatable); with --program, --tools and "
+        "--stock the hidden workpiece: part.hardness_along_x='[[60, 1.15], [110, 0.95]]' "
+        "(hardness factor from each X [mm] on) and part.break_at_x_mm=80 (the end mill "
+        "breaks there)",
     )
     p.add_argument(
         "--option",
@@ -91,6 +94,28 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    "`cnctwin record`)")
     p.add_argument("--serve-speed", type=float, default=1.0,
                    help="with --serve-opcua: recording seconds per second (default 1)")
+    p.add_argument("--realtime", action="store_true",
+                   help="with --program and --serve-opcua: simulate while serving, in real "
+                   "time, obeying the feed override an edge writes to the PLC nodes of "
+                   "OUT/nodes.toml ([write]; heartbeat watchdog, clamp, stop/feed-hold ends the "
+                   "program); OUT/control.csv and OUT/adaptive.json at the end "
+                   "(docs/adaptive.md)")
+    p.add_argument("--serve-interval-s", type=float, default=0.1,
+                   help="with --realtime: control time between served values (default 0.1 s, "
+                   "SINUMERIK's OPC UA rate)")
+    p.add_argument("--serve-user", metavar="NAME",
+                   help="with --realtime: the OPC UA user (password from "
+                   "CNCTWIN_OPCUA_PASSWORD); the server then offers Basic256Sha256 only and "
+                   "its PLC nodes are writable; without it nothing can be written")
+    p.add_argument("--wait-for-client-s", type=float, default=0.0, metavar="S",
+                   help="with --realtime: start the program once a client subscribed (the "
+                   "edge is connected), waiting at most S seconds (default 0: at once)")
+    p.add_argument("--heartbeat-s", type=float, default=0.5,
+                   help="with --realtime: the PLC falls back to 100 %% when the edge's "
+                   "heartbeat is older (default 0.5 s)")
+    p.add_argument("--plc-bounds", default="50,120", metavar="MIN,MAX",
+                   help="with --realtime: the PLC clamps the edge's override to these [%%] "
+                   "(default 50,120)")
     f = p.add_argument_group("fleet (cnctwin simulate fleet)")
     f.add_argument("--machines", type=int, default=20, help="machines (default 20)")
     f.add_argument("--days", type=int, default=5, help="days from --start-day (default 5)")
@@ -143,6 +168,12 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     options = _parse_pairs(args.options, "--option")
     if args.fmt is not None:
         options["fmt"] = args.fmt
+    if args.realtime:
+        if args.program is None or not args.serve_opcua:
+            raise ConfigError("--realtime goes with --program PART.mpf and --serve-opcua URL")
+        if not args.program.exists():
+            raise ConfigError(f"{args.program}: no such file")
+        return _realtime(args, program_kw, overrides, options, machine)
     label = args.name or args.program.name
     with Progress(transient=True) as bar:
         task = bar.add_task(label, total=1.0)
@@ -167,6 +198,72 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         from cnctwin.iotools import read_recording
 
         _serve_opcua(read_recording(res.recording_paths[0]), args)
+    return 0
+
+
+def _realtime(args: argparse.Namespace, program_kw: dict[str, Any],
+              overrides: dict[str, Any], options: dict[str, Any], machine: Any) -> int:
+    """``simulate --program ... --serve-opcua URL --realtime``: the closed loop's control."""
+    import os
+    import time
+
+    from cnctwin.edge.sinumerik_live import (
+        LiveSinumerikServer,
+        PlcOverride,
+        write_live_node_file,
+    )
+    from cnctwin.sim.part import LiveOverride
+    from cnctwin.sim.scenarios import part_program
+    from cnctwin.usecases.adaptive_report import write_live_summary
+
+    try:
+        lo, hi = (float(v) for v in str(args.plc_bounds).split(","))
+    except ValueError:
+        raise ConfigError(f"--plc-bounds {args.plc_bounds!r}: give MIN,MAX in %, e.g. 50,120"
+                          ) from None
+    plc = PlcOverride(min_pct=lo, max_pct=hi, heartbeat_s=args.heartbeat_s)
+    out = Path(args.out)
+    users = None
+    if args.serve_user:
+        pw = os.environ.get("CNCTWIN_OPCUA_PASSWORD")
+        if not pw:
+            raise ConfigError("--serve-user needs its password in CNCTWIN_OPCUA_PASSWORD")
+        users = {args.serve_user: pw}
+
+    def listening(sig: dict[str, str], text: dict[str, str]) -> None:
+        nodes = write_live_node_file(sig, text, out / "nodes.toml",
+                                     interval_s=args.serve_interval_s)
+        print(f"serving on {args.serve_opcua} in real time (node file {nodes})", flush=True)
+
+    server = LiveSinumerikServer(args.serve_opcua, plc, interval_s=args.serve_interval_s,
+                                 speed=args.serve_speed, users=users,
+                                 cert_file=out / "opcua-server-cert.der",
+                                 key_file=out / "opcua-server-key.pem",
+                                 on_listening=listening,
+                                 wait_for_client_s=args.wait_for_client_s)
+    dt = (machine.cycle_time_s if machine is not None else 0.002)
+    chunk = max(1, min(10, round(args.serve_interval_s / dt)))
+    calls: list[float] = []
+
+    def requested() -> float | None:
+        calls.append(time.time())
+        return plc.requested()
+
+    live = LiveOverride(requested=requested, chunk_cycles=chunk, tee=server)
+    try:
+        res = part_program(args.out, program=args.program, seed=args.seed, overrides=overrides,
+                           machine=machine, live=live, **program_kw, **options)
+    finally:
+        server.stop()
+    summary = write_live_summary(out, log=live.log, truth=res.truth, plc=plc,
+                                 served_at=server.served_at, requested_at=calls)
+    for p in res.paths:
+        print(p)
+    _print_limits(res.truth["limits"])
+    print(f"adaptive: cycle time {summary['cycle_time_s']:.2f} s, override "
+          f"{summary['override_pct']['mean']:.1f} % mean, stop request "
+          f"{summary['stop_request'] or 'none'}, {summary['writes']} writes from the edge, "
+          f"{len(plc.fallbacks)} heartbeat fallbacks; {out / 'adaptive.json'}")
     return 0
 
 

@@ -6,17 +6,21 @@ turns the chunk's spindle current into a requested feed override, emitted on the
 stream as ``{"kind": "override", "cycle", "tool", "override_pct", "target", "measured",
 "heartbeat", "min_pct", "max_pct"}`` (``heartbeat`` counts up by one per message: a PLC
 gateway subscribed through ``--publish`` falls back to 100 % when it stops, docs/adaptive.md);
-an overload is also an ``alarm`` (detector ``AdaptiveFeed``); a breakage needs the
-engagement model's expectation (program and stock at the edge: next), so the edge does not
-judge it yet (a tool leaving the part looks the same). Writing the
-override to the control (OPC UA node, MQTT for a PLC gateway, with a heartbeat) is the next
-step (docs/adaptive.md). A tool the file does not name is not adapted (no override message).
+an overload is also an ``alarm`` (detector ``AdaptiveFeed``). A breakage (the torque falls to
+the air level in the middle of a cut) is judged where the engagement model expects a cut: with
+the stock (``edge run --stock``) and the tool table (``--tools``) the edge sweeps the recorded
+tool positions (``ENC_POS`` of X1, Y1, Z1) through a Z-map of the part, so a tool leaving the
+part is not a breakage; without them breakage is not judged. On an OPC UA source whose node
+file names ``[write]`` nodes the override goes to the control
+(:class:`cnctwin.edge.control_write.ControlWriter`). A tool the file does not name is not
+adapted (no override message).
 
 ADAPTIVE.toml::
 
     min_pct = 50          # override bounds [%]
     max_pct = 120
     gain = 0.5            # share of the model's step per update
+    update_s = 0.1        # signal time per override update [s] (breakage: every chunk)
     [tools.2]
     target_nm = 2.6       # hold this cutting torque with T2
     [tools.3]
@@ -33,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from cnctwin.edge.pipeline import Chunk, Result
+from cnctwin.engagement import Stock, ZMap
 from cnctwin.exceptions import ConfigError
 from cnctwin.machine.tooltable import read_toml
 from cnctwin.recording import CounterGap
@@ -41,7 +46,11 @@ from cnctwin.usecases.adaptive import AdaptiveFeedController
 
 __all__ = ["AdaptiveConfig", "AdaptiveProcessor", "read_adaptive_config"]
 
-_TOP = {"min_pct", "max_pct", "gain", "tools"}
+_MIN_FEED_MM_MIN = 20.0
+"""Below this XY feed the engagement model expects no cut [mm/min] (the encoder's noise over a
+20 ms interval is a few mm/min)."""
+
+_TOP = {"min_pct", "max_pct", "gain", "update_s", "tools"}
 _TOOL = {"target_nm", "teach_in", "min_pct", "max_pct"}
 
 
@@ -55,6 +64,8 @@ class AdaptiveConfig:
         Override bounds [%].
     gain : float
         Controller gain (0..1].
+    update_s : float
+        Signal time per override update [s].
     tools : dict
         T number -> ``{"target_nm": float | None, "teach_in": bool, "min_pct", "max_pct"}``.
     source : str
@@ -64,6 +75,7 @@ class AdaptiveConfig:
     min_pct: float = 50.0
     max_pct: float = 120.0
     gain: float = 0.5
+    update_s: float = 0.1
     tools: dict[int, dict[str, Any]] = field(default_factory=dict)
     source: str = "adaptive config"
 
@@ -106,6 +118,9 @@ def read_adaptive_config(path: str | Path) -> AdaptiveConfig:
     gain = _num(src, "gain", data.get("gain", 0.5))
     if not (0.0 < gain <= 1.0):
         raise ConfigError(f"{src}: gain {gain:g} must be in (0, 1]")
+    update_s = _num(src, "update_s", data.get("update_s", 0.1))
+    if not (0.0 < update_s <= 5.0):
+        raise ConfigError(f"{src}: update_s {update_s:g} must be in (0, 5] s")
     tools: dict[int, dict[str, Any]] = {}
     raw = data.get("tools", {})
     if not isinstance(raw, dict) or not raw:
@@ -135,7 +150,8 @@ def read_adaptive_config(path: str | Path) -> AdaptiveConfig:
                               f"the file's {lo:g} .. {hi:g} %")
         tools[num] = {"target_nm": None if target is None else float(target),
                       "teach_in": teach, "min_pct": tlo, "max_pct": thi}
-    return AdaptiveConfig(min_pct=lo, max_pct=hi, gain=gain, tools=tools, source=src)
+    return AdaptiveConfig(min_pct=lo, max_pct=hi, gain=gain, update_s=update_s, tools=tools,
+                          source=src)
 
 
 class AdaptiveProcessor:
@@ -151,12 +167,21 @@ class AdaptiveProcessor:
         Spindle axis.
     teach_s : float, default 1.0
         Steady cutting time that teaches a tool's target [s].
+    stock : Stock, optional
+        The raw part: with ``diameters`` the engagement model that judges breakage.
+    diameters : dict, optional
+        T number -> tool diameter [mm] (from the tool table).
     """
 
     name = "adaptive"
 
     def __init__(self, model: SpindleModel, config: AdaptiveConfig, *, spindle: str = "SP1",
-                 teach_s: float = 1.0) -> None:
+                 teach_s: float = 1.0, stock: Stock | None = None,
+                 diameters: dict[int, float] | None = None) -> None:
+        self.zmap = ZMap(stock) if stock is not None and diameters else None
+        self.diameters = dict(diameters or {})
+        self._last_xy: tuple[float, float] | None = None
+        self._feeds: list[float] = []
         self.model = model
         self.config = config
         self.spindle = spindle
@@ -176,7 +201,8 @@ class AdaptiveProcessor:
         if tool not in self._ctrl and target is not None:
             self._ctrl[tool] = AdaptiveFeedController(
                 self.model, target_nm=target, min_pct=spec["min_pct"],
-                max_pct=spec["max_pct"], gain=self.config.gain, fs_hz=fs)
+                max_pct=spec["max_pct"], gain=self.config.gain, fs_hz=fs,
+                update_s=self.config.update_s)
         return self._ctrl.get(tool)
 
     def _track_tool(self, chunk: Chunk) -> None:
@@ -186,9 +212,44 @@ class AdaptiveProcessor:
             if len(t):
                 self._tool = int(t.iloc[-1])
 
+    def _expect_cut(self, chunk: Chunk) -> bool | None:
+        """The engagement model: is the active tool in the material at the chunk's end?
+        (Every tool's path removes material, adapted or not.) None: no model."""
+        if self.zmap is None:
+            return None
+        cols = [f"ENC_POS|{a}" for a in ("X1", "Y1", "Z1")]
+        d = self.diameters.get(self._tool)
+        if d is None or not all(c in chunk.signals for c in cols):
+            return None
+        x, y, z = (np.asarray(chunk.signals[c], dtype=np.float64) for c in cols)
+        ok = np.isfinite(x) & np.isfinite(y) & np.isfinite(z)
+        if not ok.any():
+            return None
+        x, y, z = x[ok], y[ok], z[ok]
+        eng = self.zmap.sweep(x, y, z, diameter_mm=d)
+        k = eng.engaged.size
+        tail = slice(min(int(0.8 * k), k - 1), None)
+        # the feed: XY speed per sample (from the previous chunk's last position); a tool
+        # that stops in the material (the end of a cut inside the part) cuts nothing, so
+        # the model expects a cut only while the feed is at least half the cut's own
+        px = np.concatenate([[self._last_xy[0]], x]) if self._last_xy else np.r_[x[0], x]
+        py = np.concatenate([[self._last_xy[1]], y]) if self._last_xy else np.r_[y[0], y]
+        self._last_xy = (float(x[-1]), float(y[-1]))
+        v = np.hypot(np.diff(px), np.diff(py)) / chunk.cycle_time_s * 60.0  # [mm/min]
+        engaged_now = bool(eng.engaged[tail].all())
+        ref = float(np.median(self._feeds)) if self._feeds else 0.0
+        moving = bool(v[tail].min() >= max(_MIN_FEED_MM_MIN, 0.5 * ref))
+        if engaged_now and moving:
+            self._feeds.extend(v[tail].tolist())
+            del self._feeds[:-50]
+        elif not engaged_now:
+            self._feeds.clear()
+        return engaged_now and moving
+
     def process(self, chunk: Chunk) -> list[Result]:
         """Results for this chunk: one ``override`` (and an ``alarm`` on overload/breakage)."""
         self._track_tool(chunk)
+        expect = self._expect_cut(chunk) if chunk.cycles.size else None
         i_col, n_col = f"CURRENT|{self.spindle}", f"CMD_SPEED|{self.spindle}"
         if i_col not in chunk.signals or n_col not in chunk.signals or chunk.cycles.size == 0:
             return []
@@ -211,7 +272,7 @@ class AdaptiveProcessor:
                 ctrl = self._controller(self._tool, fs, taught_nm=float(np.mean(seen)))
             if ctrl is None:
                 return []
-        st = ctrl.update(i, n)
+        st = ctrl.update(i, n, expect_cut=expect)
         cyc = int(chunk.cycles[-1])
         self.heartbeat += 1
         out = [Result("override", cyc, {

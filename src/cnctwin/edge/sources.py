@@ -524,9 +524,11 @@ class OpcUaSource:
     options : OpcUaClientOptions, optional
         Security and user.
     interval_s : float, default 0.1
-        Publishing interval [s].
-    window_s : float, default 0.5
-        Poll window [s].
+        Publishing interval [s] (the server's interval between values).
+    window_s : float, optional
+        Longest wait for new rows [s] (default ``5 x interval_s``, at most 0.5 s); rows are
+        handed on as soon as they arrive, so a chunk holds what arrived since the last one
+        (the adaptive feed's loop latency depends on it).
     idle_timeout_s : float or None
         Stop when no row arrived for this long [s].
     machine : str
@@ -534,13 +536,15 @@ class OpcUaSource:
     """
 
     def __init__(self, url: str, nodes: Any, *, options: Any = None, interval_s: float = 0.1,
-                 window_s: float = 0.5, idle_timeout_s: float | None = None,
+                 window_s: float | None = None, idle_timeout_s: float | None = None,
                  machine: str = "") -> None:
         from cnctwin.iotools.opcua_client import OpcUaRecorder
 
         self.recorder = OpcUaRecorder(url, nodes, options=options, interval_s=interval_s,
                                       machine=machine)
-        self.window_s, self.idle_timeout_s = window_s, idle_timeout_s
+        self.window_s = min(5.0 * interval_s, 0.5) if window_s is None else window_s
+        self.idle_timeout_s = idle_timeout_s
+        self._tool: str | None = None
         self.machine = machine
         self.live = True
         self.issues: list[str] = []
@@ -566,9 +570,36 @@ class OpcUaSource:
         gap = CounterGap(prev, int(cycles[0])) if prev is not None and \
             cycles[0] != prev + 1 else None
         self._last_cycle = int(cycles[-1])
-        return Chunk(cycles, t_ns, sig, gap_before=gap,
-                     cycle_time_s=self.recorder.interval_s, machine=self.machine,
-                     received_ns=time.time_ns())
+        chunk = Chunk(cycles, t_ns, sig, gap_before=gap,
+                      cycle_time_s=self.recorder.interval_s, machine=self.machine,
+                      received_ns=time.time_ns())
+        ev = self._tool_events(rows)
+        if ev is not None:
+            chunk.events = ev
+        return chunk
+
+    def _tool_events(self, rows: list[tuple[int, int, dict[str, Any]]]) -> Any:
+        """The active tool (the node file's ``[text] tool``) as NC events where it changes,
+        so processors that follow the tool (adaptive feed, holes) see it as from a file."""
+        if "tool" not in self.recorder.nodes.text:
+            return None
+        out = []
+        for c, _, vals in rows:
+            v = vals.get("tool")
+            if v is None or str(v) == self._tool:
+                continue
+            self._tool = str(v)
+            try:
+                num = int(float(str(v).strip().lstrip("Tt") or "nan"))
+            except ValueError:
+                continue  # a tool name, not a T number: not an NC tool event
+            out.append({"cycle": c, "kind": "block", "active_tool": num,
+                        "selected_tool": num})
+        if not out:
+            return None
+        from cnctwin.recording import EVENT_COLUMNS
+
+        return pd.DataFrame(out, columns=list(EVENT_COLUMNS)).astype({"cycle": "int64"})
 
     _last_cycle: int | None = None
 
@@ -577,7 +608,8 @@ class OpcUaSource:
         self.start()
         last = time.monotonic()
         while not self._interrupted:
-            time.sleep(self.window_s)
+            self.recorder.new_rows.wait(self.window_s)
+            self.recorder.new_rows.clear()
             rows = self.recorder.rows()[self._done:]
             if not rows:
                 if self.idle_timeout_s is not None and \

@@ -10,6 +10,11 @@ The variables to record are named in a node file (TOML)::
     program = "ns=2;s=/Channel/ProgramInfo/progName[u1]"
     [units]                          # optional, column -> unit
     "ENC_POS|X1" = "mm"
+    [write]                          # optional: what the edge may write (adaptive feed)
+    override_pct = "ns=2;s=/Plc/DB120.DBB0"
+    heartbeat = "ns=2;s=/Plc/DB120.DBW2"
+    feed_hold = "ns=2;s=/Plc/DB120.DBX4.0"
+    stop = "ns=2;s=/Plc/DB120.DBX4.1"
 
 Every node is checked at connect: a node id that does not exist or cannot be read is a
 :class:`~cnctwin.exceptions.ConfigError` naming it (never a silent column of NaN).
@@ -44,7 +49,14 @@ import pandas as pd
 from cnctwin.exceptions import ConfigError, FormatError
 from cnctwin.recording import CounterGap, Recording, RecordingMeta
 
-__all__ = ["NodeMap", "OpcUaClientOptions", "OpcUaRecorder", "read_node_map", "record_opcua"]
+__all__ = ["WRITE_KEYS", "NodeMap", "OpcUaClientOptions", "OpcUaRecorder", "read_node_map",
+           "record_opcua"]
+
+
+WRITE_KEYS = ("override_pct", "heartbeat", "feed_hold", "stop", "data_time")
+"""Keys of a node file's ``[write]`` table: the requested feed override [%], its heartbeat
+counter, the feed-hold and stop requests (booleans), and the source time of the newest
+sample the override was computed from (a diagnostic for the loop latency)."""
 
 
 @dataclass(frozen=True)
@@ -59,11 +71,15 @@ class NodeMap:
         LF signal name -> node id text (strings: program, block, tool).
     units : dict
         Column -> unit.
+    write : dict
+        What the edge may write to the control (``override_pct``, ``heartbeat``,
+        ``feed_hold``, ``stop``, ``data_time``) -> node id (:data:`WRITE_KEYS`).
     """
 
     signals: dict[str, str]
     text: dict[str, str] = field(default_factory=dict)
     units: dict[str, str] = field(default_factory=dict)
+    write: dict[str, str] = field(default_factory=dict)
 
     @property
     def all(self) -> dict[str, str]:
@@ -100,7 +116,7 @@ def read_node_map(path: str | os.PathLike[str]) -> NodeMap:
     if not isinstance(sig, dict) or not sig:
         raise FormatError("needs a [signals] table: column = \"node id\"", path=str(p))
     tables: dict[str, dict[str, str]] = {}
-    for name in ("signals", "text", "units"):
+    for name in ("signals", "text", "units", "write"):
         tab = doc.get(name, {})
         if not isinstance(tab, dict):
             raise FormatError(f"[{name}] must be a table", path=str(p))
@@ -108,15 +124,19 @@ def read_node_map(path: str | os.PathLike[str]) -> NodeMap:
             if not isinstance(v, str) or not v.strip():
                 raise FormatError(f"[{name}] {k!r}: expected a text value, got {v!r}",
                                   path=str(p))
+            if name == "write" and k not in WRITE_KEYS:
+                raise FormatError(f"[write] {k!r} is not a key; keys: {', '.join(WRITE_KEYS)}",
+                                  path=str(p))
             if name == "signals" and "|" not in k:
                 raise FormatError(f"[signals] {k!r}: a column is CODE|AXIS, e.g. ENC_POS|X1",
                                   path=str(p))
         tables[name] = {str(k): str(v).strip() for k, v in tab.items()}
-    unknown = sorted(set(doc) - {"signals", "text", "units"})
+    unknown = sorted(set(doc) - {"signals", "text", "units", "write"})
     if unknown:
-        raise FormatError(f"unknown table(s) {unknown}; use [signals], [text], [units]",
-                          path=str(p))
-    return NodeMap(tables["signals"], tables.get("text", {}), tables.get("units", {}))
+        raise FormatError(f"unknown table(s) {unknown}; use [signals], [text], [units], "
+                          "[write]", path=str(p))
+    return NodeMap(tables["signals"], tables.get("text", {}), tables.get("units", {}),
+                   tables.get("write", {}))
 
 
 @dataclass(frozen=True)
@@ -219,10 +239,16 @@ async def _check_nodes(client: Any, nodes: NodeMap) -> dict[str, Any]:
         try:
             await node.read_value()
         except ua.UaStatusCodeError as exc:
+            if getattr(exc, "code", None) == _WAITING:
+                out[name] = node  # exists, no value yet (the program has not started)
+                continue
             raise ConfigError(f"node {name!r} = {text}: cannot be read ({exc}); check the "
                               "node id in the node file and the user's access rights") from None
         out[name] = node
     return out
+
+
+_WAITING = 0x80320000  # BadWaitingForInitialData (OPC UA Part 4, 7.34)
 
 
 class _Handler:
@@ -231,6 +257,8 @@ class _Handler:
 
     def datachange_notification(self, node: Any, val: Any, data: Any) -> None:
         dv = data.monitored_item.Value
+        if dv.StatusCode is not None and dv.StatusCode.value == _WAITING:
+            return  # no value yet (a server that has not started): not a row
         ts = dv.SourceTimestamp or dv.ServerTimestamp
         self.rec._on_value(str(node.nodeid.to_string()), val, ts)
 
@@ -283,6 +311,9 @@ class OpcUaRecorder:
         self._resumed = False
         self._lock = threading.Lock()
         self._lost = threading.Event()
+        self._flush_soon = False
+        self.new_rows = threading.Event()
+        """Set when rows were added (a consumer clears it and waits: no polling delay)."""
         self._stop = threading.Event()
         self._ready = threading.Event()
         self._error: BaseException | None = None
@@ -299,7 +330,21 @@ class OpcUaRecorder:
         with self._lock:
             if t_ns not in self._pending:
                 self._arrived[t_ns] = time.time_ns()  # aged by our clock, not the server's
-            self._pending.setdefault(t_ns, {})[name] = value
+            row = self._pending.setdefault(t_ns, {})
+            row[name] = value
+            done = all(k in row for k in self.nodes.signals)
+        if done and not self._flush_soon:
+            # every numeric value of this write is here: a row as soon as the rest of this
+            # notification batch (the text values of the same write) has been handled
+            self._flush_soon = True
+            try:
+                asyncio.get_running_loop().call_soon(self._flush_now)
+            except RuntimeError:  # not on the client's loop (a test calling directly)
+                self._flush_now()
+
+    def _flush_now(self) -> None:
+        self._flush_soon = False
+        self._flush()
 
     def _flush(self, *, final: bool = False) -> None:
         """Turn pending timestamps into rows: those older than one interval (all values of a
@@ -307,19 +352,31 @@ class OpcUaRecorder:
         # a timestamp waits for the rest of its values up to 3 intervals after its first value
         # arrived here (the server's clock may run ahead of or behind ours)
         horizon = time.time_ns() - int(3 * self.interval_s * 1e9)
+        sig = self.nodes.signals
+
+        def complete(t: int) -> bool:  # every numeric value of the write (text: on change)
+            return all(k in self._pending[t] for k in sig)
+
         with self._lock:
             ready = sorted(t for t in self._pending if final or self._arrived[t] <= horizon
-                           or len(self._pending[t]) == len(self.nodes.all))
+                           or complete(t))
             if not final and self._pending:
                 newest = max(self._pending)  # still arriving, unless complete or aged
                 ready = [t for t in ready if t < newest or self._arrived[t] <= horizon
-                         or len(self._pending[t]) == len(self.nodes.all)]
+                         or complete(t)]
             for t in ready:
                 vals = self._pending.pop(t)
                 self._arrived.pop(t, None)
+                if not any(k in vals for k in sig):
+                    # text only (a program or tool that changed before we subscribed arrives
+                    # with its old timestamp; text is reported on change): held into the
+                    # next row, not a row of its own
+                    self._latest.update(vals)
+                    continue
                 if self._last_t is not None and t <= self._last_t:
                     self._issues.append(f"source timestamp {pd.Timestamp(t, tz='UTC')} not "
                                         "after the previous one: values merged into it")
+                    self._latest.update(vals)
                     continue
                 if self._resumed and self._last_t is not None:
                     # after a lost connection: the rows the server delivered meanwhile are
@@ -334,6 +391,8 @@ class OpcUaRecorder:
                 self._cycle += 1
                 self._rows.append((self._cycle, t, dict(self._latest)))
                 self._last_t = t
+            if ready:
+                self.new_rows.set()
 
     # ------------------------------------------------------------------ thread
     def start(self) -> OpcUaRecorder:
@@ -380,7 +439,7 @@ class OpcUaRecorder:
         self._ready.set()
         last_check = time.monotonic()
         while not self._stop.is_set():
-            await asyncio.sleep(min(self.interval_s, 0.1))
+            await asyncio.sleep(min(self.interval_s / 2.0, 0.05))
             self._flush()
             if not self._lost.is_set():
                 if time.monotonic() - last_check < 1.0:

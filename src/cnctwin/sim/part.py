@@ -35,7 +35,6 @@ from cnctwin.sim.processes import (
     MillingProcess,
     TappingProcess,
     _NoLoad,
-    _Process,
     _Progress,
 )
 from cnctwin.sim.runner import (
@@ -50,8 +49,44 @@ from cnctwin.sim.runner import (
 from cnctwin.sim.simulation import simulate
 from cnctwin.sim.stockcut import StockMillingProcess, ToolDispatch
 
-__all__ = ["S1_WINDOW_S", "BlockLines", "block_lines", "drive_limits_check", "part_program",
-           "s1_load"]
+__all__ = ["PART_KEYS", "S1_WINDOW_S", "BlockLines", "LiveOverride", "block_lines",
+           "drive_limits_check", "part_program", "s1_load"]
+
+
+PART_KEYS = {"part.hardness_along_x": "hidden hardness steps along X: [[x_mm, factor], ...] "
+                                      "(the factor applies from x_mm on)",
+             "part.break_at_x_mm": "the end mill breaks when it passes this X [mm]"}
+"""``--set`` keys of a part program's hidden workpiece and tool (end mills on a stock)."""
+
+
+@dataclass
+class LiveOverride:
+    """A control that plays the program at a feed override decided while it runs.
+
+    Attributes
+    ----------
+    requested : callable
+        ``requested() -> float | None``: the override to apply next [%] (the PLC's value
+        after its heartbeat check and clamp), asked before each chunk; None stops the
+        program there (a stop or feed-hold request the control obeyed).
+    chunk_cycles : int, default 10
+        Control cycles per chunk (10 = 20 ms: how often the override is read).
+    tee : object, optional
+        A second sink that sees every recorded chunk as it is simulated (e.g. a real-time
+        OPC UA server); ``open``, ``write``, ``close`` as a recorder sink.
+    rate_pct_per_s : float, default 200
+        The control's override ramp [%/s].
+    log : list
+        Filled per chunk: ``cycle``, ``requested_pct``, ``applied_pct`` (mean),
+        ``cutting_torque_nm`` and ``hardness_factor`` (hidden truth, mean over the chunk),
+        ``speed_rpm`` (commanded), ``tool``.
+    """
+
+    requested: Any
+    chunk_cycles: int = 10
+    tee: Any = None
+    rate_pct_per_s: float = 200.0
+    log: list[dict[str, Any]] = dataclasses.field(default_factory=list)
 
 
 _DRILL_WORDS = ("CYCLE81", "CYCLE82", "CYCLE83", "G81", "G82", "G83")
@@ -304,7 +339,7 @@ def _drill_conditions(prog: Program, tool: int) -> tuple[float, float, float]:
 def _tool_hooks(cfg: ScenarioConfig, prog: Program, tools: ToolTable, stock: Stock | None, *,
                 material: Material, surface_z_mm: float, faults: Sequence[Fault],
                 rng: np.random.Generator, progress: _Progress,
-                first_hole: int) -> ToolDispatch:
+                first_hole: int, hidden: Mapping[str, Any] | None = None) -> ToolDispatch:
     """One hook per tool of the table the program uses, by its kind."""
     zmap = ZMap(stock) if stock is not None else None
     used = sorted({int(b.tool) for b in prog.blocks if b.tool is not None})
@@ -337,7 +372,8 @@ def _tool_hooks(cfg: ScenarioConfig, prog: Program, tools: ToolTable, stock: Sto
                               f"T{t} is an end mill: give a material file with [milling]")
         elif zmap is not None:
             hooks[t] = StockMillingProcess(cfg, material=material, zmap=zmap,
-                                           tool=spec.end_mill(), faults=(), **common)
+                                           tool=spec.end_mill(), faults=(),
+                                           **dict(hidden or {}), **common)
         else:
             c = dataclasses.replace(cfg, end_mill=spec.end_mill())
             hooks[t] = MillingProcess(c, material=material, faults=(), **common)
@@ -365,6 +401,7 @@ def part_program(
     start_time: pd.Timestamp | str | None = None,
     first_hole: int = 0,
     faults: Sequence[Fault | Mapping[str, Any]] = (),
+    live: LiveOverride | None = None,
 ) -> ScenarioResult:
     """Any part program of the supported G-code subset on a machine description.
 
@@ -377,7 +414,9 @@ def part_program(
     seed : int
         Seed of every random stream.
     overrides : mapping, optional
-        Dotted overrides on top of ``machine``.
+        Dotted overrides on top of ``machine``; and the hidden workpiece of end mills on a
+        stock (:data:`PART_KEYS`): ``part.hardness_along_x`` = [[x_mm, factor], ...],
+        ``part.break_at_x_mm`` (in ``truth.json``: ``part``, ``breakage_cycle``).
     machine : Machine, optional
         The machine (e.g. loaded from a machine file); default the thesis machine.
     material : str or Material, optional
@@ -416,6 +455,11 @@ def part_program(
         Cycles simulated and written per chunk (bounds memory).
     progress : callable, optional
         Called with (fraction done 0..1, message) while the scenario runs.
+    live : LiveOverride, optional
+        Play the program at a feed override decided while it runs
+        (:class:`~cnctwin.sim.override.OverridePlayer`): the adaptive feed's closed loop.
+        Truth ``live``: ``stopped_cycle`` (a stop request ended the program) and the
+        per-chunk log is in ``live.log``.
 
     Returns
     -------
@@ -440,7 +484,17 @@ def part_program(
     except GCodeError as exc:
         raise ConfigError(f"{path}: {exc}; the supported subset is listed in "
                           "docs/simulator.md") from None
-    cfg = ScenarioConfig.build(overrides, machine=machine)
+    ov = dict(overrides or {})
+    part = {k: ov.pop(k) for k in list(ov) if k.startswith("part.")}
+    bad = sorted(set(part) - set(PART_KEYS))
+    if bad:
+        raise ConfigError(f"--set {bad[0]}: not a key; part keys: "
+                          + "; ".join(f"{k} ({v})" for k, v in PART_KEYS.items()))
+    hidden = _part_keys(part)
+    if hidden and stock is None:
+        raise ConfigError(f"--set {sorted(part)[0]} needs --stock and --tools (the hidden "
+                          "workpiece is cut by end mills on a stock)")
+    cfg = ScenarioConfig.build(ov, machine=machine)
     if stock is not None:
         if tools is None:
             raise ConfigError("--stock needs --tools TOOLS.toml: the Z-map cuts with each "
@@ -455,7 +509,7 @@ def part_program(
     o = _prepare(out)
     stem = path.stem
     upper = text.upper()
-    hook: _Process | ToolDispatch
+    hook: Any
     pf = _Progress(progress, stem)
     rng = np.random.default_rng([seed, 1])
     if material is None:
@@ -473,7 +527,7 @@ def part_program(
             kind = "stock" if stock is not None else "tools"
             hook = _tool_hooks(cfg, prog, tools, stock, material=mat,
                                surface_z_mm=surface_z_mm, faults=flist, rng=rng, progress=pf,
-                               first_hole=first_hole)
+                               first_hole=first_hole, hidden=hidden)
         elif any(w in upper for w in _DRILL_WORDS):
             kind = "drilling"
             speeds = [float(v) for v in re.findall(r"\bS(\d+(?:\.\d*)?)", upper)] or [1.0]
@@ -494,15 +548,19 @@ def part_program(
                                   rng=rng, truth=None, daq=None, progress=pf)
     mat_name = material.name if isinstance(material, Material) else material
     res = ScenarioResult("part_program", truth={
-        **_base_truth("part_program", seed, overrides, cfg), "program": str(path),
+        **_base_truth("part_program", seed, overrides, cfg),
+        **({"part": part} if part else {}), "program": str(path),
         "process": kind, "material": mat_name, "faults": [fault_to_dict(f) for f in flist],
         **({"stock": stock.as_text()} if stock is not None else {}),
         **({"tools": {str(k): dataclasses.asdict(v) for k, v in tools.tools.items()}}
            if tools is not None else {})})
     _write_program(o, path.name, text, res.paths)
     sink, rpath = _make_sink(o, stem, fmt, max_file_mb)
+    source: Any = prog
+    if live is not None:
+        source, hook, sink = _live(prog, cfg.machine, live, hook, sink, res)
     try:
-        sim = simulate(prog, cfg.machine, seed=seed, start_cycle=START_CYCLE,
+        sim = simulate(source, cfg.machine, seed=seed, start_cycle=START_CYCLE,
                        start_time=START_TIME if start_time is None else start_time,
                        cutting=hook, sink=sink, chunk_cycles=chunk_cycles)
     except GCodeError as exc:  # found while running it (a speed above the machine's limit)
@@ -514,8 +572,14 @@ def part_program(
         # X/Y, with its cycle
         res.truth["holes"] = [{k: (float(v) if isinstance(v, np.floating) else v)
                                for k, v in row.items()} for row in hook.hole_rows()]
-    elif isinstance(hook, ToolDispatch):
+    elif isinstance(hook, _LiveHook):
+        hook = hook.inner
+    if isinstance(hook, ToolDispatch):
         rows = []
+        broken = [h.broken_cycle for h in hook.hooks.values()
+                  if isinstance(h, StockMillingProcess) and h.broken_cycle is not None]
+        if broken:
+            res.truth["breakage_cycle"] = int(min(broken))
         for t, h in sorted(hook.hooks.items()):
             if isinstance(h, DrillingProcess | TappingProcess):
                 rows += [{"tool": t, **{k: (float(v) if isinstance(v, np.floating) else v)
@@ -534,3 +598,96 @@ def part_program(
     return res
 
 
+
+
+def _part_keys(part: Mapping[str, Any]) -> dict[str, Any]:
+    """``part.*`` values checked, as :class:`StockMillingProcess` arguments."""
+    out: dict[str, Any] = {}
+    if "part.hardness_along_x" in part:
+        v = part["part.hardness_along_x"]
+        ok = isinstance(v, list) and all(
+            isinstance(p, list) and len(p) == 2
+            and all(isinstance(q, int | float) and not isinstance(q, bool) for q in p)
+            and p[1] > 0 for p in v)
+        if not ok:
+            raise ConfigError(f"--set part.hardness_along_x={v!r}: give [[x_mm, factor], ...] "
+                              "with positive factors, e.g. [[60, 1.15], [110, 0.95]]")
+        out["hardness_along_x"] = tuple((float(p[0]), float(p[1])) for p in v)
+    if "part.break_at_x_mm" in part:
+        b = part["part.break_at_x_mm"]
+        if isinstance(b, bool) or not isinstance(b, int | float) or not math.isfinite(b):
+            raise ConfigError(f"--set part.break_at_x_mm={b!r}: give an X position [mm]")
+        out["break_at_x_mm"] = float(b)
+    return out
+
+
+class _LiveHook:
+    """The cutting hook, keeping each chunk's hidden cutting torque and hardness."""
+
+    def __init__(self, inner: Any) -> None:
+        self.inner = inner
+        self.last: dict[str, float] = {}
+
+    def __call__(self, ci: Any) -> Any:
+        out = self.inner(ci)
+        t = getattr(out, "truth", None) or {}
+        self.last = {k: float(np.nanmean(t[k])) if k in t and np.size(t[k])
+                     and np.isfinite(t[k]).any() else 0.0
+                     for k in ("cutting_torque_nm", "hardness_factor")}
+        self.last["speed_rpm"] = float(np.mean(np.abs(ci.spindle_speed_rpm))) if len(ci) \
+            else 0.0
+        return out
+
+
+class _TeeSink:
+    def __init__(self, inner: Any, tee: Any) -> None:
+        self.inner, self.tee = inner, tee
+
+    def open(self, columns: list[str], meta: Any) -> None:
+        self.inner.open(columns, meta)
+        self.tee.open(columns, meta)
+
+    def write(self, chunk: Any) -> None:
+        self.inner.write(chunk)
+        self.tee.write(chunk)
+
+    def close(self, meta: Any) -> Any:
+        self.tee.close(meta)
+        return self.inner.close(meta)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.inner, name)
+
+
+def _live(prog: Program, machine: Machine, live: LiveOverride, hook: Any, sink: Any,
+          res: ScenarioResult) -> tuple[Any, Any, Any]:
+    """The program as override-played chunks, the hook and sink that log each chunk."""
+    from cnctwin.sim.override import OverridePlayer, plan_of
+
+    player = OverridePlayer(plan_of(prog, machine), prog, min_pct=0.0, max_pct=200.0,
+                            rate_pct_per_s=live.rate_pct_per_s)
+    lhook = _LiveHook(hook)
+
+    def chunks() -> Any:
+        while not player.done:
+            req = live.requested()
+            if req is None:  # a stop the control obeyed: the program ends here
+                res.truth["live"] = {"stopped_cycle": START_CYCLE + player.cycle}
+                return
+            first = player.cycle
+            c = player.step(live.chunk_cycles, float(req))
+            if c.block_index.size == 0:
+                return
+            yield c
+            if live.log and "cutting_torque_nm" not in live.log[-1]:
+                live.log[-1].update(lhook.last)
+            live.log.append({"cycle": START_CYCLE + first, "requested_pct": float(req),
+                             "applied_pct": float(np.mean(c.override_pct))
+                             if c.override_pct.size else 100.0,
+                             "tool": int(np.asarray(c.tool)[-1]) if np.size(c.tool) else 0})
+        res.truth.setdefault("live", {"stopped_cycle": None})
+
+    if live.tee is not None and sink is None:
+        raise ConfigError("a live run with a second sink (tee) needs an output directory")
+    out_sink = _TeeSink(sink, live.tee) if live.tee is not None else sink
+    return chunks(), lhook, out_sink

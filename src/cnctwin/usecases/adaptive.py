@@ -29,7 +29,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from cnctwin.exceptions import ConfigError
 from cnctwin.spindle import SpindleModel
@@ -90,12 +90,17 @@ class AdaptiveFeedController:
         Sample rate of the signals [Hz].
     min_cut_s : float, default 0.5
         Cutting time before a collapse counts as a breakage [s].
+    update_s : float, optional
+        Samples gathered per override update [s] (e.g. 0.1 when the signals arrive every
+        20 ms over OPC UA: the override moves on a 100 ms mean, breakage is judged on every
+        call); None: every call updates.
     """
 
     def __init__(self, model: SpindleModel, *, target_nm: float, min_pct: float = 50.0,
                  max_pct: float = 120.0, air_nm: float | None = None,
                  overload_nm: float | None = None, overload_s: float = 0.2, gain: float = 0.5,
-                 edge_share: float = 0.25, fs_hz: float = 500.0, min_cut_s: float = 0.5) -> None:
+                 edge_share: float = 0.25, fs_hz: float = 500.0, min_cut_s: float = 0.5,
+                 update_s: float | None = None) -> None:
         if not (math.isfinite(target_nm) and target_nm > 0):
             raise ConfigError(f"target_nm must be a positive torque, got {target_nm!r}")
         if not (0.0 < min_pct <= max_pct):
@@ -117,15 +122,24 @@ class AdaptiveFeedController:
         self.state = AdaptiveState(override_pct=100.0)
         self._over_s = 0.0
         self._cut_s = 0.0
+        if update_s is not None and not (math.isfinite(update_s) and update_s > 0):
+            raise ConfigError(f"update_s must be a positive time [s], got {update_s!r}")
+        self.update_s = update_s
+        self._buf_tau: list[NDArray[np.float64]] = []
+        self._buf_s = 0.0
 
     def update(self, current_a: ArrayLike, speed_rpm: ArrayLike, *,
                expect_cut: bool | None = None) -> AdaptiveState:
-        """One control step from the samples since the last one.
+        """One step from the samples since the last call.
+
+        Breakage is judged on every call (the stop request comes with the samples in which
+        the torque collapsed); the override is updated once at least ``update_s`` of samples
+        have arrived (every call without ``update_s``), from their mean torque.
 
         Parameters
         ----------
         current_a, speed_rpm : array-like
-            Spindle current [A] and speed [rpm] of the samples since the last update.
+            Spindle current [A] and speed [rpm] of the samples since the last call.
         expect_cut : bool, optional
             The engagement model (the program through the stock, ``cnctwin.engagement``)
             expects the tool in the material at the end of these samples: a collapse of the
@@ -144,31 +158,41 @@ class AdaptiveFeedController:
         with np.errstate(invalid="ignore"):
             tau = self.model.cutting_torque(i, n, fs_hz=self.fs_hz) * np.sign(n)
         ok = np.isfinite(tau) & (np.abs(n) > 50.0)
-        t_now = float(np.mean(tau[ok])) if ok.any() else math.nan
-        # a collapse inside the chunk: its last fifth already at the air level (the stop
-        # request then comes with this chunk, not the next)
-        tail = slice(max(int(0.8 * i.size), 0), None)
+        t_new = float(np.mean(tau[ok])) if ok.any() else math.nan
+        # a collapse inside these samples: their last fifth already at the air level (the
+        # stop request then comes with them, not with the next call)
+        tail = slice(min(int(0.8 * i.size), i.size - 1), None)
         ok_t = ok[tail]
         t_tail = float(np.mean(tau[tail][ok_t])) if ok_t.any() else math.nan
         dt = i.size / self.fs_hz
+        cut_before = self._cut_s
+        if math.isfinite(t_new) and t_new > self.air_nm:
+            self._cut_s += dt
+        if (expect_cut and cut_before >= self.min_cut_s and math.isfinite(t_tail)
+                and t_tail < self.air_nm):
+            st.breakage = True
+        if st.breakage:
+            st.override_pct = self.min_pct  # stop requested: no faster feed into a broken tool
+            st.torque_nm = t_new
+            st.history.append((st.override_pct, t_new, False))
+            return st
+        self._buf_tau.append(tau[ok])
+        self._buf_s += dt
+        if self.update_s is not None and self._buf_s < self.update_s - 1e-9:
+            return st
+        both = np.concatenate(self._buf_tau) if self._buf_tau else np.zeros(0)
+        t_now = float(np.mean(both)) if both.size else math.nan
+        span = self._buf_s
+        self._buf_tau, self._buf_s = [], 0.0
         st.torque_nm = t_now
-        was_cutting = st.cutting
         st.cutting = bool(math.isfinite(t_now) and t_now > self.air_nm)
-        if (st.cutting and expect_cut and math.isfinite(t_tail) and t_tail < self.air_nm
-                and self._cut_s >= self.min_cut_s):
-            st.breakage = True  # collapsed within this chunk
         o = st.override_pct
         if not st.cutting:
-            if was_cutting and expect_cut and self._cut_s >= self.min_cut_s:
-                st.breakage = True
             self._cut_s = 0.0
             self._over_s = 0.0
-            o_new = self.min_pct if st.breakage else self.max_pct
-        elif st.breakage:
-            o_new = self.min_pct  # stop requested: no faster feed into a broken tool
+            o_new = self.max_pct
         else:
-            self._cut_s += dt
-            self._over_s = self._over_s + dt if t_now > self.overload_nm else 0.0
+            self._over_s = self._over_s + span if t_now > self.overload_nm else 0.0
             if self._over_s >= self.overload_s:
                 st.overload = True
                 o_new = self.min_pct
