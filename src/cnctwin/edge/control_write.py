@@ -102,7 +102,7 @@ class ControlWriter:
             try:
                 node = client.get_node(ua.NodeId.from_string(text))
                 level = await node.read_attribute(ua.AttributeIds.UserAccessLevel)
-                vt = (await node.read_data_value()).Value.VariantType
+                vt = await node.read_data_type_as_variant_type()
             except ua.UaStatusCodeError as exc:
                 raise ConfigError(f"[write] {key} = {text}: no such node on {self.url} "
                                   f"({exc}); check the node file") from None
