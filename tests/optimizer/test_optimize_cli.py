@@ -247,3 +247,38 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.Capture
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_optimize_json_carries_the_torque_the_adaptive_feed_holds(
+        hidden: dict[str, object], tmp_path: Path) -> None:
+    """Every cutting piece of optimize.json carries the mean cutting torque planned at its new
+    feed (issue 26: the adaptive feed's target ``target_from``). The first slot (Y10, 2 mm
+    deep into fresh stock, 0..pi immersion) by the closed form with the *hidden* coefficients
+    (Altintas eq. 2.47 for a full slot: T = z a r / (2 pi) (Kte pi + Ktc 2 c)): within 5 %
+    (the calibration's own error is below 3.5 %)."""
+    from cnctwin.edge.adaptive import planned_torque, read_adaptive_config
+
+    tmp = hidden["tmp"]
+    truth = hidden["truth"]
+    assert isinstance(tmp, Path) and isinstance(truth, dict)
+    rep = json.loads((tmp / "opt" / "optimize.json").read_text())
+    first = rep["lines"][0]
+    assert first["text"].startswith("G1 X70")
+    piece = max(first["pieces"], key=lambda p: p["length_mm"])  # the steady full slot
+    assert piece["tool"] == 2
+    c = piece["feed_mm_min"] / (2400.0 * 2)
+    z, a, r = 2, 2.0, 8.0
+    expected = z * a * r / (2.0 * np.pi) * (truth["kte_n_per_mm"] * np.pi
+                                            + truth["ktc_n_per_mm2"] * 2.0 * c) / 1000.0
+    assert piece["cutting_torque_nm"] == pytest.approx(expected, rel=0.05)
+    # the adaptive configuration reads it per tool (length-weighted over the tool's cuts)
+    torques = [p["cutting_torque_nm"] for ln in rep["lines"] for p in ln["pieces"]
+               if p.get("cutting_torque_nm")]
+    target = planned_torque(tmp / "opt" / "optimize.json", 2)
+    assert min(torques) <= target <= max(torques)
+    cfg = tmp_path / "adaptive.toml"
+    cfg.write_text(f'[tools.2]\ntarget_from = "{tmp / "opt" / "optimize.json"}"\n')
+    assert read_adaptive_config(cfg).tools[2]["target_nm"] == pytest.approx(target)
+    cfg.write_text(f'[tools.1]\ntarget_from = "{tmp / "opt" / "optimize.json"}"\n')
+    with pytest.raises(Exception, match="plans no cut with T1"):
+        read_adaptive_config(cfg)

@@ -78,8 +78,12 @@ class _Observer:
         return self.inner.close(meta)
 
 
-def _run(adaptive: bool, break_x: float | None = None) -> dict[str, Any]:
-    prog = parse_program(PROGRAM)
+def _run(adaptive: bool, break_x: float | None = None, *, speed_rpm: float = 3000.0
+         ) -> dict[str, Any]:
+    # the same feed per tooth (0.075 mm) at another speed: the same torque, another power
+    feed = 450.0 * speed_rpm / 3000.0
+    prog = parse_program(PROGRAM.replace("S3000", f"S{speed_rpm:g}").replace(
+        "F450", f"F{feed:g}"))
     machine = Machine.thesis_default()
     cfg = ScenarioConfig.build(None, machine=machine)
     plan = plan_of(prog, machine)
@@ -126,8 +130,7 @@ def runs() -> dict[str, dict[str, Any]]:
     return {"fixed": _run(False), "adaptive": _run(True)}
 
 
-def test_the_loop_holds_the_torque_through_hidden_hardness_steps(runs: dict[str, Any]) -> None:
-    a = runs["adaptive"]
+def _share_within(a: dict[str, Any]) -> tuple[float, int]:
     t = a["truth"]
     assert t is not None
     torque = t["cutting_torque_nm"].to_numpy(dtype=np.float64)
@@ -144,9 +147,24 @@ def test_the_loop_holds_the_torque_through_hidden_hardness_steps(runs: dict[str,
     win = np.array([settled[i * w:(i + 1) * w].all() for i in range(nwin)])
     mean = np.array([torque[i * w:(i + 1) * w].mean() for i in range(nwin)])
     judged = mean[win]
-    assert judged.size >= 20
     inside = np.abs(judged / TARGET_NM - 1.0) <= 0.05
-    assert inside.mean() >= 0.90, (inside.mean(), judged.round(3))
+    return float(inside.mean()) if judged.size else float("nan"), int(judged.size)
+
+
+def test_the_loop_holds_the_torque_through_hidden_hardness_steps(runs: dict[str, Any]) -> None:
+    share, n = _share_within(runs["adaptive"])
+    assert n >= 20
+    assert share >= 0.90, share
+
+
+@pytest.mark.parametrize("speed_rpm", [1500.0, 4500.0])
+def test_the_loop_is_stable_across_the_speed_range(speed_rpm: float) -> None:
+    """The same chip at half and 1.5 times the speed (F225 at 1500 rpm, F675 at 4500 rpm): the
+    controller's gain comes from the torque model, not from the speed, so the loop holds the
+    target as at 3000 rpm (at 6000 rpm 76 % of the windows: docs/adaptive.md)."""
+    share, n = _share_within(_run(True, speed_rpm=speed_rpm))
+    assert n >= 10
+    assert share >= 0.90, (speed_rpm, share)
 
 
 def test_the_adaptive_part_is_shorter_and_stays_in_bounds(runs: dict[str, Any]) -> None:
@@ -242,10 +260,20 @@ def test_edge_run_adaptive_emits_override_messages(tmp_path: Any,
     assert all((r["min_pct"], r["max_pct"]) == (50.0, 120.0) for r in ov)
     cut = [r for r in ov if r.get("cutting")]
     assert cut and any(r["override_pct"] > 100.0 for r in cut)  # 2.38 Nm < 2.6: faster
+    # a power target: 816.8 W at 3000 rpm is 2.6 Nm (P / omega), held as torque
+    cfg.write_text("[tools.2]\ntarget_w = 816.8\n")
+    assert main(["edge", "run", "--source", str(tmp_path / "sim" / "p.json"), "--model",
+                 str(model), "--adaptive", str(cfg), "--out", str(tmp_path / "edge_w"),
+                 "--quiet", "--no-anomaly", "--no-twin"]) == 0
+    rows_w = [json.loads(x) for f in sorted((tmp_path / "edge_w").glob("*.jsonl"))
+              for x in f.read_text().splitlines() if x.strip()]
+    ov_w = [r for r in rows_w if r.get("kind") == "override" and r.get("cutting")]
+    assert ov_w and all(r["target_w"] == 816.8 for r in ov_w)
+    assert np.median([r["target"] for r in ov_w]) == pytest.approx(2.6, rel=0.01)
     # bad configurations
     for text, needle in (("min_pct = 130\nmax_pct = 120\n[tools.2]\ntarget_nm = 2\n",
                           "override bounds min_pct 130 .. max_pct 120"),
-                         ("[tools.2]\n", "tools.2: give target_nm or teach_in"),
+                         ("[tools.2]\n", "tools.2: give target_nm, target_w, target_from"),
                          ("[tools.2]\ntarget = 2\n", "tools.2.target is not a key")):
         cfg.write_text(text)
         capsys.readouterr()

@@ -25,6 +25,10 @@ ADAPTIVE.toml::
     target_nm = 2.6       # hold this cutting torque with T2
     [tools.3]
     teach_in = true       # the first steady cut with T3 (>= 1 s) sets its target
+    [tools.4]
+    target_from = "opt/optimize.json"   # the torque cnctwin optimize planned for T4
+    [tools.5]
+    target_w = 800        # hold this cutting power (torque = P / omega at the current speed)
 """
 
 from __future__ import annotations
@@ -44,14 +48,14 @@ from cnctwin.recording import CounterGap
 from cnctwin.spindle import SpindleModel
 from cnctwin.usecases.adaptive import AdaptiveFeedController
 
-__all__ = ["AdaptiveConfig", "AdaptiveProcessor", "read_adaptive_config"]
+__all__ = ["AdaptiveConfig", "AdaptiveProcessor", "planned_torque", "read_adaptive_config"]
 
 _MIN_FEED_MM_MIN = 20.0
 """Below this XY feed the engagement model expects no cut [mm/min] (the encoder's noise over a
 20 ms interval is a few mm/min)."""
 
 _TOP = {"min_pct", "max_pct", "gain", "update_s", "tools"}
-_TOOL = {"target_nm", "teach_in", "min_pct", "max_pct"}
+_TOOL = {"target_nm", "target_w", "target_from", "teach_in", "min_pct", "max_pct"}
 
 
 @dataclass(frozen=True)
@@ -139,8 +143,19 @@ def read_adaptive_config(path: str | Path) -> AdaptiveConfig:
                               f"{', '.join(sorted(_TOOL))}")
         target = t.get("target_nm")
         teach = bool(t.get("teach_in", False))
-        if target is None and not teach:
-            raise ConfigError(f"{src}: tools.{key}: give target_nm or teach_in = true")
+        target_w = t.get("target_w")
+        given = [k for k in ("target_nm", "target_w", "target_from", "teach_in") if k in t]
+        if len(given) > 1:
+            raise ConfigError(f"{src}: tools.{key}: give one of target_nm, target_w, "
+                              f"target_from, teach_in (not {' and '.join(given)})")
+        if target_w is not None and not _num(src, f"tools.{key}.target_w", target_w) > 0:
+            raise ConfigError(f"{src}: tools.{key}.target_w must be a positive power [W]")
+        if "target_from" in t:
+            target = planned_torque(Path(src).parent / str(t["target_from"]), num,
+                                    where=f"{src}: tools.{key}.target_from")
+        if target is None and not teach and target_w is None:
+            raise ConfigError(f"{src}: tools.{key}: give target_nm, target_w, target_from "
+                              "(optimize.json) or teach_in = true")
         if target is not None and not _num(src, f"tools.{key}.target_nm", target) > 0:
             raise ConfigError(f"{src}: tools.{key}.target_nm must be a positive torque [Nm]")
         tlo = _num(src, f"tools.{key}.min_pct", t.get("min_pct", lo))
@@ -149,9 +164,60 @@ def read_adaptive_config(path: str | Path) -> AdaptiveConfig:
             raise ConfigError(f"{src}: tools.{key} bounds {tlo:g} .. {thi:g} % must lie within "
                               f"the file's {lo:g} .. {hi:g} %")
         tools[num] = {"target_nm": None if target is None else float(target),
+                      "target_w": None if target_w is None else float(target_w),
                       "teach_in": teach, "min_pct": tlo, "max_pct": thi}
     return AdaptiveConfig(min_pct=lo, max_pct=hi, gain=gain, update_s=update_s, tools=tools,
                           source=src)
+
+
+def planned_torque(path: str | Path, tool: int, *, where: str = "target_from") -> float:
+    """The mean cutting torque ``cnctwin optimize`` planned for a tool [Nm].
+
+    The length-weighted mean over the tool's cutting pieces of ``optimize.json`` (each
+    piece's ``cutting_torque_nm``: the engagement model and the calibrated material at the
+    new feed, without the margin).
+
+    Parameters
+    ----------
+    path : str or path
+        ``optimize.json``.
+    tool : int
+        T number.
+    where : str
+        Named in errors (the config file and key).
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    ConfigError
+        Unreadable, not an optimize.json, or no cut of this tool in it.
+    """
+    import json
+
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{where}: cannot read {p} ({exc}); give the optimize.json of "
+                          "'cnctwin optimize'") from None
+    lines = doc.get("lines") if isinstance(doc, dict) else None
+    if not isinstance(lines, list):
+        raise ConfigError(f"{where}: {p} is not an optimize.json (no 'lines')")
+    num = den = 0.0
+    for ln in lines:
+        for pc in ln.get("pieces", []) if isinstance(ln, dict) else []:
+            tq = pc.get("cutting_torque_nm")
+            if pc.get("tool") == tool and isinstance(tq, int | float) and tq > 0:
+                w = float(pc.get("length_mm") or 0.0) or 1e-9
+                num += w * float(tq)
+                den += w
+    if den <= 0.0:
+        raise ConfigError(f"{where}: {p} plans no cut with T{tool} (re-run 'cnctwin optimize' "
+                          "with this version, or give target_nm)")
+    return num / den
 
 
 class AdaptiveProcessor:
@@ -192,12 +258,14 @@ class AdaptiveProcessor:
         self._alarmed: set[tuple[int, str]] = set()
         self.heartbeat = 0
 
-    def _controller(self, tool: int, fs: float, *, taught_nm: float | None = None
-                    ) -> AdaptiveFeedController | None:
+    def _controller(self, tool: int, fs: float, *, taught_nm: float | None = None,
+                    speed_rpm: float | None = None) -> AdaptiveFeedController | None:
         spec = self.config.tools.get(tool)
         if spec is None:
             return None
         target = spec["target_nm"] if spec["target_nm"] is not None else taught_nm
+        if target is None and spec.get("target_w") is not None and speed_rpm:
+            target = spec["target_w"] / (abs(speed_rpm) * 2.0 * math.pi / 60.0)
         if tool not in self._ctrl and target is not None:
             self._ctrl[tool] = AdaptiveFeedController(
                 self.model, target_nm=target, min_pct=spec["min_pct"],
@@ -259,7 +327,14 @@ class AdaptiveProcessor:
             return []
         i = np.asarray(chunk.signals[i_col], dtype=np.float64)
         n = np.asarray(chunk.signals[n_col], dtype=np.float64)
-        ctrl = self._controller(self._tool, fs)
+        n_mean = float(np.nanmean(np.abs(n))) if np.isfinite(n).any() else 0.0
+        ctrl = self._controller(self._tool, fs,
+                                speed_rpm=n_mean if n_mean > 50.0 else None)
+        if ctrl is not None and spec.get("target_w") is not None and n_mean > 50.0:
+            # a power target: the torque that gives it at the current speed
+            ctrl.set_target(spec["target_w"] / (n_mean * 2.0 * math.pi / 60.0))
+        if ctrl is None and spec.get("target_w") is not None:
+            return []  # a power target waits for the spindle to turn
         if ctrl is None:  # teach-in: the mean torque of the first steady cut
             with np.errstate(invalid="ignore"):
                 tau = self.model.cutting_torque(i, n, fs_hz=fs) * np.sign(n)
@@ -277,6 +352,7 @@ class AdaptiveProcessor:
         self.heartbeat += 1
         out = [Result("override", cyc, {
             "tool": self._tool, "override_pct": st.override_pct, "target": ctrl.target_nm,
+            **({"target_w": spec["target_w"]} if spec.get("target_w") is not None else {}),
             "heartbeat": self.heartbeat, "min_pct": ctrl.min_pct, "max_pct": ctrl.max_pct,
             "measured": None if not math.isfinite(st.torque_nm) else st.torque_nm,
             "cutting": st.cutting, "units": {"target": "Nm", "measured": "Nm",

@@ -19,7 +19,7 @@ the cycle's feed is the smallest, and the name of the limit that gave it binds.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -144,10 +144,15 @@ class FeedLimits:
         Highest path feed [mm/min] (``inf`` where no cutting limit applies: air).
     binding : numpy.ndarray of int
         Index into :data:`CONSTRAINTS` of the binding limit (-1: none).
+    torque_a_nm, torque_b_nm_per_mm : numpy.ndarray
+        The predicted mean cutting torque A + B c at a feed per tooth c [mm] (nominal, no
+        margin; 0 where not cutting): what the adaptive feed holds (docs/adaptive.md).
     """
 
     feed_mm_min: NDArray[np.float64]
     binding: NDArray[np.int64]
+    torque_a_nm: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    torque_b_nm_per_mm: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
 
 
 def _positive_root(a2: NDArray[np.float64], a1: NDArray[np.float64],
@@ -233,4 +238,5 @@ def feed_limits(entry_rad: NDArray[np.float64], exit_rad: NDArray[np.float64],
     c_best = c_all[idx, np.arange(n.size)]
     feed = c_best * n * z
     binding = np.where(np.isfinite(feed), idx, -1)
-    return FeedLimits(feed_mm_min=feed, binding=binding.astype(np.int64))
+    return FeedLimits(feed_mm_min=feed, binding=binding.astype(np.int64),
+                      torque_a_nm=big_a / g, torque_b_nm_per_mm=big_b / g)

@@ -172,6 +172,8 @@ def plan_feeds(program: Program, trace: EngagementTrace, tools: ToolTable,
     n = len(trace)
     flim = np.full(n, np.inf)
     bind = np.full(n, -1, dtype=np.int64)
+    t_a = np.zeros(n)
+    t_b = np.zeros(n)
     for t in np.unique(trace.tool):
         if int(t) not in tools or tools.get(int(t)).kind != "end_mill":
             continue
@@ -181,6 +183,8 @@ def plan_feeds(program: Program, trace: EngagementTrace, tools: ToolTable,
                          limits=limits)
         flim[sel] = fl.feed_mm_min
         bind[sel] = fl.binding
+        t_a[sel] = fl.torque_a_nm
+        t_b[sel] = fl.torque_b_nm_per_mm
     machine_cap = limits.path_max_mm_min
     incremental = any("91" in b.words.get("G", ()) for b in program.blocks)
     plan: dict[int, list[Piece]] = {}
@@ -221,7 +225,15 @@ def plan_feeds(program: Program, trace: EngagementTrace, tools: ToolTable,
                                 if blk.feed_mode == "G95" else fval))
             length = float(np.sum(np.hypot(np.diff(trace.x_mm[lo + a:lo + e]),
                                            np.diff(trace.y_mm[lo + a:lo + e]))))
-            info.append({"feed_mm_min": float(feed), "binding": why, "length_mm": length})
+            # the mean cutting torque predicted at this feed (what the adaptive feed holds)
+            z = tools.get(t).flutes
+            n_cyc = np.abs(trace.speed_rpm[lo + a:lo + e])
+            cut = np.isfinite(seg) & (t_b[lo + a:lo + e] > 0.0) & (n_cyc > 1.0)
+            torque = (float(np.median(t_a[lo + a:lo + e][cut] + t_b[lo + a:lo + e][cut]
+                                      * feed / (n_cyc[cut] * z)))
+                      if cut.any() else None)
+            info.append({"feed_mm_min": float(feed), "binding": why, "length_mm": length,
+                         "tool": t, "cutting_torque_nm": torque})
         plan[bi] = pieces
         slow = min(range(len(info)), key=lambda i: info[i]["feed_mm_min"])
         lines.append(LinePlan(line=blk.line, text=blk.text.strip(), feed_old_mm_min=_old_feed(blk),

@@ -128,6 +128,23 @@ class AdaptiveFeedController:
         self._buf_tau: list[NDArray[np.float64]] = []
         self._buf_s = 0.0
 
+    def set_target(self, target_nm: float) -> None:
+        """Hold a new torque (a power target at a new speed: P / omega); the air, overload and
+        edge levels keep their ratio to the target.
+
+        Parameters
+        ----------
+        target_nm : float
+            Cutting torque to hold [Nm].
+        """
+        if not (math.isfinite(target_nm) and target_nm > 0):
+            raise ConfigError(f"target_nm must be a positive torque, got {target_nm!r}")
+        k = float(target_nm) / self.target_nm
+        self.target_nm = float(target_nm)
+        self.air_nm *= k
+        self.overload_nm *= k
+        self.edge_nm *= k
+
     def update(self, current_a: ArrayLike, speed_rpm: ArrayLike, *,
                expect_cut: bool | None = None) -> AdaptiveState:
         """One step from the samples since the last call.
