@@ -167,6 +167,84 @@ def test_shdr_adapter_snapshot_lines_and_ping() -> None:
         ShdrAdapter(model, host="0.0.0.0", port=0)
 
 
+def test_an_shdr_client_that_never_reads_is_dropped_and_never_blocks_send() -> None:
+    """Issue 27, point 4: an agent that connects and never reads. ``send`` queues and returns
+    (it never waits on the socket); once the agent is a queue's worth behind it is dropped
+    and counted, while a reading agent gets every line in order."""
+    model = machine_tool_device("M1")
+    ad = ShdrAdapter(model, port=0, queue_bytes=2_000_000, send_timeout_s=1.0)
+    stalled = socket.create_connection(("127.0.0.1", ad.port), timeout=5)
+    stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    got: list[str] = []
+    good = socket.create_connection(("127.0.0.1", ad.port), timeout=10)
+
+    def read() -> None:
+        data = bytearray()
+        while b"2026-01-01T00:00:00.004999Z" not in data[-9000:]:
+            part = good.recv(1 << 20)
+            if not part:
+                break
+            data += part
+        got.extend(ln.strip() for ln in data.decode().splitlines())
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    try:
+        deadline = time.time() + 5
+        while ad.n_clients < 2 and time.time() < deadline:
+            time.sleep(0.01)
+        assert ad.n_clients == 2
+        # 500 Hz for 10 s, each line padded to ~4 kB (a message text): 20 MB, more than the
+        # kernel's socket buffers of a loopback connection absorb and 10x the queue
+        n = 5000
+        pad = "x" * 4000
+
+        def pipeline() -> None:  # in bursts of 20 lines, as chunks of a live pipeline
+            for i in range(n):
+                if i % 20 == 0:
+                    time.sleep(0.002)
+                ad.send(f"2026-01-01T00:00:00.{i:06d}Z",
+                        [("x1_pos", float(i)), ("y1_pos", 2.0), ("z1_pos", 3.0),
+                         ("sp1_speed", 3000.0), ("sp1_cut_torque", 1.25),
+                         ("program", pad)])
+        sender = threading.Thread(target=pipeline, daemon=True)
+        sender.start()
+        sender.join(60)
+        # liveness, not speed: the old adapter's sendall under its lock waited here forever
+        assert not sender.is_alive(), "send() blocked on the agent that never reads"
+        reader.join(20)
+        assert ad.dropped_clients == 1 and ad.n_clients == 1
+        lines = [ln for ln in got if "|x1_pos|" in ln]
+        assert [float(ln.split("|")[2]) for ln in lines] == [float(i) for i in range(n)]
+    finally:
+        stalled.close()
+        good.close()
+        ad.close()
+
+
+def test_the_agent_serves_many_clients_at_once() -> None:
+    """Issue 27, point 4: 200 clients connecting at once (backlog 128, one thread each) all
+    get their document; none waits for a connection refused or reset."""
+    import concurrent.futures
+    import urllib.request
+
+    model = machine_tool_device("M1")
+    buf = ObservationBuffer(1000)
+    buf.add("x1_pos", 0, 1.0)
+    agent = MTConnectAgent(model, buf, port=0)
+    try:
+        def get(_: int) -> tuple[int, float]:
+            t0 = time.perf_counter()
+            with urllib.request.urlopen(f"{agent.url}/current", timeout=30) as r:
+                r.read()
+                return r.status, time.perf_counter() - t0
+        with concurrent.futures.ThreadPoolExecutor(200) as ex:
+            res = list(ex.map(get, range(200)))
+        assert all(code == 200 for code, _ in res)
+        assert agent.client_errors == 0
+    finally:
+        agent.close()
+
+
 def test_edge_run_serves_the_real_recording(
     c4a_file: Path, spindle_model: Any, tmp_path: Path, schemas: dict[str, Any]
 ) -> None:

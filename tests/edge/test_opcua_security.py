@@ -10,6 +10,7 @@ import socket
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from cnctwin.cli import main
@@ -20,7 +21,10 @@ pytest.importorskip("asyncua", reason="the opcua extra: pip install 'cnctwin[opc
 USER, PASSWORD = "operator", "correct-horse-battery"
 
 
-def _client_cert(tmp: Path) -> tuple[Path, Path]:
+def _client_cert(tmp: Path, trust: Path | None = None) -> tuple[Path, Path]:
+    """A self-signed client certificate; copied into ``trust/trusted`` (approved) if given."""
+    import shutil
+
     from asyncua.crypto.cert_gen import setup_self_signed_certificate
     from cryptography.x509.oid import ExtendedKeyUsageOID
 
@@ -28,6 +32,9 @@ def _client_cert(tmp: Path) -> tuple[Path, Path]:
     asyncio.run(setup_self_signed_certificate(key, cert, "urn:cnctwin:test:client",
                                               "localhost", [ExtendedKeyUsageOID.CLIENT_AUTH],
                                               {"commonName": "cnctwin test client"}))
+    if trust is not None:
+        (trust / "trusted").mkdir(parents=True, exist_ok=True)
+        shutil.copy(cert, trust / "trusted" / f"{tmp.name}.der")
     return cert, key
 
 
@@ -79,7 +86,7 @@ def secured(tmp_path_factory: pytest.TempPathFactory, c4a_file: Path) -> Any:
     proc = subprocess.Popen([sys.executable, "-m", "cnctwin", "edge", "run", "--source",
                              str(c4a_file), "--model", str(model), "--out", str(d / "out"),
                              "--quiet", "--machine", "m1", "--speed", "0.2", "--opcua", url,
-                             "--opcua-users", str(d / "users")],
+                             "--opcua-users", str(d / "users"), "--opcua-trust", str(d / "pki")],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         deadline = time.monotonic() + 40
@@ -103,8 +110,8 @@ def secured(tmp_path_factory: pytest.TempPathFactory, c4a_file: Path) -> Any:
 
 def test_user_with_sign_and_encrypt_reads_and_cannot_write(secured: Any,
                                                            tmp_path: Path) -> None:
-    url, _ = secured
-    cert, key = _client_cert(tmp_path)
+    url, d = secured
+    cert, key = _client_cert(tmp_path, d / "pki")
     got = asyncio.run(_session(url, cert=cert, key=key, user=USER, password=PASSWORD))
     assert got["holes"] is not None
     assert got["write"] != "accepted"  # every node is read-only
@@ -118,8 +125,8 @@ def test_user_with_sign_and_encrypt_reads_and_cannot_write(secured: Any,
 def test_anonymous_wrong_password_and_no_security_are_refused(
         secured: Any, tmp_path: Path, user: str | None, password: str | None,
         encrypted: bool) -> None:
-    url, _ = secured
-    cert, key = _client_cert(tmp_path) if encrypted else (None, None)
+    url, d = secured
+    cert, key = _client_cert(tmp_path, d / "pki") if encrypted else (None, None)
     from asyncua import ua
 
     # asyncua reports a refused identity as BadUserAccessDenied / BadIdentityTokenInvalid
@@ -127,6 +134,64 @@ def test_anonymous_wrong_password_and_no_security_are_refused(
     with pytest.raises((ua.UaStatusCodeError, ua.UaError)) as err:
         asyncio.run(_session(url, cert=cert, key=key, user=user, password=password))
     print(type(err.value).__name__, err.value)
+
+
+def test_a_certificate_not_in_the_trust_list_is_refused_and_kept_for_approval(
+        secured: Any, tmp_path: Path) -> None:
+    """Issue 27, point 5: a self-signed client certificate the administrator has not approved
+    is refused (right user and password notwithstanding) and written to pki/rejected/; moved
+    to pki/trusted/ it is let in at the next connect, without a restart."""
+    import shutil
+
+    url, d = secured
+    cert, key = _client_cert(tmp_path)  # not approved
+    from asyncua import ua
+
+    with pytest.raises((ua.UaStatusCodeError, ua.UaError, OSError, TimeoutError,
+                        asyncio.TimeoutError)):
+        asyncio.run(_session(url, cert=cert, key=key, user=USER, password=PASSWORD))
+    rejected = sorted((d / "pki" / "rejected").glob("*.der"))
+    assert rejected and any(p.read_bytes() == cert.read_bytes() for p in rejected)
+    mine = next(p for p in rejected if p.read_bytes() == cert.read_bytes())
+    shutil.move(mine, d / "pki" / "trusted" / mine.name)  # the administrator approves it
+    got = asyncio.run(_session(url, cert=cert, key=key, user=USER, password=PASSWORD))
+    assert got["holes"] is not None
+
+
+def test_the_private_key_is_the_owners_only(secured: Any) -> None:
+    _, d = secured
+    assert (d / "out" / "opcua-key.pem").stat().st_mode & 0o777 == 0o600
+
+
+def test_unknown_user_and_wrong_password_take_the_same_time_and_guessing_is_throttled(
+) -> None:
+    """Issue 27, point 5: a refusal costs the same key derivation whether the name exists or
+    not (within 20 %, the acceptance's tolerance; median of 5 each, interleaved), and five
+    refusals of a name within a minute lock it for 30 s."""
+    import time
+
+    from cnctwin.edge.opcua import _UserManager, hash_password
+
+    um = _UserManager({USER: hash_password(PASSWORD, iterations=100_000)}, max_failures=1000)
+
+    def cost(name: str, pw: str) -> float:
+        t0 = time.perf_counter()
+        assert um.get_user(None, username=name, password=pw) is None
+        return time.perf_counter() - t0
+
+    unknown, wrong = [], []
+    for i in range(5):
+        unknown.append(cost(f"nobody{i}", "x"))
+        wrong.append(cost(USER, f"wrong{i}"))
+    ratio = float(np.median(unknown) / np.median(wrong))
+    assert 0.8 <= ratio <= 1.2, ratio
+    assert um.get_user(None, username=USER, password=PASSWORD) is not None
+    # throttling: the 5th failure locks the name; the right password is then refused too
+    th = _UserManager({USER: hash_password(PASSWORD, iterations=1000)})
+    for _ in range(5):
+        assert th.get_user(None, username=USER, password="guess") is None
+    assert th.get_user(None, username=USER, password=PASSWORD) is None
+    assert th.refused == 6
 
 
 def test_opcua_without_users_or_insecure_refuses_to_start(

@@ -123,6 +123,13 @@ def _add_run_options(r: argparse.ArgumentParser) -> None:
     r.add_argument("--opcua-users", type=Path, metavar="FILE",
                    help="users file (name:hash lines; 'cnctwin edge opcua-user NAME --users "
                    "FILE' adds one)")
+    r.add_argument("--opcua-trust", type=Path, metavar="DIR",
+                   help="client-certificate trust list of --opcua: DIR/trusted/ holds the "
+                   "clients let in; an unknown certificate is refused and written to "
+                   "DIR/rejected/ for approval (default OUT/opcua-pki)")
+    r.add_argument("--opcua-trust-any", action="store_true",
+                   help="accept any client certificate (users still log in); the default "
+                   "refuses certificates not in --opcua-trust")
     r.add_argument("--opcua-publish-hz", type=float, default=10.0,
                    help="OPC UA publish rate of the decimated 500 Hz values [Hz]")
     r.add_argument("--nodes", type=Path, metavar="FILE",
@@ -622,7 +629,9 @@ def _build(args: argparse.Namespace) -> Any:
                                   "to serve anonymous clients without security")
             ua_security = OpcUaSecurity(args.opcua_cert or out / "opcua-cert.der",
                                         args.opcua_key or out / "opcua-key.pem",
-                                        read_users(args.opcua_users))
+                                        read_users(args.opcua_users),
+                                        trust_dir=args.opcua_trust or out / "opcua-pki",
+                                        trust_any=args.opcua_trust_any)
         sinks.append(OpcUaSink(args.opcua, machine=machine,
                                publish_hz=args.opcua_publish_hz, security=ua_security))
     if args.mtconnect or args.shdr:

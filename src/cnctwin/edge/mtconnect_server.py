@@ -17,6 +17,7 @@ them (``cnctwin edge run --mtconnect http://HOST:PORT --shdr tcp://HOST:PORT``).
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import hmac
 import json
@@ -114,6 +115,7 @@ class MTConnectAgent:
 
         class Handler(BaseHTTPRequestHandler):
             server_version = "cnctwin-mtconnect"
+            timeout = 10.0  # a client that stops reading or writing holds one thread, briefly
 
             def log_message(self, *args: Any) -> None:  # quiet
                 pass
@@ -128,8 +130,15 @@ class MTConnectAgent:
                 self.end_headers()
                 self.wfile.write(body)
 
+        class Server(ThreadingHTTPServer):
+            request_queue_size = 128  # a plant's clients connecting at once (default 5)
+
+            def handle_error(self, request: Any, client_address: Any) -> None:
+                agent.client_errors += 1  # a client that vanished: counted, no traceback
+
+        self.client_errors = 0
         try:
-            self._server = ThreadingHTTPServer((host, port), Handler)
+            self._server = Server((host, port), Handler)
         except OSError as exc:
             reason = exc.strerror or exc
             raise ConfigError(f"cannot listen on {host}:{port} for MTConnect ({reason}); "
@@ -203,8 +212,46 @@ def _shdr_value(v: Any) -> str:
     return str(v).replace("|", "/").replace("\n", " ")
 
 
+class _ShdrClient:
+    """One connected agent: a bounded queue of bytes its own thread sends (the pipeline never
+    waits on this socket)."""
+
+    def __init__(self, sock: socket.socket, limit_bytes: int) -> None:
+        self.sock = sock
+        self.limit_bytes = limit_bytes
+        self.queue: collections.deque[bytes] = collections.deque()
+        self.queued = 0
+        self.cond = threading.Condition()
+        self.closed = False
+
+    def put(self, data: bytes) -> bool:
+        """Queue ``data``; False when the client is too far behind (it is then dropped)."""
+        with self.cond:
+            if self.closed:
+                return False
+            if self.queued + len(data) > self.limit_bytes:
+                return False
+            self.queue.append(data)
+            self.queued += len(data)
+            self.cond.notify()
+        return True
+
+    def close(self) -> None:
+        with self.cond:
+            self.closed = True
+            self.cond.notify_all()
+        with contextlib.suppress(OSError):
+            self.sock.shutdown(socket.SHUT_RDWR)
+        with contextlib.suppress(OSError):
+            self.sock.close()
+
+
 class ShdrAdapter:
     """An SHDR adapter: a TCP server that agents (cppagent) connect to.
+
+    Every agent has its own bounded queue and sending thread (with a send timeout): a slow or
+    stalled agent is dropped and counted (:attr:`dropped_clients`), it never blocks
+    :meth:`send`, so the runtime's pipeline never waits on a socket.
 
     Parameters
     ----------
@@ -214,50 +261,55 @@ class ShdrAdapter:
         Address to listen on (port 0: any free port).
     insecure : bool, default False
         Listen on a non-loopback address (SHDR has no authentication).
+    queue_bytes : int, default 4_000_000
+        Data an agent may be behind before it is dropped [bytes] (about 10 s of the
+        500 Hz sampler's lines).
+    send_timeout_s : float, default 5
+        A send that does not progress for this long drops the agent [s].
+    backlog : int, default 128
+        Listen backlog (a plant's agents connecting at once).
     """
 
     def __init__(self, model: DeviceModel, *, host: str = "127.0.0.1", port: int = 7878,
-                 insecure: bool = False) -> None:
+                 insecure: bool = False, queue_bytes: int = 4_000_000,
+                 send_timeout_s: float = 5.0, backlog: int = 128) -> None:
         if not insecure and not is_loopback(host):
             raise ConfigError(f"the SHDR adapter on {host} would face the network without "
                               "authentication (SHDR has none): listen on 127.0.0.1 and let "
                               "the agent connect locally, or give --shdr-insecure")
         self.model = model
-        self._clients: list[socket.socket] = []
+        self.queue_bytes, self.send_timeout_s = int(queue_bytes), float(send_timeout_s)
+        self._clients: list[_ShdrClient] = []
         self._lock = threading.Lock()
         self._current: dict[str, str] = {}
+        self.dropped_clients = 0
         adapter = self
 
         class Handler(socketserver.BaseRequestHandler):
             def handle(self) -> None:
                 sock: socket.socket = self.request
+                sock.settimeout(adapter.send_timeout_s)
+                client = _ShdrClient(sock, adapter.queue_bytes)
                 with adapter._lock:
                     snapshot = "".join(f"{line}\n" for line in adapter._current.values())
-                    adapter._clients.append(sock)
-                try:
                     if snapshot:
-                        sock.sendall(snapshot.encode())
-                    buf = b""
-                    while True:
-                        data = sock.recv(4096)
-                        if not data:
-                            return
-                        buf += data
-                        while b"\n" in buf:
-                            line, buf = buf.split(b"\n", 1)
-                            if line.strip().startswith(b"* PING"):
-                                with adapter._lock:
-                                    sock.sendall(b"* PONG 10000\n")
-                except OSError:
-                    return
+                        client.put(snapshot.encode())
+                    adapter._clients.append(client)
+                reader = threading.Thread(target=adapter._read, args=(client,),
+                                          name="shdr-read", daemon=True)
+                reader.start()
+                try:
+                    adapter._write(client)
                 finally:
-                    with adapter._lock:
-                        if sock in adapter._clients:
-                            adapter._clients.remove(sock)
+                    adapter._remove(client, dropped=False)
 
         class Server(socketserver.ThreadingTCPServer):
             allow_reuse_address = True
             daemon_threads = True
+            request_queue_size = backlog
+
+            def handle_error(self, request: Any, client_address: Any) -> None:
+                pass  # a client that vanished is not an error of the runtime
 
         try:
             self._server = Server((host, port), Handler)
@@ -270,6 +322,50 @@ class ShdrAdapter:
                                         daemon=True)
         self._thread.start()
 
+    def _write(self, client: _ShdrClient) -> None:
+        """The client's thread: send what is queued (a send timeout drops it)."""
+        while True:
+            with client.cond:
+                while not client.queue and not client.closed:
+                    client.cond.wait(1.0)
+                if client.closed:
+                    return
+                parts = list(client.queue)
+                client.queue.clear()
+                client.queued = 0
+            try:
+                client.sock.sendall(b"".join(parts))
+            except OSError:  # timed out (a stalled agent) or gone
+                self._remove(client, dropped=True)
+                return
+
+    def _read(self, client: _ShdrClient) -> None:
+        """Answer the agent's heartbeats (``* PING`` -> ``* PONG 10000``) until it leaves."""
+        buf = b""
+        while not client.closed:
+            try:
+                data = client.sock.recv(4096)
+            except TimeoutError:
+                continue
+            except OSError:
+                break
+            if not data:
+                break
+            buf += data
+            while b"\n" in buf:
+                line, buf = buf.split(b"\n", 1)
+                if line.strip().startswith(b"* PING"):
+                    client.put(b"* PONG 10000\n")
+        client.close()
+
+    def _remove(self, client: _ShdrClient, *, dropped: bool) -> None:
+        with self._lock:
+            if client in self._clients:
+                self._clients.remove(client)
+                if dropped:
+                    self.dropped_clients += 1
+        client.close()
+
     @property
     def n_clients(self) -> int:
         """Connected agents."""
@@ -277,7 +373,8 @@ class ShdrAdapter:
             return len(self._clients)
 
     def send(self, timestamp: str, items: list[tuple[str, Any]]) -> None:
-        """Send one time's values (``[(key, value), ...]``) to every connected agent."""
+        """Queue one time's values (``[(key, value), ...]``) for every connected agent (never
+        waits on a socket: an agent too far behind is dropped and counted)."""
         if not items:
             return
         samples = [(k, v) for k, v in items if not isinstance(v, tuple)]
@@ -288,29 +385,26 @@ class ShdrAdapter:
             if isinstance(v, tuple):  # condition: (level, native_code, message)
                 level, code, text = v
                 lines.append(f"{timestamp}|{k}|{level}|{code or ''}|||{_shdr_value(text or '')}")
+        data = "".join(f"{line}\n" for line in lines).encode()
+        slow = []
         with self._lock:
             for k, v in items:
                 self._current[k] = (f"{timestamp}|{k}|{_shdr_value(v)}"
                                     if not isinstance(v, tuple) else lines[-1])
-            data = "".join(f"{line}\n" for line in lines).encode()
-            for sock in list(self._clients):
-                try:
-                    sock.sendall(data)
-                except OSError:
-                    self._clients.remove(sock)
+            for c in self._clients:
+                if not c.put(data):
+                    slow.append(c)
+        for c in slow:
+            self._remove(c, dropped=True)
 
     def close(self) -> None:
         """Stop serving and drop the clients."""
         self._server.shutdown()
         self._server.server_close()
         with self._lock:
-            for s in self._clients:
-                try:
-                    s.shutdown(socket.SHUT_RDWR)
-                    s.close()
-                except OSError:
-                    pass
-            self._clients.clear()
+            clients, self._clients = list(self._clients), []
+        for c in clients:
+            c.close()
         self._thread.join(5)
 
 
@@ -502,7 +596,8 @@ class MTConnectSink:
                 "next_sequence": self.buffer.next_sequence,
                 "first_sequence": self.buffer.first_sequence,
                 "agent": self.agent.url if self.agent else None,
-                "shdr_clients": self.adapter.n_clients if self.adapter else 0}
+                "shdr_clients": self.adapter.n_clients if self.adapter else 0,
+                "shdr_dropped_clients": self.adapter.dropped_clients if self.adapter else 0}
 
     def close(self) -> None:
         """Mark the device unavailable and stop serving."""

@@ -250,11 +250,87 @@ class OpcUaSecurity:
         (self-signed, one year) when they do not exist.
     users : dict
         User name -> password hash (:func:`read_users`); anonymous access is refused.
+    trust_dir : Path, optional
+        Client-certificate trust list: ``trust_dir/trusted/`` holds the certificates (DER or
+        PEM) of the clients let in; an unknown one is refused and written to
+        ``trust_dir/rejected/`` for the administrator to approve (move it to ``trusted/``;
+        read at every connect, no restart). None with ``trust_any``: any certificate.
+    trust_any : bool, default False
+        Accept any client certificate (the user's explicit opt-in, ``--opcua-trust-any``).
     """
 
     cert_file: Path
     key_file: Path
     users: dict[str, str]
+    trust_dir: Path | None = None
+    trust_any: bool = False
+
+
+def _fingerprint(cert: Any) -> str:
+    from cryptography.hazmat.primitives import hashes
+
+    return str(cert.fingerprint(hashes.SHA256()).hex())
+
+
+class TrustList:
+    """The client certificates a secured server lets in (:attr:`OpcUaSecurity.trust_dir`).
+
+    Parameters
+    ----------
+    directory : path
+        ``trusted/`` and ``rejected/`` below it (created).
+    log : callable, optional
+        Called with one line per newly rejected certificate (default: stderr).
+    """
+
+    def __init__(self, directory: str | os.PathLike[str], *, log: Any = None) -> None:
+        self.dir = Path(directory)
+        (self.dir / "trusted").mkdir(parents=True, exist_ok=True)
+        (self.dir / "rejected").mkdir(parents=True, exist_ok=True)
+        self.log = log
+        self.rejected = 0
+
+    def trusted(self) -> set[str]:
+        """SHA-256 fingerprints of ``trusted/`` (read anew: approvals need no restart)."""
+        from cryptography import x509
+
+        out = set()
+        for f in sorted((self.dir / "trusted").iterdir()):
+            try:
+                data = f.read_bytes()
+                cert = (x509.load_pem_x509_certificate(data) if data.lstrip().startswith(b"-----")
+                        else x509.load_der_x509_certificate(data))
+            except (OSError, ValueError):
+                continue  # not a certificate: ignored (the server's log would say which)
+            out.add(_fingerprint(cert))
+        return out
+
+    async def __call__(self, cert: Any, app_description: Any) -> None:
+        """asyncua's certificate validator: refuse what ``trusted/`` does not hold."""
+        from asyncua import ua
+        from asyncua.common.utils import ServiceError
+        from cryptography.hazmat.primitives.serialization import Encoding
+
+        fp = _fingerprint(cert)
+        if fp in self.trusted():
+            return
+        self.rejected += 1
+        path = self.dir / "rejected" / f"{fp[:16]}.der"
+        if not path.exists():
+            path.write_bytes(cert.public_bytes(Encoding.DER))
+            try:
+                cn = cert.subject.rfc4514_string()
+            except Exception:
+                cn = "?"
+            line = (f"OPC UA: refused the client certificate {cn} (SHA-256 {fp[:16]}...); to "
+                    f"trust it, move {path} to {self.dir / 'trusted'}")
+            if self.log is not None:
+                self.log(line)
+            else:
+                import sys
+
+                print(line, file=sys.stderr, flush=True)
+        raise ServiceError(ua.StatusCodes.BadCertificateUntrusted)
 
 
 class OpcUaSink:
@@ -363,6 +439,8 @@ class OpcUaSink:
         self._alarm_until: int | None = None
         self._futures: deque[Future[None]] = deque()
         self._nodes: dict[str, Any] = {}
+        self.trust: TrustList | None = None
+        self._users: _UserManager | None = None
         self._server: Any = None
         self._loop = asyncio.new_event_loop()
         self._ready = threading.Event()
@@ -404,7 +482,8 @@ class OpcUaSink:
         for name in ("asyncua", "asyncua.server"):  # the server logs every session at INFO
             logging.getLogger(name).setLevel(logging.WARNING)
         sec = self.security
-        server = Server(user_manager=_UserManager(sec.users) if sec is not None else None)
+        self._users = _UserManager(sec.users) if sec is not None else None
+        server = Server(user_manager=self._users)
         await server.init()
         server.set_endpoint(self.endpoint)
         server.set_server_name(f"cnctwin edge ({self.machine})")
@@ -421,11 +500,15 @@ class OpcUaSink:
                 sec.key_file, sec.cert_file, uri, self.host if self.host != "0.0.0.0"
                 else "localhost", [ExtendedKeyUsageOID.SERVER_AUTH],
                 {"commonName": f"cnctwin edge {self.machine}"})
+            os.chmod(sec.key_file, 0o600)  # the private key: its owner only
             await server.load_certificate(str(sec.cert_file))
             await server.load_private_key(str(sec.key_file))
             server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_Sign,
                                         ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt])
             server.set_security_IDs(["Username"])  # no anonymous access
+            if not sec.trust_any:
+                self.trust = TrustList(sec.trust_dir or sec.cert_file.parent / "opcua-pki")
+                server.set_certificate_validator(self.trust)
         idx = await server.register_namespace(self.namespace_uri)
         self._idx = idx
         m = self.machine
@@ -703,7 +786,9 @@ class OpcUaSink:
     def status(self) -> dict[str, Any]:
         return {"endpoint": self.endpoint, "published": self.published,
                 "windows": self.windows, "holes": self._holes, "alarms": self._alarms,
-                "last_error": self.last_error}
+                "last_error": self.last_error,
+                "refused_logins": self._users.refused if self._users is not None else 0,
+                "refused_certificates": self.trust.rejected if self.trust is not None else 0}
 
     def flush(self, *, timeout_s: float = 30.0) -> None:
         """Wait until every write handed to the server is applied."""
@@ -758,16 +843,59 @@ _HOLE_KEYS: dict[str, str] = {
 
 
 class _UserManager:
-    """asyncua user manager over a users file: a known name with its password, or nobody."""
+    """asyncua user manager over a users file: a known name with its password, or nobody.
 
-    def __init__(self, users: dict[str, str]) -> None:
+    An unknown user costs the same key derivation as a wrong password (a dummy hash with the
+    users' iteration count), so the time of a refusal does not tell which names exist.
+    After ``max_failures`` refusals of one name within ``window_s`` that name is refused
+    without a check for ``lockout_s`` (throttling a password guess), counted in
+    :attr:`refused`.
+    """
+
+    def __init__(self, users: dict[str, str], *, max_failures: int = 5, window_s: float = 60.0,
+                 lockout_s: float = 30.0) -> None:
         self.users = users
+        iterations = 200_000
+        for stored in users.values():
+            try:
+                iterations = int(stored.split("$")[1])
+                break
+            except (IndexError, ValueError):
+                continue
+        self._dummy = hash_password(_random_text(), iterations=iterations)
+        self.max_failures, self.window_s, self.lockout_s = max_failures, window_s, lockout_s
+        self._failures: dict[str, list[float]] = {}
+        self._locked: dict[str, float] = {}
+        self.refused = 0
 
     def get_user(self, iserver: Any, username: str | None = None, password: str | None = None,
                  certificate: Any = None) -> Any:
+        import time
+
         from asyncua.server.user_managers import User, UserRole
 
-        stored = self.users.get(username or "")
-        if stored is None or password is None or not verify_password(password, stored):
+        name = username or ""
+        now = time.monotonic()
+        if self._locked.get(name, 0.0) > now:
+            self.refused += 1
             return None
+        stored = self.users.get(name)
+        ok = verify_password(password or "", stored if stored is not None else self._dummy)
+        if stored is None or password is None or not ok:
+            self.refused += 1
+            recent = [t for t in self._failures.get(name, []) if now - t < self.window_s]
+            recent.append(now)
+            self._failures[name] = recent
+            if len(recent) >= self.max_failures:
+                self._locked[name] = now + self.lockout_s
+                self._failures[name] = []
+            return None
+        self._failures.pop(name, None)
         return User(role=UserRole.User, name=username)
+
+
+def _random_text() -> str:
+    """A random text (the dummy password of :class:`_UserManager`)."""
+    import secrets
+
+    return secrets.token_hex(16)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import os
 import threading
 import time
 import urllib.parse
@@ -202,6 +203,7 @@ class SinumerikOpcUaServer:
                 await setup_self_signed_certificate(
                     Path(str(self.key_file)), Path(str(self.cert_file)), uri, "localhost",
                     [ExtendedKeyUsageOID.SERVER_AUTH], {"commonName": "sinumerik-sim"})
+                os.chmod(str(self.key_file), 0o600)
                 await server.load_certificate(str(self.cert_file))
                 await server.load_private_key(str(self.key_file))
                 server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_Sign,
