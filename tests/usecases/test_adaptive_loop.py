@@ -299,3 +299,34 @@ def test_an_injected_breakage_gives_the_stop_request_within_100_ms() -> None:
 def test_healthy_runs_report_no_breakage(runs: dict[str, Any]) -> None:
     assert not runs["adaptive"]["ctrl"].state.breakage
     assert not runs["adaptive"]["ctrl"].state.overload
+
+
+def test_an_override_above_100_stays_within_the_axes_acceleration_limits() -> None:
+    """A square at F6000 whose corners the NC plans near the axes' 3000 mm/s^2 (thesis
+    machine, MD32300): played at 150 % by time scaling alone the corners would need
+    (1.5)^2 x the plan's acceleration (measured 4600-4800 mm/s^2); the player caps the
+    override there (a o^2 <= a_max, anticipated at its ramp rate), so the executed set points
+    stay within the limit (finite differences of the played positions), and still run faster
+    than at 100 % on the straights."""
+    prog = parse_program("G90 G94 G64\nG0 X0 Y0 Z0\nG1 X50 F6000\nG1 Y50\nG1 X0\nG1 Y0\nM30\n")
+    machine = Machine.thesis_default()
+    plan = plan_of(prog, machine)
+    limits = {ax.name: (ax.max_velocity_mm_min, ax.max_accel_mm_s2, ax.max_jerk_mm_s3)
+              for ax in machine.axes}
+    dt = machine.cycle_time_s
+
+    def played(axis_limits: Any) -> tuple[float, int]:
+        pl = OverridePlayer(plan, prog, max_pct=150.0, axis_limits=axis_limits)
+        chunks = list(pl.chunks(lambda: 150.0, chunk_cycles=50))
+        acc = 0.0
+        for ax in ("X1", "Y1"):
+            x = np.concatenate([c.des_pos[ax] for c in chunks])
+            acc = max(acc, float(np.abs(np.gradient(np.gradient(x, dt), dt)).max()))
+        return acc, sum(c.block_index.size for c in chunks)
+
+    blind, n_blind = played(None)
+    capped, n_capped = played(limits)
+    assert blind > 1.2 * limits["X1"][1]  # the uncapped player would exceed it
+    assert capped <= limits["X1"][1] * 1.01, capped
+    n_plan = int(np.asarray(plan.spindle_speed_cmd_rpm).size)
+    assert n_blind < n_capped < n_plan  # faster than 100 %, slower than blind 150 %

@@ -12,9 +12,12 @@ passes it. :func:`cnctwin.sim.simulate` takes the player's chunks (an iterator),
 controller that reads each chunk's recording can set the override of the next: a closed loop
 in one process.
 
-Time scaling keeps the path; velocities scale with the override and accelerations with its
-square (plus the ramp's own term): a plan within the axes' limits at 100 % stays within
-``(max_pct / 100)^2`` of them, which the bounds (default 120 %) keep small.
+Time scaling keeps the path; velocities scale with the override, accelerations with its
+square and jerks with its cube (plus the ramp's own terms). The NC's plan at 100 % is within
+the axes' limits; above 100 % the player caps the override where the plan is near them
+(``axis_limits``: per plan cycle the largest override with v o, a o^2 and j o^3 within the
+limits, anticipated at the ramp rate), as a control's look-ahead does; below 100 % every
+term shrinks.
 """
 
 from __future__ import annotations
@@ -81,6 +84,9 @@ class OverridePlayer:
         Bounds of the applied override [%] (SINUMERIK's feed override switch: 0-120 %).
     rate_pct_per_s : float, default 200
         Largest change of the applied override per second [%/s] (the control's ramp).
+    axis_limits : dict, optional
+        Axis name -> (max velocity [mm/min], max acceleration [mm/s^2], max jerk [mm/s^3]):
+        the override above 100 % is capped where the plan runs near them.
 
     Attributes
     ----------
@@ -91,7 +97,8 @@ class OverridePlayer:
     """
 
     def __init__(self, plan: Any, program: Program, *, min_pct: float = 0.0,
-                 max_pct: float = 120.0, rate_pct_per_s: float = 200.0) -> None:
+                 max_pct: float = 120.0, rate_pct_per_s: float = 200.0,
+                 axis_limits: dict[str, tuple[float, float, float]] | None = None) -> None:
         if not (0.0 <= min_pct <= max_pct):
             raise ConfigError(f"override bounds {min_pct}..{max_pct} %: give 0 <= min <= max")
         if not rate_pct_per_s > 0:
@@ -106,6 +113,7 @@ class OverridePlayer:
         bi = np.asarray(plan.block_index, dtype=np.int64)
         mode = np.asarray(plan.spindle_mode)
         self._feed = kinds[np.clip(bi, 0, len(kinds) - 1)] & (mode == 0)
+        self._cap = self._override_cap(axis_limits or {})
         self._tau = 0.0  # plan cycles (fractional)
         self.cycle = 0
         self.applied_pct = 100.0
@@ -113,6 +121,32 @@ class OverridePlayer:
         self._events = ev.sort_values("cycle", kind="stable").reset_index(drop=True) \
             if len(ev) else ev
         self._ev_next = 0
+
+    def _override_cap(self, limits: dict[str, tuple[float, float, float]]
+                      ) -> NDArray[np.float64]:
+        """Per plan cycle the largest override [%] within the axes' limits (>= 100: the
+        plan itself is the NC's, within them), anticipated backwards at the ramp rate."""
+        cap = np.full(self.n_plan, np.inf)
+        dt = self.dt
+        for ax, (v_max, a_max, j_max) in limits.items():
+            if ax not in self.plan.des_pos:
+                continue
+            x = np.asarray(self.plan.des_pos[ax], dtype=np.float64)
+            if x.size < 4:
+                continue
+            v = np.abs(np.gradient(x, dt)) * 60.0  # [mm/min]
+            a = np.abs(np.gradient(np.gradient(x, dt), dt))
+            j = np.abs(np.gradient(np.gradient(np.gradient(x, dt), dt), dt))
+            with np.errstate(divide="ignore"):
+                c = np.minimum.reduce([v_max / v, np.sqrt(a_max / a), np.cbrt(j_max / j)])
+            cap = np.minimum(cap, 100.0 * c)
+        cap = np.maximum(cap, 100.0)
+        # the applied override falls at most rate x dt per cycle: reach a cap in time
+        step = self.rate_pct_per_s * dt
+        out = cap.copy()
+        for i in range(out.size - 2, -1, -1):
+            out[i] = min(out[i], out[i + 1] + step)
+        return out
 
     @property
     def done(self) -> bool:
@@ -143,7 +177,8 @@ class OverridePlayer:
                 break
             i = min(int(self._tau), last)
             if self._feed[i]:
-                self.applied_pct += min(max(target - self.applied_pct, -d_max), d_max)
+                goal = min(target, float(self._cap[i]))
+                self.applied_pct += min(max(goal - self.applied_pct, -d_max), d_max)
                 rate = self.applied_pct / 100.0
                 ovr.append(self.applied_pct)
             else:

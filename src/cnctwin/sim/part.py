@@ -664,8 +664,10 @@ def _live(prog: Program, machine: Machine, live: LiveOverride, hook: Any, sink: 
     """The program as override-played chunks, the hook and sink that log each chunk."""
     from cnctwin.sim.override import OverridePlayer, plan_of
 
+    limits = {ax.name: (ax.max_velocity_mm_min, ax.max_accel_mm_s2, ax.max_jerk_mm_s3)
+              for ax in machine.axes}
     player = OverridePlayer(plan_of(prog, machine), prog, min_pct=0.0, max_pct=200.0,
-                            rate_pct_per_s=live.rate_pct_per_s)
+                            rate_pct_per_s=live.rate_pct_per_s, axis_limits=limits)
     lhook = _LiveHook(hook)
 
     def chunks() -> Any:
