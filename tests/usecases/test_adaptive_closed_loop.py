@@ -177,6 +177,36 @@ def test_the_loop_holds_the_torque_through_hidden_hardness_steps(
     assert hard.median() < 95.0 < 105.0 < soft.median()
 
 
+def test_the_online_model_factor_tracks_the_hidden_hardness(setup: dict[str, Any],
+                                                           adaptive: dict[str, Any]) -> None:
+    """The edge's engagement model (Z-map of the stock swept by the recorded positions, the
+    library's AISI 1045 coefficients) predicts the mean torque A + B c; the measured-to-model
+    ratio it adapts online must follow the hardness hidden in the simulator (1.0 / 1.15 / 0.95)
+    within 5 % in each zone's second half (the EWMA settled; the soft sensor's own error
+    included)."""
+    from cnctwin.sim.config import START_CYCLE, START_TIME
+
+    d = setup["dir"]
+    rows = [json.loads(x) for x in (d / "adaptive-edge" / "results.jsonl").read_text()
+            .splitlines() if x.strip()]
+    ov = [r for r in rows if r.get("kind") == "override" and r.get("cutting")
+          and "model_factor" in r]
+    assert len(ov) > 100
+    t0 = pd.Timestamp(START_TIME)
+    t0 = t0.tz_localize("UTC") if t0.tzinfo is None else t0
+    cyc = np.array([START_CYCLE + round((pd.Timestamp(r["time"]) - t0).total_seconds() / 0.002)
+                    for r in ov])
+    log = adaptive["log"]
+    k = np.searchsorted(log["cycle"].to_numpy(), cyc, side="right") - 1
+    hard = log["hardness_factor"].to_numpy()[np.clip(k, 0, len(log) - 1)]
+    factor = np.array([r["model_factor"] for r in ov])
+    for h in (1.0, 1.15, 0.95):
+        zone = np.flatnonzero(np.abs(hard - h) < 1e-6)
+        assert zone.size > 10, h
+        late = factor[zone[zone.size // 2:]]
+        assert np.median(late) == pytest.approx(h, rel=0.05), (h, np.median(late))
+
+
 def test_the_adaptive_part_is_shorter_and_within_every_limit(setup: dict[str, Any],
                                                              adaptive: dict[str, Any]) -> None:
     from cnctwin.engagement import parse_stock

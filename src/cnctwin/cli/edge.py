@@ -182,7 +182,10 @@ def _add_run_options(r: argparse.ArgumentParser) -> None:
     r.add_argument("--learn-holes", type=int, default=6,
                    help="teach-in holes of --detector adaptive (6)")
     r.add_argument("--material", default="aisi1045",
-                   help="Kienzle material for physics-torque (aisi1045, grey_cast_iron)")
+                   help="workpiece material: Kienzle law for physics-torque; with --adaptive "
+                   "and --stock its milling coefficients (the machine file's calibrated one "
+                   "first) give the controller's edge torque (aisi1045, grey_cast_iron, "
+                   "al7050, a material file)")
     r.add_argument("--adaptive", type=Path, metavar="ADAPTIVE.toml",
                    help="adaptive feed: per tool a target cutting torque (or teach-in); the "
                    "requested feed override goes on the results stream (kind override); "
@@ -557,9 +560,18 @@ def _build(args: argparse.Namespace) -> Any:
     if getattr(args, "adaptive_config", None) is not None:
         from cnctwin.edge.adaptive import AdaptiveProcessor
 
+        coef = None
+        if getattr(args, "stock_spec", None) is not None:  # the engagement model's torque
+            from cnctwin.sim.materials import resolve_material
+
+            own = getattr(machine_file, "materials", {}) if machine_file is not None else {}
+            coef = resolve_material(args.material, machine_materials=own,
+                                    machine_source=str(args.machine)).material.milling
         procs.append(AdaptiveProcessor(model, args.adaptive_config,
                                        stock=getattr(args, "stock_spec", None),
-                                       diameters=getattr(args, "tool_diameters", None)))
+                                       diameters=getattr(args, "tool_diameters", None),
+                                       coefficients=coef,
+                                       flutes=getattr(args, "tool_flutes", None)))
     if not args.no_anomaly:
         from cnctwin.usecases.anomaly import (
             Detector,
@@ -724,6 +736,7 @@ def _run(args: argparse.Namespace) -> int:
         table = read_tool_table(args.tools)
         args.tool_kinds = {t: table.get(t).kind for t in table}
         args.tool_diameters = {t: table.get(t).diameter_mm for t in table}
+        args.tool_flutes = {t: table.get(t).flutes for t in table}
         cfg = getattr(args, "adaptive_config", None)
         unknown = sorted(set(cfg.tools) - set(table)) if cfg is not None else []
         if unknown:

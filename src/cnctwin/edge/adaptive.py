@@ -237,13 +237,25 @@ class AdaptiveProcessor:
         The raw part: with ``diameters`` the engagement model that judges breakage.
     diameters : dict, optional
         T number -> tool diameter [mm] (from the tool table).
+    coefficients : MillingCoefficients, optional
+        The workpiece's milling coefficients (calibrated into the machine file, or the
+        library's): with the engagement model the controller's edge torque T_e = k A (A the
+        edge term of the mean torque A + B c at the present engagement, k the measured-to-
+        model ratio, adapted online) instead of a fixed share of the target.
+    flutes : dict, optional
+        T number -> flutes (from the tool table).
     """
 
     name = "adaptive"
 
     def __init__(self, model: SpindleModel, config: AdaptiveConfig, *, spindle: str = "SP1",
                  teach_s: float = 1.0, stock: Stock | None = None,
-                 diameters: dict[int, float] | None = None) -> None:
+                 diameters: dict[int, float] | None = None,
+                 coefficients: Any = None, flutes: dict[int, int] | None = None) -> None:
+        self.coefficients = coefficients
+        self.flutes = dict(flutes or {})
+        self._model: tuple[float, float] | None = None  # (A, A + B c) of the last chunk
+        self._k: dict[int, float] = {}
         self.zmap = ZMap(stock) if stock is not None and diameters else None
         self.diameters = dict(diameters or {})
         self._last_xy: tuple[float, float] | None = None
@@ -305,6 +317,7 @@ class AdaptiveProcessor:
         self._last_xy = (float(x[-1]), float(y[-1]))
         v = np.hypot(np.diff(px), np.diff(py)) / chunk.cycle_time_s * 60.0  # [mm/min]
         engaged_now = bool(eng.engaged[tail].all())
+        self._model = self._model_torque(eng, v, chunk)
         ref = float(np.median(self._feeds)) if self._feeds else 0.0
         moving = bool(v[tail].min() >= max(_MIN_FEED_MM_MIN, 0.5 * ref))
         if engaged_now and moving:
@@ -313,6 +326,30 @@ class AdaptiveProcessor:
         elif not engaged_now:
             self._feeds.clear()
         return engaged_now and moving
+
+    def _model_torque(self, eng: Any, v_mm_min: np.ndarray, chunk: Chunk
+                      ) -> tuple[float, float] | None:
+        """Mean (A, A + B c) over the chunk's cutting samples: the edge and the whole mean
+        torque of the linear edge-force model at the present engagement [Nm]."""
+        k = self.coefficients
+        z = self.flutes.get(self._tool)
+        d = self.diameters.get(self._tool)
+        n_col = f"CMD_SPEED|{self.spindle}"
+        if k is None or z is None or d is None or n_col not in chunk.signals:
+            return None
+        n = np.abs(np.asarray(chunk.signals[n_col], dtype=np.float64))
+        if n.size != eng.entry_rad.size:
+            return None
+        on = (eng.engaged & np.isfinite(eng.entry_rad) & np.isfinite(eng.exit_rad)
+              & (n > 50.0) & (v_mm_min > _MIN_FEED_MM_MIN))
+        if not on.any():
+            return None
+        p0, p1, a = eng.entry_rad[on], eng.exit_rad[on], eng.axial_depth_mm[on]
+        c = v_mm_min[on] / (n[on] * z)
+        base = z * a * (d / 2.0) / (2.0 * math.pi) / 1000.0
+        big_a = base * k.kte_n_per_mm * (p1 - p0)
+        big_b = base * k.ktc_n_per_mm2 * (np.cos(p0) - np.cos(p1))
+        return float(np.mean(big_a)), float(np.mean(big_a + big_b * c))
 
     def process(self, chunk: Chunk) -> list[Result]:
         """Results for this chunk: one ``override`` (and an ``alarm`` on overload/breakage)."""
@@ -347,7 +384,15 @@ class AdaptiveProcessor:
                 ctrl = self._controller(self._tool, fs, taught_nm=float(np.mean(seen)))
             if ctrl is None:
                 return []
-        st = ctrl.update(i, n, expect_cut=expect)
+        model = self._model
+        k = self._k.get(self._tool, 1.0)
+        edge = k * model[0] if model is not None else None
+        updates = len(ctrl.state.history)
+        st = ctrl.update(i, n, expect_cut=expect, edge_nm=edge)
+        if (model is not None and len(st.history) > updates and st.cutting and model[1] > 0
+                and math.isfinite(st.torque_nm)):
+            # online: the measured-to-model ratio (hardness, wear, the material's scatter)
+            self._k[self._tool] = 0.8 * k + 0.2 * st.torque_nm / model[1]
         cyc = int(chunk.cycles[-1])
         self.heartbeat += 1
         out = [Result("override", cyc, {
@@ -355,7 +400,11 @@ class AdaptiveProcessor:
             **({"target_w": spec["target_w"]} if spec.get("target_w") is not None else {}),
             "heartbeat": self.heartbeat, "min_pct": ctrl.min_pct, "max_pct": ctrl.max_pct,
             "measured": None if not math.isfinite(st.torque_nm) else st.torque_nm,
-            "cutting": st.cutting, "units": {"target": "Nm", "measured": "Nm",
+            "cutting": st.cutting,
+            **({"model_nm": model[1] * self._k.get(self._tool, 1.0),
+                "model_factor": self._k.get(self._tool, 1.0), "edge_nm": ctrl.edge_nm}
+               if model is not None else {}),
+            "units": {"target": "Nm", "measured": "Nm",
                                              "override_pct": "%"}})]
         for flag, fault, msg in (
                 (st.overload, "overload", "cutting torque above 1.5 x the target: feed hold"),

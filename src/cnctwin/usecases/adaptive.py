@@ -146,7 +146,7 @@ class AdaptiveFeedController:
         self.edge_nm *= k
 
     def update(self, current_a: ArrayLike, speed_rpm: ArrayLike, *,
-               expect_cut: bool | None = None) -> AdaptiveState:
+               expect_cut: bool | None = None, edge_nm: float | None = None) -> AdaptiveState:
         """One step from the samples since the last call.
 
         Breakage is judged on every call (the stop request comes with the samples in which
@@ -162,11 +162,18 @@ class AdaptiveFeedController:
             expects the tool in the material at the end of these samples: a collapse of the
             torque then is a breakage, not the end of a cut. None (not known): breakage is
             not judged (a tool leaving the part looks the same).
+        edge_nm : float, optional
+            The edge (rubbing) torque at the present engagement [Nm], from the engagement
+            model and the material's edge coefficients scaled by the measured-to-model ratio
+            (:class:`cnctwin.edge.adaptive.AdaptiveProcessor`); replaces the fixed
+            ``edge_share`` of the target from now on.
 
         Returns
         -------
         AdaptiveState
         """
+        if edge_nm is not None and math.isfinite(edge_nm) and edge_nm >= 0.0:
+            self.edge_nm = float(edge_nm)
         i = np.asarray(current_a, dtype=np.float64)
         n = np.asarray(speed_rpm, dtype=np.float64)
         st = self.state
