@@ -11,6 +11,7 @@ import sys
 import threading
 import time
 import urllib.error
+import urllib.parse
 import urllib.request
 from pathlib import Path
 from typing import Any
@@ -165,6 +166,100 @@ def test_shdr_adapter_snapshot_lines_and_ping() -> None:
         ad.close()
     with pytest.raises(ConfigError, match=r"no authentication|has none"):
         ShdrAdapter(model, host="0.0.0.0", port=0)
+
+
+def test_agent_requests_by_the_standard(schemas: dict[str, Any]) -> None:
+    """Issue 27, point 3 (MTConnect Part 1, REST protocol): another device's name is
+    NO_DEVICE; ``path=`` returns only the items its XPath selects (in /current and /sample);
+    ``to=`` ends a sample before that sequence; a negative ``count`` returns the last ones; a
+    bad XPath is INVALID_PATH; every document is valid against the official 2.3 XSDs."""
+    model = machine_tool_device("M1")
+    buf = ObservationBuffer(1000)
+    for i in range(50):
+        buf.add("x1_pos", i, float(i))
+        buf.add("sp1_speed", i, 3000.0 + i)
+    agent = MTConnectAgent(model, buf, port=0)
+    try:
+        st, body = _get(f"{agent.url}/OtherMachine/current")
+        assert st == 404
+        assert _valid(schemas, "Error", body).find(".//{*}Error").get("errorCode") == \
+            "NO_DEVICE"
+        path = urllib.parse.quote('//Axes//DataItem[@type="POSITION"]')
+        st, body = _get(f"{agent.url}/current?path={path}")
+        doc = _valid(schemas, "Streams", body)
+        ids = {e.get("dataItemId") for e in doc.iter() if e.get("dataItemId")}
+        assert "x1_pos" in ids and "sp1_speed" not in ids
+        assert ids <= {d.id for d in model.data_items if d.type == "POSITION"}
+        # sample with path and to: the x1 positions 10 .. 19 (sequences 21, 23, ... 39)
+        st, body = _get(f"{agent.url}/sample?path={path}&from=21&to=41&count=100")
+        doc = _valid(schemas, "Streams", body)
+        vals = [float(e.text) for e in doc.iter() if e.get("dataItemId") == "x1_pos"]
+        assert vals == [float(v) for v in range(10, 20)]
+        # negative count: the last three of the path, in order
+        st, body = _get(f"{agent.url}/sample?path={path}&count=-3")
+        doc = _valid(schemas, "Streams", body)
+        vals = [float(e.text) for e in doc.iter() if e.get("dataItemId") == "x1_pos"]
+        assert vals == [47.0, 48.0, 49.0]
+        st, body = _get(f"{agent.url}/sample?path=" + urllib.parse.quote("//DataItem[@"))
+        assert st == 400
+        assert _valid(schemas, "Error", body).find(".//{*}Error").get("errorCode") == \
+            "INVALID_PATH"
+    finally:
+        agent.close()
+
+
+def test_agent_streams_every_observation_once() -> None:
+    """``/sample?interval=50&heartbeat=500``: a multipart stream; observations added while
+    it runs arrive each exactly once and in order; without news an empty heartbeat document
+    comes within the heartbeat."""
+    import http.client
+
+    model = machine_tool_device("M1")
+    buf = ObservationBuffer(10_000)
+    agent = MTConnectAgent(model, buf, port=0)
+    start = buf.next_sequence
+    conn = http.client.HTTPConnection("127.0.0.1", agent.port, timeout=10)
+    try:
+        conn.request("GET", f"/sample?interval=50&heartbeat=500&from={start}&count=1000")
+        resp = conn.getresponse()
+        assert resp.status == 200
+        assert resp.getheader("Content-Type").startswith("multipart/x-mixed-replace")
+        got: list[int] = []
+        docs = 0
+
+        def reader() -> None:
+            nonlocal docs
+            data = b""
+            while True:
+                try:
+                    part = resp.read1(65536)
+                except (OSError, ValueError, http.client.HTTPException):
+                    return
+                if not part:
+                    return
+                data += part
+                while b"</MTConnectStreams>" in data:
+                    doc, data = data.split(b"</MTConnectStreams>", 1)
+                    xml = doc[doc.index(b"<?xml"):] + b"</MTConnectStreams>"
+                    docs += 1
+                    got.extend(int(e.get("sequence")) for e in etree.fromstring(xml).iter()
+                               if e.get("dataItemId") == "x1_pos")
+        th = threading.Thread(target=reader, daemon=True)
+        th.start()
+        for i in range(600):
+            buf.add("x1_pos", i, float(i))
+            if i % 100 == 0:
+                time.sleep(0.12)
+        deadline = time.time() + 20
+        while len(got) < 600 and time.time() < deadline:
+            time.sleep(0.05)
+        assert got == list(range(start, start + 600))
+        before = docs
+        time.sleep(1.2)  # no news: heartbeats keep the stream alive
+        assert docs > before
+    finally:
+        agent.close()
+        conn.close()
 
 
 def test_an_shdr_client_that_never_reads_is_dropped_and_never_blocks_send() -> None:

@@ -67,6 +67,7 @@ __all__ = [
     "iso_timestamp",
     "item_key",
     "machine_tool_device",
+    "path_items",
     "probe_document",
     "streams_document",
 ]
@@ -290,16 +291,24 @@ class ObservationBuffer:
             first = self._obs[0].sequence if self._obs else self._next
             return sorted(self._latest.values(), key=lambda o: o.sequence), first, self._next
 
-    def sample(self, start: int | None = None, count: int = 100) -> tuple[
+    def sample(self, start: int | None = None, count: int = 100, *,
+               to: int | None = None, items: set[str] | None = None) -> tuple[
             list[Observation], int, int, int]:
-        """Observations ``start .. start+count-1`` that are in the buffer.
+        """Observations from ``start`` (at most ``count``, before ``to``) that are in the
+        buffer, of the data items ``items`` (all without it).
 
         Parameters
         ----------
         start : int, optional
-            First sequence number; default the oldest in the buffer.
+            First sequence number; default the oldest in the buffer (with a negative
+            ``count``: not allowed, the window ends at ``to``).
         count : int, default 100
-            Most observations returned (1 ... buffer size).
+            Most observations returned (1 ... buffer size); negative: the last ``-count``
+            before ``to`` (MTConnect 1.7 ``count=-n``).
+        to : int, optional
+            Sequence number to stop before (default: the next).
+        items : set of str, optional
+            Data item ids to return (the agent's ``path=`` filter).
 
         Returns
         -------
@@ -309,27 +318,98 @@ class ObservationBuffer:
         Raises
         ------
         OutOfRangeError
-            ``start`` older than the buffer's first or newer than its next sequence, or
-            ``count`` outside 1 ... size.
+            ``start`` or ``to`` outside the buffer, ``count`` 0 or beyond the buffer size.
         """
-        if not isinstance(count, int) or not 1 <= count <= self.size:
-            raise OutOfRangeError(f"count must be 1 ... {self.size} (the buffer size), not "
-                                  f"{count!r}")
+        if not isinstance(count, int) or count == 0 or abs(count) > self.size:
+            raise OutOfRangeError(f"count must be 1 ... {self.size} or -1 ... -{self.size} "
+                                  f"(the buffer size), not {count!r}")
         with self._lock:
             first = self._obs[0].sequence if self._obs else self._next
             last = self._next - 1
+            end = self._next if to is None else int(to)
+            if end < first or end > self._next:
+                raise OutOfRangeError(f"'to' must be {first} ... {self._next} (the buffer "
+                                      f"holds {first} ... {last}), not {end}")
+
+            def keep(o: Observation) -> bool:
+                return items is None or o.item_id in items
+
+            if count < 0:
+                if start is not None:
+                    raise OutOfRangeError("a negative count takes no 'from': it counts back "
+                                          "from 'to' (or the newest)")
+                out: list[Observation] = []
+                for j in range(end - first - 1, -1, -1):
+                    if keep(self._obs[j]):
+                        out.append(self._obs[j])
+                        if len(out) == -count:
+                            break
+                out.reverse()
+                return out, first, (out[-1].sequence + 1 if out else end), last
             s = first if start is None else int(start)
             if s < first or s > self._next:
                 raise OutOfRangeError(
                     f"'from' must be {first} ... {self._next} (the buffer holds {first} ... "
                     f"{last}); {s} has {'left' if s < first else 'not reached'} the buffer")
-            i = s - first
-            out = [self._obs[j] for j in range(i, min(i + count, len(self._obs)))]
-            nxt = out[-1].sequence + 1 if out else s
+            out = []
+            j = s - first
+            stop = max(end - first, j)
+            while j < stop and len(out) < count:
+                if keep(self._obs[j]):
+                    out.append(self._obs[j])
+                j += 1
+            # the next request starts after what was scanned (the filter's gaps included)
+            nxt = first + j if out and len(out) == count else max(first + j, s)
             return out, first, nxt, last
 
 
 # ---------------------------------------------------------------------------- documents
+def path_items(model: DeviceModel, buffer: ObservationBuffer, path: str) -> set[str]:
+    """The data item ids an MTConnect ``path=`` XPath selects in the device model.
+
+    The XPath is evaluated on the ``/probe`` document without its namespace (clients write
+    ``//Axes//DataItem[@type="POSITION"]``); a matched ``DataItem`` counts itself, any other
+    matched element every ``DataItem`` below it.
+
+    Parameters
+    ----------
+    model : DeviceModel
+        The device.
+    buffer : ObservationBuffer
+        The agent's buffer (the probe document's header).
+    path : str
+        XPath 1.0.
+
+    Returns
+    -------
+    set of str
+
+    Raises
+    ------
+    ConfigError
+        Not a valid XPath (the agent answers ``INVALID_PATH``).
+    """
+    from lxml import etree
+
+    doc = etree.fromstring(probe_document(model, buffer))
+    for el in doc.iter():
+        if isinstance(el.tag, str) and "}" in el.tag:
+            el.tag = el.tag.split("}", 1)[1]
+    etree.cleanup_namespaces(doc)
+    try:
+        found = doc.xpath(path)
+    except etree.XPathError as exc:
+        raise ConfigError(f"path {path!r} is not a valid XPath: {exc}") from None
+    ids: set[str] = set()
+    for el in found if isinstance(found, list) else []:
+        if not isinstance(el, etree._Element):
+            continue
+        if el.tag == "DataItem":
+            ids.add(str(el.get("id")))
+        ids.update(str(d.get("id")) for d in el.iter("DataItem"))
+    return ids
+
+
 def iso_timestamp(t_ns: int) -> str:
     """MTConnect/SHDR timestamp of ``t_ns`` [ns since the epoch], UTC, microseconds.
 

@@ -41,6 +41,7 @@ from cnctwin.edge.mtconnect import (
     iso_timestamp,
     item_key,
     machine_tool_device,
+    path_items,
     probe_document,
     streams_document,
 )
@@ -121,7 +122,12 @@ class MTConnectAgent:
                 pass
 
             def do_GET(self) -> None:
-                status, body = agent.respond(self.path, self.headers.get("Authorization"))
+                auth = self.headers.get("Authorization")
+                stream = agent.stream_request(self.path, auth)
+                if stream is not None:
+                    agent.stream(self, *stream)
+                    return
+                status, body = agent.respond(self.path, auth)
                 self.send_response(status)
                 self.send_header("Content-Type", "application/xml; charset=utf-8")
                 self.send_header("Content-Length", str(len(body)))
@@ -137,6 +143,7 @@ class MTConnectAgent:
                 agent.client_errors += 1  # a client that vanished: counted, no traceback
 
         self.client_errors = 0
+        self._closing = False
         try:
             self._server = Server((host, port), Handler)
         except OSError as exc:
@@ -157,8 +164,9 @@ class MTConnectAgent:
                                         daemon=True)
         self._thread.start()
 
-    def respond(self, path: str, authorization: str | None = None) -> tuple[int, bytes]:
-        """Status and body for a request path (the HTTP handler's logic, testable alone)."""
+    def _parse(self, path: str, authorization: str | None
+               ) -> tuple[str, dict[str, list[str]]] | tuple[int, bytes]:
+        """The request and its query, or an error response."""
         b = self.buffer
         if self.token is not None:
             given = (authorization or "").removeprefix("Bearer ").strip()
@@ -167,37 +175,161 @@ class MTConnectAgent:
                                            buffer=b)
         u = urllib.parse.urlsplit(path)
         parts = [urllib.parse.unquote(p) for p in u.path.split("/") if p]
-        if parts and parts[0] in (self.model.name, self.model.id, self.model.uuid):
+        names = (self.model.name, self.model.id, self.model.uuid)
+        requests = ("probe", "current", "sample")
+        if parts and parts[0] in names:
             parts = parts[1:]
+        elif len(parts) == 2 or (len(parts) == 1 and parts[0] not in requests):
+            return 404, error_document("NO_DEVICE", f"no device {parts[0]!r}; this agent "
+                                       f"serves {self.model.name!r}", buffer=b)
         req = parts[0] if parts else "probe"
-        q = urllib.parse.parse_qs(u.query)
-        if len(parts) > 1 or req not in ("probe", "current", "sample"):
+        if len(parts) > 1 or req not in requests:
             return 404, error_document("INVALID_REQUEST", f"unknown request {u.path!r}; use "
                                        "/probe, /current or /sample?from=&count=", buffer=b)
+        return req, urllib.parse.parse_qs(u.query)
+
+    def _items(self, q: dict[str, list[str]]) -> set[str] | tuple[int, bytes] | None:
+        if "path" not in q:
+            return None
+        try:
+            return path_items(self.model, self.buffer, q["path"][0])
+        except ConfigError as exc:
+            return 400, error_document("INVALID_PATH", str(exc), buffer=self.buffer)
+
+    def respond(self, path: str, authorization: str | None = None) -> tuple[int, bytes]:
+        """Status and body for a request path (the HTTP handler's logic, testable alone).
+
+        ``/probe``, ``/current`` and ``/sample`` (also ``/DEVICE/...``; another device name:
+        ``NO_DEVICE``); ``path=`` (XPath over the device model: only the items it selects;
+        ``INVALID_PATH``), ``from=``, ``count=`` (negative: the last ``-count``), ``to=``.
+        ``interval=`` streams (:meth:`stream`).
+        """
+        b = self.buffer
+        parsed = self._parse(path, authorization)
+        if isinstance(parsed[0], int):
+            return parsed
+        req, q = parsed
+        assert isinstance(req, str) and isinstance(q, dict)
         if req == "probe":
             return 200, probe_document(self.model, b)
+        items = self._items(q)
+        if isinstance(items, tuple):
+            return items
         if req == "current":
             if "at" in q:
                 return 400, error_document("UNSUPPORTED", "current?at= is not supported",
                                            buffer=b)
             obs, first, nxt = b.current()
+            if items is not None:
+                obs = [o for o in obs if o.item_id in items]
             return 200, streams_document(self.model, obs, buffer=b, first_sequence=first,
                                          next_sequence=nxt, last_sequence=nxt - 1)
         try:
             start = int(q["from"][0]) if "from" in q else None
             count = int(q["count"][0]) if "count" in q else 100
+            to = int(q["to"][0]) if "to" in q else None
         except ValueError:
-            return 400, error_document("INVALID_REQUEST", "from and count must be integers",
+            return 400, error_document("INVALID_REQUEST", "from, count and to must be integers",
                                        buffer=b)
         try:
-            obs, first, nxt, last = b.sample(start, count)
+            obs, first, nxt, last = b.sample(start, count, to=to, items=items)
         except OutOfRangeError as exc:
             return 400, error_document("OUT_OF_RANGE", str(exc), buffer=b)
         return 200, streams_document(self.model, obs, buffer=b, first_sequence=first,
                                      next_sequence=nxt, last_sequence=last)
 
+    def stream_request(self, path: str, authorization: str | None
+                       ) -> tuple[str, dict[str, list[str]]] | None:
+        """``(request, query)`` when ``path`` asks for a stream (``interval=``), else None."""
+        u = urllib.parse.urlsplit(path)
+        if "interval" not in urllib.parse.parse_qs(u.query):
+            return None
+        parsed = self._parse(path, authorization)
+        if isinstance(parsed[0], int) or parsed[0] == "probe":
+            return None  # the error (or the probe) is answered as a document
+        return parsed
+
+    def stream(self, handler: Any, req: str, q: dict[str, list[str]]) -> None:
+        """``interval=MS`` (and ``heartbeat=MS``, default 10 000): a ``multipart/x-mixed-
+        replace`` stream, one document per interval with what is new since the last (sample:
+        every observation once, in order; current: the latest values), an empty document
+        after ``heartbeat`` without news; until the client leaves or the agent closes."""
+        import time
+
+        b = self.buffer
+        try:
+            interval = int(q["interval"][0]) / 1000.0
+            heartbeat = int(q.get("heartbeat", ["10000"])[0]) / 1000.0
+            count = int(q.get("count", ["100"])[0])
+            start = int(q["from"][0]) if "from" in q else None
+        except ValueError:
+            self._send(handler, 400, error_document(
+                "INVALID_REQUEST", "interval, heartbeat, from and count must be integers",
+                buffer=b))
+            return
+        items = self._items(q)
+        if isinstance(items, tuple):
+            self._send(handler, *items)
+            return
+        if not (0.0 <= interval <= 3600.0 and 0.01 <= heartbeat <= 3600.0) or count < 1:
+            self._send(handler, 400, error_document(
+                "INVALID_REQUEST", "interval 0 ... 3 600 000 ms, heartbeat 10 ... 3 600 000 "
+                "ms, count >= 1", buffer=b))
+            return
+        boundary = "cnctwin" + format(id(handler), "x")
+        handler.send_response(200)
+        handler.send_header("Content-Type", f"multipart/x-mixed-replace;boundary={boundary}")
+        handler.send_header("Connection", "close")
+        handler.end_headers()
+        nxt = b.next_sequence if start is None else start
+        last_sent = 0.0
+        try:
+            while not self._closing:
+                if req == "current":
+                    obs, first, n2 = b.current()
+                    if items is not None:
+                        obs = [o for o in obs if o.item_id in items]
+                    body = streams_document(self.model, obs, buffer=b, first_sequence=first,
+                                            next_sequence=n2, last_sequence=n2 - 1)
+                    news = True
+                else:
+                    try:
+                        obs, first, n2, last = b.sample(nxt, count, items=items)
+                    except OutOfRangeError as exc:  # fell out of the buffer: say so, end
+                        body = error_document("OUT_OF_RANGE", str(exc), buffer=b)
+                        self._part(handler, boundary, body)
+                        return
+                    news = bool(obs)
+                    body = streams_document(self.model, obs, buffer=b, first_sequence=first,
+                                            next_sequence=n2, last_sequence=last)
+                    nxt = n2
+                now = time.monotonic()
+                if news or now - last_sent >= heartbeat:
+                    self._part(handler, boundary, body)
+                    last_sent = now
+                if not news or req == "current":
+                    time.sleep(max(interval, 0.01))
+        except OSError:
+            return  # the client left
+
+    @staticmethod
+    def _part(handler: Any, boundary: str, body: bytes) -> None:
+        head = (f"--{boundary}\r\nContent-type: text/xml\r\nContent-length: {len(body)}"
+                "\r\n\r\n").encode()
+        handler.wfile.write(head + body + b"\r\n")
+        handler.wfile.flush()
+
+    @staticmethod
+    def _send(handler: Any, status: int, body: bytes) -> None:
+        handler.send_response(status)
+        handler.send_header("Content-Type", "application/xml; charset=utf-8")
+        handler.send_header("Content-Length", str(len(body)))
+        handler.end_headers()
+        handler.wfile.write(body)
+
     def close(self) -> None:
-        """Stop serving."""
+        """Stop serving (open streams end)."""
+        self._closing = True
         self._server.shutdown()
         self._server.server_close()
         self._thread.join(5)
