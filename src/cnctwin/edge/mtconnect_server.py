@@ -144,6 +144,8 @@ class MTConnectAgent:
 
         self.client_errors = 0
         self._closing = False
+        self._cache: dict[Any, tuple[int, bytes]] = {}
+        self._cache_lock = threading.Lock()
         try:
             self._server = Server((host, port), Handler)
         except OSError as exc:
@@ -210,6 +212,24 @@ class MTConnectAgent:
             return parsed
         req, q = parsed
         assert isinstance(req, str) and isinstance(q, dict)
+        # many clients ask the same while nothing new arrived: one document per (request,
+        # query, buffer state), the newest 256 kept
+        key = (req, tuple(sorted((k, tuple(v)) for k, v in q.items())), b.next_sequence,
+               b.first_sequence)
+        with self._cache_lock:
+            hit = self._cache.get(key)
+        if hit is not None:
+            return hit
+        out = self._respond(b, req, q)
+        if out[0] == 200:
+            with self._cache_lock:
+                self._cache[key] = out
+                while len(self._cache) > 256:
+                    self._cache.pop(next(iter(self._cache)))
+        return out
+
+    def _respond(self, b: ObservationBuffer, req: str, q: dict[str, list[str]]
+                 ) -> tuple[int, bytes]:
         if req == "probe":
             return 200, probe_document(self.model, b)
         items = self._items(q)
@@ -411,6 +431,7 @@ class ShdrAdapter:
                               "the agent connect locally, or give --shdr-insecure")
         self.model = model
         self.queue_bytes, self.send_timeout_s = int(queue_bytes), float(send_timeout_s)
+        self.coalesce_s = 0.01
         self._clients: list[_ShdrClient] = []
         self._lock = threading.Lock()
         self._current: dict[str, str] = {}
@@ -455,13 +476,18 @@ class ShdrAdapter:
         self._thread.start()
 
     def _write(self, client: _ShdrClient) -> None:
-        """The client's thread: send what is queued (a send timeout drops it)."""
+        """The client's thread: send what is queued (a send timeout drops it), at most every
+        ``coalesce_s`` (one send per few chunks, not one wake-up per line)."""
+        import time
+
         while True:
             with client.cond:
                 while not client.queue and not client.closed:
                     client.cond.wait(1.0)
                 if client.closed:
                     return
+            time.sleep(self.coalesce_s)
+            with client.cond:
                 parts = list(client.queue)
                 client.queue.clear()
                 client.queued = 0
