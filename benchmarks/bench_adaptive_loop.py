@@ -32,23 +32,15 @@ from typing import Any
 
 import pandas as pd
 
+from cnctwin.sim.programs import ADAPTIVE_SLOT
 from cnctwin.usecases.adaptive_report import compare_runs, cut_share_within
 
-PROGRAM = """G90 G17 G94 G64
-T2 M6
-S3000 M3
-G0 X-12 Y20 Z5
-G0 Z-2
-G1 X110 F450
-G0 Z20
-G0 X0 Y0
-M30
-"""
-TOOLS = ('[tools.2]\nkind = "end_mill"\ndiameter_mm = 16\nflutes = 2\nhelix_deg = 30\n'
-         'max_chip_mm = 0.2\n')
-STOCK = "0,0,-30,150,40,0"
-HARDNESS = "part.hardness_along_x=[[-100, 1.0], [40, 1.15], [80, 0.95]]"
-TARGET_NM = 2.6
+PROGRAM = ADAPTIVE_SLOT.program
+TOOLS = ADAPTIVE_SLOT.tools
+STOCK = ADAPTIVE_SLOT.stock
+HARDNESS = "part.hardness_along_x=" + json.dumps([list(p) for p in
+                                                 ADAPTIVE_SLOT.hardness_along_x])
+TARGET_NM = ADAPTIVE_SLOT.target_nm
 EXE = str(Path(sys.executable).parent / "cnctwin")
 
 

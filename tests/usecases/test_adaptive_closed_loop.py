@@ -37,25 +37,17 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from cnctwin.sim.programs import ADAPTIVE_SLOT
 from tests._services import free_port
 
 pytestmark = pytest.mark.xdist_group("adaptive_realtime")
 
-PROGRAM = """G90 G17 G94 G64
-T2 M6
-S3000 M3
-G0 X-12 Y20 Z5
-G0 Z-2
-G1 X110 F450
-G0 Z20
-G0 X0 Y0
-M30
-"""
-TOOLS = ('[tools.2]\nkind = "end_mill"\ndiameter_mm = 16\nflutes = 2\nhelix_deg = 30\n'
-         'max_chip_mm = 0.2\n')
-STOCK = "0,0,-30,150,40,0"
-HARDNESS = "part.hardness_along_x=[[-100, 1.0], [40, 1.15], [80, 0.95]]"
-TARGET_NM = 2.6
+PROGRAM = ADAPTIVE_SLOT.program
+TOOLS = ADAPTIVE_SLOT.tools
+STOCK = ADAPTIVE_SLOT.stock
+HARDNESS = "part.hardness_along_x=" + json.dumps([list(p) for p in
+                                                 ADAPTIVE_SLOT.hardness_along_x])
+TARGET_NM = ADAPTIVE_SLOT.target_nm
 INTERVAL_S = 0.02
 EXE = str(Path(sys.executable).parent / "cnctwin")
 
@@ -216,8 +208,8 @@ def test_the_adaptive_part_is_shorter_and_within_every_limit(setup: dict[str, An
     d = setup["dir"]
     fixed = part_program(None, program=d / "p.mpf", material="aisi1045",
                          tools=read_tool_table(d / "tools.toml"), stock=parse_stock(STOCK),
-                         overrides={"part.hardness_along_x": [[-100, 1.0], [40, 1.15],
-                                                              [80, 0.95]]})
+                         overrides={"part.hardness_along_x": [list(p) for p in
+                                                    ADAPTIVE_SLOT.hardness_along_x]})
     t_fixed = fixed.truth["limits"]["cycle_time_s"]
     t_adapt = adaptive["summary"]["cycle_time_s"]
     assert t_adapt < t_fixed - 0.2, (t_adapt, t_fixed)

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import asyncio
 import math
-import os
 import threading
 import time
 import urllib.parse
@@ -38,6 +37,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from cnctwin.edge.sinumerik_opcua import sinumerik_server
 from cnctwin.exceptions import ConfigError
 from cnctwin.sim.recorder import RecordedChunk
 
@@ -396,45 +396,16 @@ class LiveSinumerikServer:
     async def _main(self) -> None:
         import logging
 
-        from asyncua import Server, ua
+        from asyncua import ua
 
         for name in ("asyncua", "asyncua.server"):
             logging.getLogger(name).setLevel(logging.ERROR)
         try:
             self._loop = asyncio.get_running_loop()
-            if self.users:
-                from asyncua.crypto.cert_gen import setup_self_signed_certificate
-                from cryptography.x509.oid import ExtendedKeyUsageOID
-
-                from cnctwin.edge.opcua import _UserManager, hash_password
-
-                hashed = {u: hash_password(p, iterations=1000) for u, p in self.users.items()}
-                server = Server(user_manager=_UserManager(hashed))
-            else:
-                server = Server()
-            await server.init()
-            server.set_endpoint(self.endpoint)
-            server.set_server_name("SINUMERIK 840D sl (cnctwin simulator, live)")
-            if self.users:
-                uri = "urn:cnctwin:sinumerik-sim"
-                await server.set_application_uri(uri)
-                Path(str(self.cert_file)).parent.mkdir(parents=True, exist_ok=True)
-                await setup_self_signed_certificate(
-                    Path(str(self.key_file)), Path(str(self.cert_file)), uri, "localhost",
-                    [ExtendedKeyUsageOID.SERVER_AUTH], {"commonName": "sinumerik-sim"})
-                os.chmod(str(self.key_file), 0o600)
-                await server.load_certificate(str(self.cert_file))
-                await server.load_private_key(str(self.key_file))
-                server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_Sign,
-                                            ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt])
-                server.set_security_IDs(["Username"])
-            else:
-                server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
-            idx = await server.register_namespace("SinumerikVarProvider")
-            if idx != 2:
-                raise ConfigError(f"namespace index {idx}, expected 2")
-            folder = await server.nodes.objects.add_folder(ua.NodeId("Sinumerik", idx),
-                                                           ua.QualifiedName("Sinumerik", idx))
+            server, folder = await sinumerik_server(
+                self.endpoint, name="SINUMERIK 840D sl (cnctwin simulator, live)",
+                users=self.users, cert_file=self.cert_file, key_file=self.key_file)
+            idx = 2
             # no value yet, stamped before the program's first cycle: a client subscribing
             # before the program starts gets "waiting for initial data", not a 0.0 newer
             # than everything the program will serve

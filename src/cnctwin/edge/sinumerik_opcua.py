@@ -37,7 +37,7 @@ import pandas as pd
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import Recording
 
-__all__ = ["SinumerikOpcUaServer", "node_ids", "write_node_file"]
+__all__ = ["SinumerikOpcUaServer", "node_ids", "sinumerik_server", "write_node_file"]
 
 _AXIS_VARS = (("ENC_POS", "actToolBasePos", "mm"), ("LOAD", "aaLoad", "%"),
               ("CURRENT", "aaCurr", "A"), ("POWER", "aaPower", "W"))
@@ -99,6 +99,68 @@ def write_node_file(rec: Recording, path: str | Path) -> Path:
     p = Path(path)
     p.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return p
+
+
+async def sinumerik_server(endpoint: str, *, name: str, users: dict[str, str] | None,
+                           cert_file: str | Path | None, key_file: str | Path | None
+                           ) -> tuple[Any, Any]:
+    """An initialised (not yet started) asyncua server shaped like SINUMERIK's: namespace 2
+    ``SinumerikVarProvider``, a ``Sinumerik`` folder; with ``users`` Basic256Sha256 Sign and
+    SignAndEncrypt with a user name only (certificate generated if missing, key 0600),
+    without them anonymous and no security.
+
+    Parameters
+    ----------
+    endpoint : str
+        ``opc.tcp://HOST:PORT``.
+    name : str
+        Server name.
+    users : dict, optional
+        User name -> password.
+    cert_file, key_file : path, optional
+        Server certificate (DER) and key (PEM) (with ``users``).
+
+    Returns
+    -------
+    tuple
+        The server and the ``Sinumerik`` folder node.
+    """
+    from asyncua import Server, ua
+
+    if users:
+        from asyncua.crypto.cert_gen import setup_self_signed_certificate
+        from cryptography.x509.oid import ExtendedKeyUsageOID
+
+        from cnctwin.edge.opcua import _UserManager, hash_password
+
+        hashed = {u: hash_password(p, iterations=1000) for u, p in users.items()}
+        server = Server(user_manager=_UserManager(hashed))
+    else:
+        server = Server()
+    await server.init()
+    server.set_endpoint(endpoint)
+    server.set_server_name(name)
+    if users:
+        uri = "urn:cnctwin:sinumerik-sim"
+        await server.set_application_uri(uri)
+        Path(str(cert_file)).parent.mkdir(parents=True, exist_ok=True)
+        await setup_self_signed_certificate(
+            Path(str(key_file)), Path(str(cert_file)), uri, "localhost",
+            [ExtendedKeyUsageOID.SERVER_AUTH], {"commonName": "sinumerik-sim"})
+        os.chmod(str(key_file), 0o600)
+        await server.load_certificate(str(cert_file))
+        await server.load_private_key(str(key_file))
+        server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_Sign,
+                                    ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt])
+        server.set_security_IDs(["Username"])
+    else:
+        server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+    idx = await server.register_namespace("SinumerikVarProvider")
+    if idx != 2:
+        raise ConfigError(f"namespace index {idx}, expected 2")
+    folder = await server.nodes.objects.add_folder(ua.NodeId("Sinumerik", idx),
+                                                   ua.QualifiedName("Sinumerik", idx))
+    return server, folder
 
 
 def _last_at(ev_cycles: np.ndarray, values: np.ndarray, cycles: np.ndarray) -> list[str]:
@@ -178,44 +240,15 @@ class SinumerikOpcUaServer:
     async def _main(self) -> None:
         import logging
 
-        from asyncua import Server, ua
+        from asyncua import ua
 
         for name in ("asyncua", "asyncua.server"):
             logging.getLogger(name).setLevel(logging.ERROR)
         try:
-            if self.users:
-                from asyncua.crypto.cert_gen import setup_self_signed_certificate
-                from cryptography.x509.oid import ExtendedKeyUsageOID
-
-                from cnctwin.edge.opcua import _UserManager, hash_password
-
-                hashed = {u: hash_password(p, iterations=1000) for u, p in self.users.items()}
-                server = Server(user_manager=_UserManager(hashed))
-            else:
-                server = Server()
-            await server.init()
-            server.set_endpoint(self.endpoint)
-            server.set_server_name("SINUMERIK 840D sl (cnctwin simulator)")
-            if self.users:
-                uri = "urn:cnctwin:sinumerik-sim"
-                await server.set_application_uri(uri)
-                Path(str(self.cert_file)).parent.mkdir(parents=True, exist_ok=True)
-                await setup_self_signed_certificate(
-                    Path(str(self.key_file)), Path(str(self.cert_file)), uri, "localhost",
-                    [ExtendedKeyUsageOID.SERVER_AUTH], {"commonName": "sinumerik-sim"})
-                os.chmod(str(self.key_file), 0o600)
-                await server.load_certificate(str(self.cert_file))
-                await server.load_private_key(str(self.key_file))
-                server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_Sign,
-                                            ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt])
-                server.set_security_IDs(["Username"])
-            else:
-                server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
-            idx = await server.register_namespace("SinumerikVarProvider")
-            if idx != 2:
-                raise ConfigError(f"namespace index {idx}, expected 2")
-            folder = await server.nodes.objects.add_folder(ua.NodeId("Sinumerik", idx),
-                                                           ua.QualifiedName("Sinumerik", idx))
+            server, folder = await sinumerik_server(
+                self.endpoint, name="SINUMERIK 840D sl (cnctwin simulator)", users=self.users,
+                cert_file=self.cert_file, key_file=self.key_file)
+            idx = 2  # SinumerikVarProvider (sinumerik_server checks it)
             nodes: dict[str, Any] = {}
             for name, nid in {**self.signals, **self.text}.items():
                 vt = ua.VariantType.Double if name in self.signals else ua.VariantType.String

@@ -15,6 +15,7 @@ Every function returns program text that :func:`cnctwin.sim.gcode.parse_program`
 * :func:`tapping_program`: rigid tapping (thesis Sect. 5.4), M8 x 1.25 by default.
 * :func:`axis_test_program`: each feed axis back and forth in air at several feeds, for the
   identification of its position loop and friction (``cnctwin calibrate axes``).
+* :data:`ADAPTIVE_SLOT`: the adaptive feed's closed-loop part (docs/adaptive.md).
 
 Values the thesis does not give are marked as assumptions in the parameter descriptions.
 """
@@ -31,6 +32,7 @@ from cnctwin.exceptions import ConfigError
 from cnctwin.sim.gcode import ISO_COARSE_PITCH_MM
 
 __all__ = [
+    "ADAPTIVE_SLOT",
     "AIR_CUT_SPEEDS_RPM",
     "ProductionProgram",
     "air_cut_sweep_program",
@@ -710,3 +712,36 @@ def production_program(seed: int, *, operations: int = 8, tapping: bool = True,
             ops.append("air move")
     lines += ["G0 Z50", "M5 M9", "M30"]
     return ProductionProgram("\n".join(lines) + "\n", holes, tuple(ops))
+
+
+@dataclass(frozen=True)
+class _AdaptiveSlot:
+    """The adaptive feed's closed-loop part: program, tool table, stock, hidden hardness."""
+
+    program: str
+    tools: str
+    stock: str
+    hardness_along_x: tuple[tuple[float, float], ...]
+    target_nm: float
+
+
+ADAPTIVE_SLOT = _AdaptiveSlot(
+    program="""G90 G17 G94 G64
+T2 M6
+S3000 M3
+G0 X-12 Y20 Z5
+G0 Z-2
+G1 X110 F450
+G0 Z20
+G0 X0 Y0
+M30
+""",
+    tools=('[tools.2]\nkind = "end_mill"\ndiameter_mm = 16\nflutes = 2\nhelix_deg = 30\n'
+           'max_chip_mm = 0.2\n'),
+    stock="0,0,-30,150,40,0",
+    hardness_along_x=((-100.0, 1.0), (40.0, 1.15), (80.0, 0.95)),
+    target_nm=2.6)
+"""A 16 mm slot 2 mm deep in AISI 1045 at a conservative F450 (3000 rpm, 0.075 mm/tooth:
+2.38 Nm by the closed form at hardness 1, Altintas eq. 2.47), hidden hardness x 1.0 / 1.15 /
+0.95 along X, target 2.6 Nm: the adaptive feed's closed-loop test and benchmark
+(tests/usecases/test_adaptive_closed_loop.py, benchmarks/bench_adaptive_loop.py)."""
