@@ -38,4 +38,16 @@ if [ -z "${CNCTWIN_PG_URL:-}" ]; then
       || echo "ensure-services: PostgreSQL is not reachable on 127.0.0.1:5432" >&2
   fi
 fi
+# node-opcua: an OPC UA client cnctwin did not write, for the interoperability test
+# (tests/interop); Node.js and npm from Debian, the package from the npm registry, pinned,
+# into .node/ of the checkout
+if ! have node || ! have npm; then apt_install nodejs npm; fi
+NODE_OPCUA=2.186.4
+if have npm && [ ! -f .node/node_modules/node-opcua-client/package.json ] \
+    || ! grep -q "\"version\": \"$NODE_OPCUA\"" .node/node_modules/node-opcua-client/package.json 2>/dev/null; then
+  if have npm; then
+    npm install --silent --no-audit --no-fund --prefix .node "node-opcua-client@$NODE_OPCUA" \
+      >/dev/null 2>&1 || echo "ensure-services: npm could not install node-opcua-client" >&2
+  fi
+fi
 exit 0

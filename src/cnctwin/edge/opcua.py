@@ -32,6 +32,7 @@ import json
 import math
 import os
 import threading
+import time
 import urllib.parse
 from collections import deque
 from concurrent.futures import Future
@@ -440,6 +441,10 @@ class OpcUaSink:
         self._futures: deque[Future[None]] = deque()
         self._nodes: dict[str, Any] = {}
         self.trust: TrustList | None = None
+        self._channel_active = False
+        self._mt_ns = 0
+        self._power_on_h = -1
+        self._started = time.monotonic()
         self._users: _UserManager | None = None
         self._server: Any = None
         self._loop = asyncio.new_event_loop()
@@ -572,13 +577,26 @@ class OpcUaSink:
 
             mt = await add_machine_tool(server, m, idx)
             same = lambda dv: dv  # noqa: E731
+
+            def inverted(dv: Any) -> Any:
+                return ua.DataValue(ua.Variant(not bool(dv.Value.Value), ua.VariantType.Boolean),
+                                    SourceTimestamp=dv.SourceTimestamp,
+                                    ServerTimestamp=dv.ServerTimestamp)
+
+            # the stack light follows the alarm: red while active, green otherwise
             self._mirror = {
                 nodes["SpindleSpeed"]: [(mt["ActualSpeed"], same)],
                 nodes["CuttingTorque"]: [(mt["CuttingTorque"], same)],
                 nodes["HoleCount"]: [(mt["HoleCount"], same)],
-                nodes["Alarm.Active"]: [(mt["AlarmActive"], same)],
+                nodes["Alarm.Active"]: [(mt["AlarmActive"], same), (mt["Light.Red"], same),
+                                        (mt["Light.Green"], inverted)],
                 nodes["Alarm.Message"]: [(mt["AlarmMessage"], same)],
             }
+            for key in ("ChannelState", "FeedOverride", "PowerOnDuration", "Light.Yellow",
+                        "Light.Green", "CurrentState", "CurrentState.Id",
+                        "CurrentState.Number"):
+                nodes[f"MT.{key}"] = mt[key]
+            self._mt_ns = int(mt["mt_ns"])
             nodes["MT.ProgramName"] = mt["ProgramName"]
             # IsRotating is the state at the window's end (a spindle that stopped inside the
             # window is not rotating, though the window's mean speed is not zero)
@@ -742,7 +760,7 @@ class OpcUaSink:
                     raise ConfigError(f"publish_hz {self.publish_hz:g} is above the cycle "
                                       f"rate {1 / chunk.cycle_time_s:g} Hz")
                 self._window = m
-        updates: list[tuple[Any, Any]] = list(prog)
+        updates: list[tuple[Any, Any]] = list(prog) + self._machine_tool_state(messages, chunk)
         for msg in messages:
             kind = msg["kind"]
             if kind == "torque":
@@ -764,6 +782,40 @@ class OpcUaSink:
             while len(self._hist) > 1 and int(self._hist[0][0][-1]) < horizon:
                 self._hist.popleft()
         self._submit(updates)
+
+    def _machine_tool_state(self, messages: list[dict[str, Any]], chunk: Chunk | None
+                            ) -> list[tuple[Any, Any]]:
+        """OPC 40501 channel and machine state: ChannelState Active once data flows (with the
+        green light), the feed override the adaptive feed requests, the yellow light on its
+        feed-hold (overload) request, PowerOnDuration [h] since the runtime started."""
+        from asyncua import ua
+
+        nd = self._nodes
+        if "MT.ChannelState" not in nd:
+            return []
+        out: list[tuple[Any, Any]] = []
+        t = int(chunk.time_ns[-1]) if chunk is not None and len(chunk) else time.time_ns()
+        if chunk is not None and len(chunk) and not self._channel_active:
+            self._channel_active = True
+            out.append((nd["MT.ChannelState"],
+                        ua.DataValue(ua.Variant(0, ua.VariantType.Int32))))  # Active
+            out.append((nd["MT.Light.Green"], self._dv(True, "b", t)))
+            from cnctwin.edge.opcua_machinetool import program_state
+
+            for key, dv in program_state("Running", self._mt_ns).items():
+                out.append((nd[f"MT.{key}"], dv))
+        hours = int((time.monotonic() - self._started) // 3600)
+        if hours != self._power_on_h:
+            self._power_on_h = hours
+            out.append((nd["MT.PowerOnDuration"],
+                        ua.DataValue(ua.Variant(hours, ua.VariantType.UInt32))))
+        for msg in messages:
+            if msg.get("kind") == "override" and msg.get("override_pct") is not None:
+                out.append((nd["MT.FeedOverride"], self._dv(msg["override_pct"], "d", t)))
+            elif (msg.get("kind") == "alarm" and msg.get("detector") == "AdaptiveFeed"
+                  and msg.get("fault") == "overload"):
+                out.append((nd["MT.Light.Yellow"], self._dv(True, "b", t)))
+        return out
 
     def _program_update(self, chunk: Chunk | None) -> list[tuple[Any, Any]]:
         """``Production/ActiveProgram/Name`` of the OPC 40501 object from the NC call events."""

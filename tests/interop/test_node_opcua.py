@@ -1,0 +1,171 @@
+"""The OPC 40501 structure read by an OPC UA client cnctwin did not write (issue 27, point 2).
+
+node-opcua (npm registry, pinned by scripts/ensure-services.sh into ``.node/``) connects to
+``cnctwin edge run --opcua`` over Basic256Sha256 SignAndEncrypt with a user, browses
+``Objects/Machines`` by the specifications' browse names and reads every node of the umati
+dashboard's *BaseMachineTool* schema: the nodes the umati Dashboard OPC UA client publishes for
+a basic machine tool (umati/Dashboard-OPCUA-Client,
+``Tests/integration/mqtt_test/schemas/SampleServer/BaseMachineTool.json``: Identification
+Manufacturer, ProductInstanceUri, SerialNumber; Monitoring/MachineTool OperationMode,
+PowerOnDuration; a channel's ChannelMode, ChannelState, FeedOverride with EURange and
+EngineeringUnits, Name; the Stacklight's NodeVersion, StacklightMode and three lights'
+IsPartOfBase, NumberInList, SignalColor, SignalMode, SignalOn; Production/ActiveProgram Name,
+NumberInList, State/CurrentState with Id and Number). The client's own certificate is refused
+until it is approved (moved from ``pki/rejected`` to ``pki/trusted``), as an administrator does.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests._services import free_port
+
+pytestmark = pytest.mark.xdist_group("node_opcua")
+
+ROOT = Path(__file__).parents[2]
+CLIENT = Path(__file__).parent / "opcua_machinetool_client.js"
+USER, PASSWORD = "operator", "correct-horse-battery"
+MT = "http://opcfoundation.org/UA/MachineTool/"
+DI = "http://opcfoundation.org/UA/DI/"
+IA = "http://opcfoundation.org/UA/IA/"
+UA = "http://opcfoundation.org/UA/"
+
+
+def _umati_base_machine_tool() -> dict[str, tuple[list[list[str]], str]]:
+    """Browse path below the machine -> (path, expected JSON type) of every node the umati
+    BaseMachineTool schema requires ("object": the node exists)."""
+    out: dict[str, tuple[list[list[str]], str]] = {}
+
+    def add(path: list[tuple[str, str]], kind: str) -> None:
+        out["/".join(n for _, n in path)] = ([list(p) for p in path], kind)
+
+    ident = (DI, "Identification")
+    add([ident, (DI, "Manufacturer")], "string")
+    add([ident, (DI, "ProductInstanceUri")], "string")
+    add([ident, (DI, "SerialNumber")], "string")
+    mon, tool = (MT, "Monitoring"), (MT, "MachineTool")
+    add([mon, tool, (MT, "OperationMode")], "number")
+    add([mon, tool, (MT, "PowerOnDuration")], "number")
+    ch = (MT, "Channel 1")
+    add([mon, ch, (MT, "ChannelMode")], "number")
+    add([mon, ch, (MT, "ChannelState")], "number")
+    add([mon, ch, (MT, "FeedOverride")], "number")
+    add([mon, ch, (MT, "FeedOverride"), (UA, "EURange")], "any")
+    add([mon, ch, (MT, "FeedOverride"), (UA, "EngineeringUnits")], "any")
+    add([mon, ch, (MT, "Name")], "string")
+    st = (MT, "Stacklight")
+    add([mon, st, (UA, "NodeVersion")], "string")
+    add([mon, st, (IA, "StacklightMode")], "number")
+    for k in range(3):
+        light = (IA, f"Light {k}")
+        add([mon, st, light, (IA, "IsPartOfBase")], "boolean")
+        add([mon, st, light, (UA, "NumberInList")], "number")
+        add([mon, st, light, (IA, "SignalColor")], "number")
+        add([mon, st, light, (IA, "SignalMode")], "number")
+        add([mon, st, light, (IA, "SignalOn")], "boolean")
+    prod, active = (MT, "Production"), (MT, "ActiveProgram")
+    add([prod, active, (MT, "Name")], "string")
+    add([prod, active, (UA, "NumberInList")], "number")
+    add([prod, active, (MT, "State"), (UA, "CurrentState")], "any")
+    add([prod, active, (MT, "State"), (UA, "CurrentState"), (UA, "Id")], "any")
+    add([prod, active, (MT, "State"), (UA, "CurrentState"), (UA, "Number")], "number")
+    return out
+
+
+def _node() -> str:
+    node = shutil.which("node")
+    ok = (ROOT / ".node" / "node_modules" / "node-opcua-client" / "package.json").exists()
+    if node is None or not ok:
+        msg = ("node-opcua is not installed: install Node.js and npm (apt-get install nodejs "
+               "npm), then run scripts/ensure-services.sh (it installs node-opcua-client "
+               "into .node/ of the checkout)")
+        if os.environ.get("CI") == "true":
+            pytest.fail(msg)
+        pytest.skip(msg)
+    return node
+
+
+@pytest.fixture(scope="module")
+def edge(tmp_path_factory: pytest.TempPathFactory, c4a_file: Path) -> Any:
+    from cnctwin.edge import save_spindle_model
+    from cnctwin.spindle import SpindleModel
+
+    d = tmp_path_factory.mktemp("ua40501")
+    env = {**os.environ, "CNCTWIN_OPCUA_PASSWORD": PASSWORD}
+    subprocess.run([sys.executable, "-m", "cnctwin", "edge", "opcua-user", USER, "--users",
+                    str(d / "users")], env=env, check=True, capture_output=True)
+    model = save_spindle_model(SpindleModel.from_parameters("thesis_spinner_840dsl"),
+                               d / "spindle.json")
+    port = free_port()
+    url = f"opc.tcp://127.0.0.1:{port}/cnctwin"
+    proc = subprocess.Popen([sys.executable, "-m", "cnctwin", "edge", "run", "--source",
+                             str(c4a_file), "--model", str(model), "--out", str(d / "out"),
+                             "--quiet", "--machine", "m1", "--speed", "0.2", "--opcua", url,
+                             "--opcua-users", str(d / "users"), "--opcua-trust",
+                             str(d / "pki")], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+                assert time.monotonic() < deadline, "the edge's OPC UA server did not start"
+                time.sleep(0.2)
+        yield url, d
+    finally:
+        proc.terminate()
+        proc.wait(timeout=15)
+
+
+def _client(node: str, url: str, pki: Path, paths: list[list[list[str]]]
+            ) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "NODE_PATH": str(ROOT / ".node" / "node_modules"),
+           "CNCTWIN_OPCUA_USER": USER, "CNCTWIN_OPCUA_PASSWORD": PASSWORD}
+    return subprocess.run([node, str(CLIENT), url, "m1", str(pki)], input=json.dumps(paths),
+                          capture_output=True, text=True, env=env, timeout=120)
+
+
+def test_node_opcua_reads_every_node_the_umati_dashboard_requires(edge: Any,
+                                                                  tmp_path: Path) -> None:
+    node = _node()
+    url, d = edge
+    expected = _umati_base_machine_tool()
+    paths = [p for p, _ in expected.values()]
+    client_pki = tmp_path / "node-pki"
+    first = _client(node, url, client_pki, paths)
+    # a certificate the administrator has not approved: refused, kept for approval
+    assert first.returncode != 0, first.stdout
+    rejected = sorted((d / "pki" / "rejected").glob("*.der"))
+    assert rejected, first.stderr
+    for p in rejected:
+        shutil.move(p, d / "pki" / "trusted" / p.name)
+    res = _client(node, url, client_pki, paths)
+    assert res.returncode == 0, res.stderr
+    # node-opcua may print its own notices on stdout: the result is the line it printed
+    line = next(x for x in res.stdout.splitlines() if x.startswith('{"machines"'))
+    doc = json.loads(line)
+    assert "m1" in doc["machines"]
+    kinds = {"string": str, "number": (int, float), "boolean": bool}
+    missing = {k: v for k, v in doc["values"].items() if "error" in v}
+    assert not missing, missing
+    for key, (_, kind) in expected.items():
+        got = doc["values"][key]
+        if kind in kinds:
+            assert isinstance(got.get("value"), kinds[kind]), (key, got)
+    v = doc["values"]
+    assert v["Identification/SerialNumber"]["value"] == "m1"
+    assert v["Monitoring/Channel 1/Name"]["value"] == "Channel 1"
+    colors = [v[f"Monitoring/Stacklight/Light {k}/SignalColor"]["value"] for k in range(3)]
+    assert colors == [2, 4, 1]  # green at the base, yellow, red (IA SignalColor)
