@@ -38,6 +38,9 @@ USER, PASSWORD = "operator", "correct-horse-battery"
 MT = "http://opcfoundation.org/UA/MachineTool/"
 DI = "http://opcfoundation.org/UA/DI/"
 IA = "http://opcfoundation.org/UA/IA/"
+MACHINERY = "http://opcfoundation.org/UA/Machinery/"
+IDENTIFICATION = {"manufacturer": "DMG MORI", "model": "DMC 60H", "serial_number": "SN-4711",
+                  "year_of_construction": 2019, "software_revision": "SINUMERIK 840D sl 4.95"}
 UA = "http://opcfoundation.org/UA/"
 
 
@@ -53,6 +56,10 @@ def _umati_base_machine_tool() -> dict[str, tuple[list[list[str]], str]]:
     add([ident, (DI, "Manufacturer")], "string")
     add([ident, (DI, "ProductInstanceUri")], "string")
     add([ident, (DI, "SerialNumber")], "string")
+    # beyond the dashboard's minimum: what the machine file's [identification] gives
+    add([ident, (DI, "Model")], "string")
+    add([ident, (DI, "SoftwareRevision")], "string")
+    add([ident, (MACHINERY, "YearOfConstruction")], "number")
     mon, tool = (MT, "Monitoring"), (MT, "MachineTool")
     add([mon, tool, (MT, "OperationMode")], "number")
     add([mon, tool, (MT, "PowerOnDuration")], "number")
@@ -108,9 +115,13 @@ def edge(tmp_path_factory: pytest.TempPathFactory, c4a_file: Path) -> Any:
                                d / "spindle.json")
     port = free_port()
     url = f"opc.tcp://127.0.0.1:{port}/cnctwin"
+    machine = d / "m1.toml"  # the machine file's [identification], as a user gives it
+    machine.write_text('name = "m1"\n\n[identification]\n' + "".join(
+        f"{k} = {json.dumps(v)}\n" for k, v in IDENTIFICATION.items()))
     proc = subprocess.Popen([sys.executable, "-m", "cnctwin", "edge", "run", "--source",
                              str(c4a_file), "--model", str(model), "--out", str(d / "out"),
-                             "--quiet", "--machine", "m1", "--speed", "0.2", "--opcua", url,
+                             "--quiet", "--machine", str(machine), "--speed", "0.2",
+                             "--opcua", url,
                              "--opcua-users", str(d / "users"), "--opcua-trust",
                              str(d / "pki")], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
@@ -165,7 +176,11 @@ def test_node_opcua_reads_every_node_the_umati_dashboard_requires(edge: Any,
         if kind in kinds:
             assert isinstance(got.get("value"), kinds[kind]), (key, got)
     v = doc["values"]
-    assert v["Identification/SerialNumber"]["value"] == "m1"
+    assert v["Identification/SerialNumber"]["value"] == "SN-4711"
+    assert v["Identification/Manufacturer"]["value"] == "DMG MORI"
+    assert v["Identification/Model"]["value"] == "DMC 60H"
+    assert v["Identification/YearOfConstruction"]["value"] == 2019
+    assert v["Identification/SoftwareRevision"]["value"] == "SINUMERIK 840D sl 4.95"
     assert v["Monitoring/Channel 1/Name"]["value"] == "Channel 1"
     colors = [v[f"Monitoring/Stacklight/Light {k}/SignalColor"]["value"] for k in range(3)]
     assert colors == [2, 4, 1]  # green at the base, yellow, red (IA SignalColor)

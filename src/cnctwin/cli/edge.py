@@ -645,7 +645,9 @@ def _build(args: argparse.Namespace) -> Any:
                                         trust_dir=args.opcua_trust or out / "opcua-pki",
                                         trust_any=args.opcua_trust_any)
         sinks.append(OpcUaSink(args.opcua, machine=machine,
-                               publish_hz=args.opcua_publish_hz, security=ua_security))
+                               publish_hz=args.opcua_publish_hz, security=ua_security,
+                               identification=dict(getattr(machine_file, "identification",
+                                                           {}) or {})))
     if args.mtconnect or args.shdr:
         sinks.append(_mtconnect_sink(args, machine))
     if getattr(args, "control_writer", None) is not None:

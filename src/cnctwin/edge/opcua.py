@@ -374,6 +374,8 @@ class OpcUaSink:
     machine_tool : bool, default True
         Also offer the OPC 40501 (Machine Tools) structure built from the official NodeSets
         (:mod:`cnctwin.edge.opcua_machinetool`; about 3 s more at start).
+    identification : dict, optional
+        The machine file's ``[identification]`` for the OPC 40501 Identification.
 
     Raises
     ------
@@ -389,7 +391,8 @@ class OpcUaSink:
                  wear_set_size: int | None = 6, alarm_hold_s: float = 1.0,
                  hole_history_s: float = 300.0, start_timeout_s: float = 60.0,
                  max_pending: int = 64, security: OpcUaSecurity | None = None,
-                 machine_tool: bool = True) -> None:
+                 machine_tool: bool = True,
+                 identification: dict[str, Any] | None = None) -> None:
         try:
             import asyncua  # noqa: F401
         except ImportError as exc:  # pragma: no cover - depends on the environment
@@ -421,6 +424,7 @@ class OpcUaSink:
         self.max_pending = max_pending
         self.security = security
         self.machine_tool = machine_tool
+        self.identification = dict(identification or {})
         self._mirror: dict[Any, list[tuple[Any, Any]]] = {}
         self._program = ""
         self.published = 0
@@ -575,7 +579,7 @@ class OpcUaSink:
         if self.machine_tool:
             from cnctwin.edge.opcua_machinetool import add_machine_tool
 
-            mt = await add_machine_tool(server, m, idx)
+            mt = await add_machine_tool(server, m, idx, identification=self.identification)
             same = lambda dv: dv  # noqa: E731
 
             def inverted(dv: Any) -> Any:

@@ -91,7 +91,8 @@ def program_state(name: str, mt: int) -> dict[str, Any]:
             "CurrentState.Number": ua.DataValue(ua.Variant(number, ua.VariantType.UInt32))}
 
 
-async def add_machine_tool(server: Any, machine: str, own_idx: int) -> dict[str, Any]:
+async def add_machine_tool(server: Any, machine: str, own_idx: int, *,
+                           identification: dict[str, Any] | None = None) -> dict[str, Any]:
     """Load the NodeSets and create the machine's ``MachineToolType`` object.
 
     Parameters
@@ -102,6 +103,10 @@ async def add_machine_tool(server: Any, machine: str, own_idx: int) -> dict[str,
         Machine name: the object's browse name and serial number.
     own_idx : int
         Namespace index of cnctwin's own variables.
+    identification : dict, optional
+        The machine file's ``[identification]`` (manufacturer, model, serial_number,
+        year_of_construction, software_revision, product_instance_uri); without a value the
+        serial number is the machine name and the manufacturer "unknown".
 
     Returns
     -------
@@ -136,18 +141,33 @@ async def add_machine_tool(server: Any, machine: str, own_idx: int) -> dict[str,
 
     # Identification is DI's (the MachineTool NodeSet names it DI:Identification)
     ident = await obj.get_child([f"{di}:Identification"])
-    for name, value, vt in (("Manufacturer", ua.LocalizedText("unknown"),
-                             ua.VariantType.LocalizedText),
-                            ("SerialNumber", machine, ua.VariantType.String),
-                            ("ProductInstanceUri", f"urn:cnctwin:machine:{machine}",
-                             ua.VariantType.String)):
+    given = dict(identification or {})
+    lt, st = ua.VariantType.LocalizedText, ua.VariantType.String
+    fields: list[tuple[str, Any, Any, int]] = [
+        ("Manufacturer", ua.LocalizedText(str(given.get("manufacturer", "unknown"))), lt, di),
+        ("SerialNumber", str(given.get("serial_number", machine)), st, di),
+        ("ProductInstanceUri", str(given.get("product_instance_uri",
+                                             f"urn:cnctwin:machine:{machine}")), st, di)]
+    if "model" in given:
+        fields.append(("Model", ua.LocalizedText(str(given["model"])), lt, di))
+    if "software_revision" in given:
+        fields.append(("SoftwareRevision", str(given["software_revision"]), st, di))
+    if "year_of_construction" in given:
+        fields.append(("YearOfConstruction", int(given["year_of_construction"]),
+                       ua.VariantType.UInt16, mach))
+    for name, value, vt, home in fields:
+        child = None
         for ns in (di, mach, mt):
             try:
                 child = await ident.get_child([f"{ns}:{name}"])
+                break
             except ua.UaStatusCodeError:
                 continue
-            await child.write_value(ua.DataValue(ua.Variant(value, vt)))
-            break
+        if child is None:  # an optional property: added with the specification's name
+            child = await ident.add_property(ua.NodeId(f"{machine}.MT.Ident.{name}", own_idx),
+                                             ua.QualifiedName(name, home), value,
+                                             varianttype=vt)
+        await child.write_value(ua.DataValue(ua.Variant(value, vt)))
     monitoring = await obj.get_child([f"{mt}:Monitoring"])
     spindle = await monitoring.add_object(ua.NodeId(f"{machine}.MT.Spindle", own_idx),
                                           ua.QualifiedName("Spindle", mt),

@@ -103,7 +103,12 @@ _ROTARY_UNITS = {"N": "Nm", "N/(mm/s)": "Nm/(deg/s)", "mm/s": "deg/s", "mm/min":
 _RECORD_KEYS = {"value", "uncertainty", "unit", "provenance", "identified", "reason",
                 "valid_range", "valid_quantity"}
 _TOP_KEYS = {"schema", "schema_version", "name", "cycle_time_s", "inner_steps", "spindle_name",
-             "tool_change_s", "axis_map", "axes", "spindle", "materials"}
+             "tool_change_s", "axis_map", "axes", "spindle", "materials", "identification"}
+IDENTIFICATION_KEYS = {"manufacturer": str, "model": str, "serial_number": str,
+                       "year_of_construction": int, "software_revision": str,
+                       "product_instance_uri": str}
+"""``[identification]`` of a machine file, as the user gives them (the OPC 40501
+Identification the edge's OPC UA server publishes)."""
 
 
 def parameter_unit(key: str, *, rotary: bool = False) -> str:
@@ -214,12 +219,16 @@ class MachineFile:
         name -> table with ``milling`` (coefficient -> record table ``value``,
         ``uncertainty``, ``unit``, ``provenance``); read by
         :func:`cnctwin.sim.materials.resolve_material`.
+    identification : dict
+        ``[identification]``: manufacturer, model, serial_number, year_of_construction,
+        software_revision, product_instance_uri (:data:`IDENTIFICATION_KEYS`).
     """
 
     machine: Machine = field(default_factory=Machine.thesis_default)
     records: Mapping[str, ParameterRecord] = field(default_factory=dict)
     path: Path | None = None
     materials: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    identification: Mapping[str, Any] = field(default_factory=dict)
 
     def value(self, key: str) -> Any:
         """The value of a dotted key (``spindle.kt_nm_per_a``, ``axes.X1.kv_m_min_per_mm``)."""
@@ -284,6 +293,8 @@ class MachineFile:
         doc["axes"] = axes
         if self.materials:
             doc["materials"] = {k: dict(v) for k, v in self.materials.items()}
+        if self.identification:
+            doc["identification"] = dict(self.identification)
         return doc
 
     @classmethod
@@ -376,7 +387,8 @@ class MachineFile:
             raise ConfigError(f"{source}: {exc}") from None
         _validate_spindle(machine.spindle, source)
         return cls(machine=machine, records=records, path=path,
-                   materials=_materials(data.get("materials", {}), source))
+                   materials=_materials(data.get("materials", {}), source),
+                   identification=_identification(data.get("identification", {}), source))
 
 
 def _get(machine: Machine, key: str) -> Any:
@@ -589,6 +601,24 @@ def _materials(data: Any, source: str) -> dict[str, dict[str, Any]]:
     return out
 
 
+def _identification(data: Any, source: str) -> dict[str, Any]:
+    """The ``[identification]`` table: known keys of the right type (the message names the
+    key and lists the known ones)."""
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"{source}: identification must be a table")
+    out: dict[str, Any] = {}
+    for k, v in data.items():
+        want = IDENTIFICATION_KEYS.get(str(k))
+        if want is None:
+            raise ConfigError(f"{source}: identification.{k} is not a key; keys: "
+                              f"{', '.join(sorted(IDENTIFICATION_KEYS))}")
+        if not isinstance(v, want) or isinstance(v, bool):
+            raise ConfigError(f"{source}: identification.{k} must be a "
+                              f"{'whole number' if want is int else 'text'}, got {v!r}")
+        out[str(k)] = v
+    return out
+
+
 def _dumps(doc: Mapping[str, Any]) -> str:
     """The document as TOML, one line per parameter (records as inline tables)."""
     lines = []
@@ -603,6 +633,9 @@ def _dumps(doc: Mapping[str, Any]) -> str:
     for name, table in doc.get("axes", {}).items():
         lines.append(f"\n[axes.{name}]")
         lines += [f"{k} = {_literal(v)}" for k, v in table.items()]
+    if doc.get("identification"):
+        lines.append("\n[identification]")
+        lines += [f"{k} = {_literal(v)}" for k, v in doc["identification"].items()]
     for name, table in doc.get("materials", {}).items():
         lines.append(f"\n[materials.{name}]")
         lines += [f"{k} = {_literal(v)}" for k, v in table.items() if k != "milling"]
