@@ -125,7 +125,7 @@ def edge(tmp_path_factory: pytest.TempPathFactory, c4a_file: Path) -> Any:
                              "--opcua-users", str(d / "users"), "--opcua-trust",
                              str(d / "pki")], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + 120  # NodeSets load ~3 s, more on a busy CI host
         while True:
             try:
                 socket.create_connection(("127.0.0.1", port), timeout=1).close()

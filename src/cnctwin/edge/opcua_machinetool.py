@@ -60,6 +60,18 @@ request of the adaptive feed, red while an alarm is active."""
 _MACHINES_FOLDER = 1001  # Machinery
 
 
+async def _child(parent: Any, name: str, namespaces: tuple[int, ...]) -> Any:
+    """The child ``name`` in the first of ``namespaces`` that has it (None: none)."""
+    from asyncua import ua
+
+    for ns in namespaces:
+        try:
+            return await parent.get_child([f"{ns}:{name}"])
+        except ua.UaStatusCodeError:
+            continue
+    return None
+
+
 PROGRAM_STATES = {"Initializing": (0, 135), "Running": (1, 138), "Ended": (2, 140),
                   "Interrupted": (3, 139), "Aborted": (4, 141)}
 """ProductionStateMachineType's states: StateNumber and the state's node id in the MachineTool
@@ -156,13 +168,7 @@ async def add_machine_tool(server: Any, machine: str, own_idx: int, *,
         fields.append(("YearOfConstruction", int(given["year_of_construction"]),
                        ua.VariantType.UInt16, mach))
     for name, value, vt, home in fields:
-        child = None
-        for ns in (di, mach, mt):
-            try:
-                child = await ident.get_child([f"{ns}:{name}"])
-                break
-            except ua.UaStatusCodeError:
-                continue
+        child = await _child(ident, name, (di, mach, mt))
         if child is None:  # an optional property: added with the specification's name
             child = await ident.add_property(ua.NodeId(f"{machine}.MT.Ident.{name}", own_idx),
                                              ua.QualifiedName(name, home), value,
@@ -234,13 +240,7 @@ async def add_machine_tool(server: Any, machine: str, own_idx: int, *,
                                  ("SignalMode", 0, ua.VariantType.Int32),  # Continuous
                                  ("IsPartOfBase", False, ua.VariantType.Boolean),
                                  ("NumberInList", k, ua.VariantType.UInt16)):
-            node = None
-            for ns_child in (ia, 0):  # IA's own, or Part 5's NumberInList
-                try:
-                    node = await light.get_child([f"{ns_child}:{child}"])
-                    break
-                except ua.UaStatusCodeError:
-                    continue
+            node = await _child(light, child, (ia, 0))  # IA's, or Part 5's NumberInList
             if node is None:  # an optional child: added with the specification's name
                 node = await light.add_variable(
                     ua.NodeId(f"{machine}.MT.Light{k}.{child}.v", own_idx),
