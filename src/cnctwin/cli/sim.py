@@ -241,7 +241,9 @@ def _realtime(args: argparse.Namespace, program_kw: dict[str, Any],
                                  key_file=out / "opcua-server-key.pem",
                                  on_listening=listening,
                                  wait_for_client_s=args.wait_for_client_s)
-    dt = (machine.cycle_time_s if machine is not None else 0.002)
+    from cnctwin.sim.machine import Machine
+
+    dt = (machine or Machine.thesis_default()).cycle_time_s
     chunk = max(1, min(10, round(args.serve_interval_s / dt)))
     calls: list[float] = []
 

@@ -344,12 +344,13 @@ class AdaptiveProcessor:
               & (n > 50.0) & (v_mm_min > _MIN_FEED_MM_MIN))
         if not on.any():
             return None
+        from cnctwin.sim.cutting import mean_milling_load
+
         p0, p1, a = eng.entry_rad[on], eng.exit_rad[on], eng.axial_depth_mm[on]
         c = v_mm_min[on] / (n[on] * z)
-        base = z * a * (d / 2.0) / (2.0 * math.pi) / 1000.0
-        big_a = base * k.kte_n_per_mm * (p1 - p0)
-        big_b = base * k.ktc_n_per_mm2 * (np.cos(p0) - np.cos(p1))
-        return float(np.mean(big_a)), float(np.mean(big_a + big_b * c))
+        edge = mean_milling_load(0.0, a, p0, p1, diameter_mm=d, flutes=z, coefficients=k)
+        full = mean_milling_load(c, a, p0, p1, diameter_mm=d, flutes=z, coefficients=k)
+        return float(np.mean(edge.torque_nm)), float(np.mean(full.torque_nm))
 
     def process(self, chunk: Chunk) -> list[Result]:
         """Results for this chunk: one ``override`` (and an ``alarm`` on overload/breakage)."""

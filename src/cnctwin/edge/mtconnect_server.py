@@ -26,6 +26,7 @@ import socket
 import socketserver
 import ssl
 import threading
+import time
 import urllib.parse
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
@@ -274,8 +275,6 @@ class MTConnectAgent:
         replace`` stream, one document per interval with what is new since the last (sample:
         every observation once, in order; current: the latest values), an empty document
         after ``heartbeat`` without news; until the client leaves or the agent closes."""
-        import time
-
         b = self.buffer
         try:
             interval = int(q["interval"][0]) / 1000.0
@@ -478,8 +477,6 @@ class ShdrAdapter:
     def _write(self, client: _ShdrClient) -> None:
         """The client's thread: send what is queued (a send timeout drops it), at most every
         ``coalesce_s`` (one send per few chunks, not one wake-up per line)."""
-        import time
-
         while True:
             with client.cond:
                 while not client.queue and not client.closed:
@@ -629,8 +626,6 @@ class MTConnectSink:
                          for d in self.model.data_items])
 
     def _put(self, t_ns: int | None, items: list[tuple[str, Any]]) -> None:
-        import time
-
         t = time.time_ns() if t_ns is None else int(t_ns)
         for key, v in items:
             if isinstance(v, tuple):
@@ -696,8 +691,6 @@ class MTConnectSink:
         if chunk is not None and len(chunk):
             return int(chunk.time_ns[0]) + round((int(msg["cycle"]) - chunk.first_cycle)
                                                  * chunk.cycle_time_s * 1e9)
-        import time
-
         return time.time_ns()
 
     def _samples(self, chunk: Chunk, torque: dict[int, tuple[float, float]],

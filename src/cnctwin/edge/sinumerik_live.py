@@ -37,12 +37,16 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from cnctwin.edge.sinumerik_opcua import sinumerik_server
+from cnctwin.edge.sinumerik_opcua import (
+    data_value,
+    node_ids_for,
+    sinumerik_server,
+    write_nodes,
+)
 from cnctwin.exceptions import ConfigError
 from cnctwin.sim.recorder import RecordedChunk
 
-__all__ = ["PLC_NODES", "LiveSinumerikServer", "PlcOverride", "live_node_ids",
-           "write_live_node_file"]
+__all__ = ["PLC_NODES", "LiveSinumerikServer", "PlcOverride", "write_live_node_file"]
 
 PLC_NODES: dict[str, str] = {
     "override_pct": "ns=2;s=/Plc/DB120.DBB0",
@@ -56,50 +60,18 @@ copies to the channel's override; docs/adaptive.md): override [%] (byte), heartb
 +1 per value), feed hold and stop requests (bits), and the source time of the newest sample
 the override was computed from (a diagnostic for the loop latency)."""
 
-_AXIS_VARS = (("ENC_POS", "actToolBasePos", "mm"), ("LOAD", "aaLoad", "%"),
-              ("CURRENT", "aaCurr", "A"), ("POWER", "aaPower", "W"))
 _LAST = ("ENC_POS",)  # served as the interval's last value; the rest as its mean
-
-
-def live_node_ids(columns: list[str], axis_map: dict[str, str]) -> tuple[dict[str, str],
-                                                                          dict[str, str]]:
-    """Column -> node id and text name -> node id served for these recorded columns.
-
-    Parameters
-    ----------
-    columns : list of str
-        ``CODE|AXIS`` columns the simulator records.
-    axis_map : dict
-        Axis number (text) -> axis name.
-
-    Returns
-    -------
-    tuple of dict
-        As :func:`cnctwin.edge.sinumerik_opcua.node_ids`.
-    """
-    numbers = {name: int(n) for n, name in axis_map.items()}
-    sig: dict[str, str] = {}
-    for code, var, _ in _AXIS_VARS:
-        for ax, n in sorted(numbers.items(), key=lambda kv: kv[1]):
-            if f"{code}|{ax}" in columns:
-                sig[f"{code}|{ax}"] = f"ns=2;s=/Channel/MachineAxis/{var}[u1,{n}]"
-    sp = next((ax for ax in numbers if ax.startswith("SP")), None)
-    if sp is not None and f"CMD_SPEED|{sp}" in columns:
-        sig[f"CMD_SPEED|{sp}"] = "ns=2;s=/Channel/Spindle/cmdSpeed[u1,1]"
-    text = {"program": "ns=2;s=/Channel/ProgramInfo/progName[u1]",
-            "tool": "ns=2;s=/Channel/State/actTNumber[u1]"}
-    return sig, text
 
 
 def write_live_node_file(signals: dict[str, str], text: dict[str, str], path: str | Path, *,
                          interval_s: float) -> Path:
-    """Write the node file of a live server: ``[signals]``, ``[text]``, ``[units]`` and the
-    writable ``[write]`` nodes of :data:`PLC_NODES`.
+    """Write the node file of a live server: :func:`~cnctwin.edge.sinumerik_opcua.
+    write_nodes` with the writable ``[write]`` nodes of :data:`PLC_NODES`.
 
     Parameters
     ----------
     signals, text : dict
-        From :func:`live_node_ids`.
+        From :func:`~cnctwin.edge.sinumerik_opcua.node_ids_for`.
     path : str or path
         TOML file to write.
     interval_s : float
@@ -109,21 +81,9 @@ def write_live_node_file(signals: dict[str, str], text: dict[str, str], path: st
     -------
     pathlib.Path
     """
-    units = {c: u for code, _, u in _AXIS_VARS for c in signals if c.startswith(code + "|")}
-    lines = ["# SINUMERIK-like OPC UA server of cnctwin, live (cnctwin.edge.sinumerik_live)",
-             f"# values every {interval_s:g} s: edge run --interval-s {interval_s:g}",
-             "[signals]"]
-    lines += [f'"{c}" = "{n}"' for c, n in signals.items()]
-    lines += ["", "[text]"] + [f'{k} = "{n}"' for k, n in text.items()]
-    lines += ["", "[units]"] + [f'"{c}" = "{u}"' for c, u in units.items()]
-    lines += ["", "# written by edge run --adaptive (secured session only)", "[write]"]
-    lines += [f'{k} = "{n}"' for k, n in PLC_NODES.items()]
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_suffix(".tmp")
-    tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    tmp.replace(p)  # a reader polling for the file never sees half of it
-    return p
+    return write_nodes(signals, text, path, write=PLC_NODES, comments=(
+        "SINUMERIK-like OPC UA server of cnctwin, live (cnctwin.edge.sinumerik_live)",
+        f"values every {interval_s:g} s: edge run --interval-s {interval_s:g}"))
 
 
 @dataclass
@@ -282,7 +242,7 @@ class LiveSinumerikServer:
     # --------------------------------------------------------------- recorder sink
     def open(self, columns: list[str], meta: Any) -> None:
         """Start serving the columns the simulator records (returns once listening)."""
-        self.signals, self.text = live_node_ids(columns, dict(meta.axis_map))
+        self.signals, self.text = node_ids_for(columns, dict(meta.axis_map))
         self._dt = float(meta.cycle_time_s)
         c0, t0 = meta.time_anchors[0]
         self._t_anchor = (int(c0), int(pd.Timestamp(t0).value))
@@ -369,21 +329,9 @@ class LiveSinumerikServer:
             self._pending[0].result(10)
 
     async def _publish(self, t_ns: int, vals: dict[str, float], text: dict[str, str]) -> None:
-        from asyncua import ua
-
         ts = pd.Timestamp(t_ns, tz="UTC").to_pydatetime()
-        for name, value in vals.items():
-            if math.isfinite(value):
-                dv = ua.DataValue(ua.Variant(value, ua.VariantType.Double), SourceTimestamp=ts,
-                                  ServerTimestamp=ts)
-            else:
-                dv = ua.DataValue(StatusCode_=ua.StatusCode(ua.StatusCodes.BadNoData),
-                                  SourceTimestamp=ts, ServerTimestamp=ts)
-            await self._server.write_attribute_value(self._nodes[name], dv)
-        for name, txt in text.items():
-            await self._server.write_attribute_value(
-                self._nodes[name], ua.DataValue(ua.Variant(txt, ua.VariantType.String),
-                                                SourceTimestamp=ts, ServerTimestamp=ts))
+        for name, value in {**vals, **text}.items():
+            await self._server.write_attribute_value(self._nodes[name], data_value(value, ts))
         self.served_at[t_ns] = time.time()
 
     # --------------------------------------------------------------- server

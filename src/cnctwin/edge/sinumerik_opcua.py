@@ -28,6 +28,7 @@ import os
 import threading
 import time
 import urllib.parse
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -37,14 +38,48 @@ import pandas as pd
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import Recording
 
-__all__ = ["SinumerikOpcUaServer", "node_ids", "sinumerik_server", "write_node_file"]
+__all__ = ["SinumerikOpcUaServer", "data_value", "node_ids", "node_ids_for", "sinumerik_server",
+           "write_node_file", "write_nodes"]
 
 _AXIS_VARS = (("ENC_POS", "actToolBasePos", "mm"), ("LOAD", "aaLoad", "%"),
               ("CURRENT", "aaCurr", "A"), ("POWER", "aaPower", "W"))
 
 
+def node_ids_for(columns: list[str], axis_map: Mapping[Any, str]
+                 ) -> tuple[dict[str, str], dict[str, str]]:
+    """Column -> node id and text name -> node id of the variables served for these columns.
+
+    Parameters
+    ----------
+    columns : list of str
+        ``CODE|AXIS`` columns.
+    axis_map : mapping
+        Axis number (int or text) -> axis name; empty: the axes numbered in column order.
+
+    Returns
+    -------
+    tuple of dict
+        Column -> node id, and text (LF) signal name -> node id.
+    """
+    numbers = {name: int(n) for n, name in axis_map.items()}
+    if not numbers:
+        for c in columns:
+            numbers.setdefault(c.split("|", 1)[1], len(numbers) + 1)
+    sig: dict[str, str] = {}
+    for code, var, _ in _AXIS_VARS:
+        for ax, n in sorted(numbers.items(), key=lambda kv: kv[1]):
+            if f"{code}|{ax}" in columns:
+                sig[f"{code}|{ax}"] = f"ns=2;s=/Channel/MachineAxis/{var}[u1,{n}]"
+    sp = next((ax for ax in numbers if ax.startswith("SP")), None)
+    if sp is not None and f"CMD_SPEED|{sp}" in columns:
+        sig[f"CMD_SPEED|{sp}"] = "ns=2;s=/Channel/Spindle/cmdSpeed[u1,1]"
+    text = {"program": "ns=2;s=/Channel/ProgramInfo/progName[u1]",
+            "tool": "ns=2;s=/Channel/State/actTNumber[u1]"}
+    return sig, text
+
+
 def node_ids(rec: Recording) -> tuple[dict[str, str], dict[str, str]]:
-    """Column -> node id and text name -> node id of the variables served for ``rec``.
+    """:func:`node_ids_for` a recording's columns and axis map.
 
     Parameters
     ----------
@@ -56,23 +91,43 @@ def node_ids(rec: Recording) -> tuple[dict[str, str], dict[str, str]]:
     tuple of dict
         Column -> node id, and text (LF) signal name -> node id.
     """
-    numbers = {name: int(n) for n, name in rec.meta.axis_map.items()}
-    if not numbers:
-        numbers = {}
-        for c in rec.columns:
-            ax = c.split("|", 1)[1]
-            numbers.setdefault(ax, len(numbers) + 1)
-    sig: dict[str, str] = {}
-    for code, var, _ in _AXIS_VARS:
-        for ax, n in sorted(numbers.items(), key=lambda kv: kv[1]):
-            if f"{code}|{ax}" in rec.columns:
-                sig[f"{code}|{ax}"] = f"ns=2;s=/Channel/MachineAxis/{var}[u1,{n}]"
-    sp = next((ax for ax in numbers if ax.startswith("SP")), None)
-    if sp is not None and f"CMD_SPEED|{sp}" in rec.columns:
-        sig[f"CMD_SPEED|{sp}"] = "ns=2;s=/Channel/Spindle/cmdSpeed[u1,1]"
-    text = {"program": "ns=2;s=/Channel/ProgramInfo/progName[u1]",
-            "tool": "ns=2;s=/Channel/State/actTNumber[u1]"}
-    return sig, text
+    return node_ids_for(list(rec.columns), rec.meta.axis_map)
+
+
+def write_nodes(signals: dict[str, str], text: dict[str, str], path: str | Path, *,
+                comments: tuple[str, ...] = (), write: dict[str, str] | None = None) -> Path:
+    """Write a node file: ``[signals]``, ``[text]``, ``[units]`` and, if given, ``[write]``
+    (replaced whole: a reader polling for the file never sees half of it).
+
+    Parameters
+    ----------
+    signals, text : dict
+        From :func:`node_ids_for`.
+    path : str or path-like
+        TOML file to write.
+    comments : tuple of str
+        Comment lines at the top.
+    write : dict, optional
+        Writable nodes (``[write]``, after a comment line).
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    units = {c: u for code, _, u in _AXIS_VARS for c in signals if c.startswith(code + "|")}
+    lines = [f"# {c}" for c in comments] + ["[signals]"]
+    lines += [f'"{c}" = "{n}"' for c, n in signals.items()]
+    lines += ["", "[text]"] + [f'{k} = "{n}"' for k, n in text.items()]
+    lines += ["", "[units]"] + [f'"{c}" = "{u}"' for c, u in units.items()]
+    if write:
+        lines += ["", "# written by edge run --adaptive (secured session only)", "[write]"]
+        lines += [f'{k} = "{n}"' for k, n in write.items()]
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    tmp = p.with_suffix(".tmp")
+    tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    tmp.replace(p)
+    return p
 
 
 def write_node_file(rec: Recording, path: str | Path) -> Path:
@@ -90,15 +145,34 @@ def write_node_file(rec: Recording, path: str | Path) -> Path:
     pathlib.Path
     """
     sig, text = node_ids(rec)
-    units = {c: u for code, _, u in _AXIS_VARS for c in sig if c.startswith(code + "|")}
-    lines = ["# SINUMERIK-like OPC UA server of cnctwin (cnctwin.edge.sinumerik_opcua)",
-             "[signals]"]
-    lines += [f'"{c}" = "{n}"' for c, n in sig.items()]
-    lines += ["", "[text]"] + [f'{k} = "{n}"' for k, n in text.items()]
-    lines += ["", "[units]"] + [f'"{c}" = "{u}"' for c, u in units.items()]
-    p = Path(path)
-    p.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return p
+    return write_nodes(sig, text, path, comments=(
+        "SINUMERIK-like OPC UA server of cnctwin (cnctwin.edge.sinumerik_opcua)",))
+
+
+def data_value(value: Any, ts: Any) -> Any:
+    """The served data value of a number (``BadNoData`` when not finite) or a text.
+
+    Parameters
+    ----------
+    value : float or str
+        The value.
+    ts : datetime
+        Its source (and server) time.
+
+    Returns
+    -------
+    asyncua.ua.DataValue
+    """
+    from asyncua import ua
+
+    if isinstance(value, str):
+        return ua.DataValue(ua.Variant(value, ua.VariantType.String), SourceTimestamp=ts,
+                            ServerTimestamp=ts)
+    if not math.isfinite(value):
+        return ua.DataValue(StatusCode_=ua.StatusCode(ua.StatusCodes.BadNoData),
+                            SourceTimestamp=ts, ServerTimestamp=ts)
+    return ua.DataValue(ua.Variant(float(value), ua.VariantType.Double), SourceTimestamp=ts,
+                        ServerTimestamp=ts)
 
 
 async def sinumerik_server(endpoint: str, *, name: str, users: dict[str, str] | None,
@@ -284,7 +358,6 @@ class SinumerikOpcUaServer:
         return t_ns[idx], cols, text
 
     async def _feed(self, server: Any, nodes: dict[str, Any]) -> None:
-        from asyncua import ua
 
         t_src, cols, text = self._values()
         span = int(t_src[-1] - t_src[0]) + round(self.interval_s * 1e9) if len(t_src) else 0
@@ -301,14 +374,7 @@ class SinumerikOpcUaServer:
                 vals: dict[str, Any] = {c: float(v[k]) for c, v in cols.items()}
                 vals["program"], vals["tool"] = text[k]
                 for name, value in vals.items():
-                    vt = ua.VariantType.String if name in self.text else ua.VariantType.Double
-                    if vt == ua.VariantType.Double and not math.isfinite(value):
-                        dv = ua.DataValue(StatusCode_=ua.StatusCode(ua.StatusCodes.BadNoData),
-                                          SourceTimestamp=ts, ServerTimestamp=ts)
-                    else:
-                        dv = ua.DataValue(ua.Variant(value, vt), SourceTimestamp=ts,
-                                          ServerTimestamp=ts)
-                    await server.write_attribute_value(nodes[name], dv)
+                    await server.write_attribute_value(nodes[name], data_value(value, ts))
                 self.served.append((t_k, vals))
             offset += span
             if not self.loop:

@@ -90,7 +90,8 @@ def write_live_summary(out: str | Path, *, log: list[dict[str, Any]], truth: dic
     log : list of dict
         :attr:`cnctwin.sim.part.LiveOverride.log`.
     truth : dict
-        The run's truth (``limits.cycle_time_s``, ``breakage_cycle``, ``live``).
+        The run's truth (``cycle_time_s``, ``limits.cycle_time_s``, ``breakage_cycle``,
+        ``live``).
     plc : PlcOverride
         The PLC logic (its writes, fallbacks, stop request).
     served_at : dict
@@ -110,7 +111,7 @@ def write_live_summary(out: str | Path, *, log: list[dict[str, Any]], truth: dic
             df[k] = np.nan
     df["cutting_power_w"] = df["cutting_torque_nm"] * df["speed_rpm"] * 2.0 * np.pi / 60.0
     df.to_csv(o / "control.csv", index=False)
-    dt = 0.002
+    dt = float(truth["cycle_time_s"])  # the control cycle the run was simulated with
     cut = df["cutting_torque_nm"].to_numpy(dtype=float) > CUT_NM if len(df) else np.zeros(0,
                                                                                             bool)
     req = np.asarray(requested_at, dtype=np.float64)
