@@ -199,7 +199,10 @@ def _add_run_options(r: argparse.ArgumentParser) -> None:
                    "(default 0.1 s; a live simulator says its own in its node file)")
     r.add_argument("--tools", type=Path, metavar="TOOLS.toml",
                    help="tool table ([tools.N] with kind, diameter_mm, ...): a plunge of an "
-                   "end mill outside a drilling cycle is not counted as a hole")
+                   "end mill outside a drilling cycle is not counted as a hole; each hole "
+                   "gives its tool's life (tool_life: holes used, and with life_holes or "
+                   "wear_limit_um + wear_um_per_increase the remaining life), published as "
+                   "OPC 40501 Tools/Prognoses and MTConnect CuttingTool assets")
     r.add_argument("--drill-mm", type=float, default=8.5,
                    help="drill diameter for physics-torque [mm] (8.5)")
     r.add_argument("--point-angle-deg", type=float, default=140.0,
@@ -556,7 +559,14 @@ def _build(args: argparse.Namespace) -> Any:
     machine = args.machine or src.machine or "machine"
     procs: list[Any] = [TorqueProcessor(model)]
     if not args.no_holes:
-        procs.append(HoleProcessor(model, tool_kinds=getattr(args, "tool_kinds", None)))
+        life = None
+        if getattr(args, "tool_table", None) is not None:
+            from cnctwin.usecases.tool_life import ToolLifeLimits, ToolLifeTracker
+
+            table = args.tool_table
+            life = ToolLifeTracker({t: ToolLifeLimits.from_tool(table.get(t)) for t in table})
+        procs.append(HoleProcessor(model, tool_kinds=getattr(args, "tool_kinds", None),
+                                   tool_life=life))
     if getattr(args, "adaptive_config", None) is not None:
         from cnctwin.edge.adaptive import AdaptiveProcessor
 
@@ -736,6 +746,7 @@ def _run(args: argparse.Namespace) -> int:
         from cnctwin.machine import read_tool_table
 
         table = read_tool_table(args.tools)
+        args.tool_table = table
         args.tool_kinds = {t: table.get(t).kind for t in table}
         args.tool_diameters = {t: table.get(t).diameter_mm for t in table}
         args.tool_flutes = {t: table.get(t).flutes for t in table}

@@ -235,8 +235,18 @@ def _cmd_wear(args: argparse.Namespace) -> int:
                                   fit_offset=len(measured) >= 3)
         wear = est.predict(inc)
         out["wear_um"] = wear
+        std = est.predict_std(inc[-1:])
+        wear_std = float(std[0]) if np.isfinite(std[0]) else 0.0
         summary += [("wear per unit increase", f"{est.slope_um:.4g} ± {est.slope_std_um:.2g} µm"),
-                    ("estimated wear at the last hole", f"{wear[-1]:.1f} µm")]
+                    ("wear at the baseline", f"{est.offset_um:.4g} µm"),
+                    ("estimated wear at the last hole", f"{wear[-1]:.1f} µm"),
+                    ("uncertainty of a wear estimate",
+                     f"{wear_std:.3g} µm (at the last hole; fit and scatter of the "
+                     "measured points)"),
+                    ("tool table keys (live tool life)",
+                     f"wear_um_per_increase = {est.slope_um:.6g}, wear_offset_um = "
+                     f"{est.offset_um:.6g}, wear_std_um = {wear_std:.3g}, "
+                     f"wear_baseline_holes = {baseline}, wear_limit_um = {args.limit_um:g}")]
         try:
             fc = forecast_remaining_life(holes["hole"], wear, limit_um=args.limit_um)
             summary.append((f"holes to {args.limit_um:g} µm",

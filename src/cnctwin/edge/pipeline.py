@@ -47,6 +47,8 @@ RESULT_KINDS: dict[str, str] = {
     "hole": "a hole is complete: its row of cnctwin.usecases.holes.hole_record",
     "alarm": "an anomaly score crossed its threshold upward, or a hole judged against its cut "
              "condition (HoleLoadJudge: breakage, no load, load rise or drop)",
+    "tool_life": "after a hole, its tool's life: holes used, flank-wear estimate, remaining "
+                 "holes and time with a 90 % interval (cnctwin.usecases.tool_life)",
     "twin": "a window of the stream against the calibrated twin (cnctwin.compare): residual "
             "ratio and departures per axis",
     "gap": "the CYCLE counter jumped: cycles missing (never invented)",

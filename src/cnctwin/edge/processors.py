@@ -34,6 +34,7 @@ from cnctwin.usecases.air_friction import AirFrictionCheck
 from cnctwin.usecases.anomaly import Detector, PhysicsResidualDetector
 from cnctwin.usecases.hole_load import HoleLoadJudge
 from cnctwin.usecases.holes import HOLE_COLUMNS, HoleEvents, holes_from_arrays
+from cnctwin.usecases.tool_life import ToolLifeTracker
 
 __all__ = ["TORQUE_FLAGS", "AnomalyProcessor", "HoleProcessor", "TorqueProcessor",
            "TwinCompareProcessor"]
@@ -227,6 +228,11 @@ class HoleProcessor:
     tool_kinds : mapping, optional
         T number -> kind from the tool table (``cnctwin edge run --tools``): a plunge of an
         end mill outside a drilling cycle is not a hole.
+    tool_life : ToolLifeTracker, optional
+        After each hole a ``tool_life`` result of the hole's tool
+        (:class:`cnctwin.usecases.tool_life.ToolLifeTracker`: holes used, flank-wear
+        estimate, remaining life with its interval). A partial hole counts as a usage; its
+        torque is not used for the wear.
     """
 
     name = "holes"
@@ -237,8 +243,10 @@ class HoleProcessor:
                  max_buffer_s: float = 300.0, min_speed_mm_s: float = 0.05,
                  live_context: bool = True,
                  load_judge: HoleLoadJudge | bool = True,
-                 tool_kinds: Mapping[int, str] | None = None) -> None:
+                 tool_kinds: Mapping[int, str] | None = None,
+                 tool_life: ToolLifeTracker | None = None) -> None:
         self.tool_kinds = dict(tool_kinds) if tool_kinds is not None else None
+        self.tool_life = tool_life
         self.load_judge: HoleLoadJudge | None = (
             HoleLoadJudge() if load_judge is True else load_judge or None)
         self.model = model
@@ -418,6 +426,14 @@ class HoleProcessor:
                         "reference_nm": verdict.reference_nm, "hole": verdict.hole,
                         "message": verdict.message,
                         "units": {"score": "-", "reference_nm": "Nm"}}))
+            if self.tool_life is not None and payload.get("tool") is not None:
+                tq = payload.get("torque_mean_nm")
+                life = self.tool_life.update(
+                    int(payload["tool"]),
+                    float("nan") if tq is None or msg.get("partial") else float(tq),
+                    float(payload.get("end_s") or float("nan")))
+                out.append(Result("tool_life", int(row["end_cycle"]),
+                                  {"hole": int(row["hole"]), **life.as_payload()}))
             if self.cut is not None:
                 self.cut.hole_done(payload)
             self.holes += 1

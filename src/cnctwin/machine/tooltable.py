@@ -18,6 +18,16 @@ The simulator cuts with it (engagement diameter, flutes), the optimizer respects
     stick_out_mm = 50         # optional
     corner_radius_mm = 0      # optional (flat end mill)
 
+    [tools.4]
+    kind = "drill"
+    diameter_mm = 20
+    life_holes = 3000             # optional: the planned life (the control's usage limit)
+    wear_limit_um = 300           # optional: flank wear VB at which the tool is changed
+    wear_um_per_increase = 1000   # optional: VB per unit relative torque increase
+    wear_offset_um = 20           #   (cnctwin wear --measured ...: its slope, offset
+    wear_std_um = 8               #    its uncertainty, and the new-tool holes the increase
+    wear_baseline_holes = 30      #    is relative to)
+
     [tools.3]
     kind = "tap"
     diameter_mm = 8
@@ -49,7 +59,9 @@ _REQUIRED: dict[str, tuple[str, ...]] = {
     "tap": ("kind", "diameter_mm", "pitch_mm"),
 }
 _OPTIONAL = ("flutes", "helix_deg", "max_chip_mm", "max_torque_nm", "max_force_per_tooth_n",
-             "stick_out_mm", "corner_radius_mm", "pitch_mm", "point_angle_deg", "name")
+             "stick_out_mm", "corner_radius_mm", "pitch_mm", "point_angle_deg", "name",
+             "life_holes", "wear_limit_um", "wear_um_per_increase", "wear_offset_um",
+             "wear_std_um", "wear_baseline_holes")
 _UNIT_HINTS = {"diameter": "diameter_mm", "d": "diameter_mm", "dia": "diameter_mm",
                "diameter_in": "diameter_mm", "max_chip": "max_chip_mm", "helix": "helix_deg",
                "max_torque": "max_torque_nm", "stick_out": "stick_out_mm",
@@ -89,6 +101,22 @@ class ToolSpec:
         Point angle of a drill [deg].
     name : str
         Free text (catalogue number).
+    life_holes : int or None
+        Planned life in holes (usages), as the control's tool management counts it.
+    wear_limit_um : float or None
+        Average flank wear VB at which the tool is due for a change [µm].
+    wear_um_per_increase : float or None
+        Flank wear per unit relative increase of the hole's mean cutting torque [µm] (the
+        slope of :class:`cnctwin.usecases.wear.WearEstimator`, from ``cnctwin wear
+        --measured``); with ``wear_limit_um`` the edge forecasts the remaining life.
+    wear_offset_um : float
+        Flank wear of the tool when its baseline holes were drilled [µm].
+    wear_std_um : float
+        Standard uncertainty of a wear estimate [µm] (``cnctwin wear --measured`` prints
+        it); widens the remaining-life interval.
+    wear_baseline_holes : int
+        The tool's first holes whose mean torque the increase is relative to (as
+        ``cnctwin wear --baseline``).
     """
 
     number: int
@@ -104,6 +132,12 @@ class ToolSpec:
     pitch_mm: float | None = None
     point_angle_deg: float = 140.0
     name: str = ""
+    life_holes: int | None = None
+    wear_limit_um: float | None = None
+    wear_um_per_increase: float | None = None
+    wear_offset_um: float = 0.0
+    wear_std_um: float = 0.0
+    wear_baseline_holes: int = 30
 
     def end_mill(self) -> EndMill:
         """The :class:`~cnctwin.machine.tools.EndMill` description of this tool."""
@@ -181,11 +215,14 @@ class ToolTable:
                           "kind and diameter_mm")
 
 
+_INTEGER = ("flutes", "life_holes", "wear_baseline_holes")
+
+
 def _number(src: str, t: str, key: str, v: Any, *, lo: float = 0.0,
             integer: bool = False) -> float:
     if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
         raise ConfigError(f"{src}: tools.{t}.{key} must be a number, got {v!r}")
-    if v <= lo and key not in ("corner_radius_mm", "helix_deg"):
+    if v <= lo and key not in ("corner_radius_mm", "helix_deg", "wear_offset_um"):
         raise ConfigError(f"{src}: tools.{t}.{key} must be > {lo:g}, got {v!r}")
     if integer and v != int(v):
         raise ConfigError(f"{src}: tools.{t}.{key} must be a whole number, got {v!r}")
@@ -221,12 +258,19 @@ def _tool(src: str, t: str, entry: Any) -> ToolSpec:
             if k == "name":
                 kw[k] = str(v)
             continue
-        kw[k] = _number(src, t, k, v, integer=(k == "flutes"),
-                        lo=-1e-12 if k in ("corner_radius_mm",) else 0.0)
-        if k == "flutes":
+        kw[k] = _number(src, t, k, v, integer=k in _INTEGER,
+                        lo=-1e-12 if k in ("corner_radius_mm", "wear_std_um") else 0.0)
+        if k in _INTEGER:
             kw[k] = int(v)
     if kind == "end_mill" and kw.get("corner_radius_mm", 0.0) > kw["diameter_mm"] / 2.0:
         raise ConfigError(f"{src}: tools.{t}.corner_radius_mm exceeds the radius")
+    if ("wear_limit_um" in kw) != ("wear_um_per_increase" in kw):
+        given, lacking = (("wear_limit_um", "wear_um_per_increase") if "wear_limit_um" in kw
+                          else ("wear_um_per_increase", "wear_limit_um"))
+        raise ConfigError(f"{src}: tools.{t}.{given} needs {lacking} too (the wear forecast "
+                          "maps the torque increase to flank wear and compares it with the "
+                          "limit); 'cnctwin wear --measured HOLE:UM,...' gives the "
+                          "slope")
     return ToolSpec(**kw)
 
 

@@ -186,12 +186,19 @@ class WearEstimator:
         Standard error of the slope [µm].
     n_points : int
         Calibration points used.
+    resid_std_um : float
+        Standard deviation of the measured points about the fit [µm].
+    cov_um2 : tuple of float
+        Covariance of (slope, offset): (var slope, cov, var offset) [µm²]; offset terms 0
+        when the offset is not fitted.
     """
 
     slope_um: float = float("nan")
     offset_um: float = 0.0
     slope_std_um: float = float("nan")
     n_points: int = 0
+    resid_std_um: float = float("nan")
+    cov_um2: tuple[float, float, float] = (float("nan"), 0.0, 0.0)
 
     def fit(
         self, increase: ArrayLike, wear_um: ArrayLike, *, fit_offset: bool = False
@@ -230,7 +237,19 @@ class WearEstimator:
         self.offset_um = float(coef[1]) if fit_offset else 0.0
         self.slope_std_um = float(np.sqrt(cov[0, 0]))
         self.n_points = int(x.size)
+        self.resid_std_um = float(np.sqrt(float(resid @ resid) / dof))
+        self.cov_um2 = ((float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1])) if fit_offset
+                        else (float(cov[0, 0]), 0.0, 0.0))
         return self
+
+    def predict_std(self, increase: ArrayLike) -> NDArray[np.float64]:
+        """Standard uncertainty of a wear prediction [µm]: the fit's parameters and the
+        scatter of the measured points about it (a prediction, not a mean, interval)."""
+        if not np.isfinite(self.slope_um):
+            raise IdentificationError("WearEstimator is not calibrated; call fit() first")
+        x = np.asarray(increase, dtype=np.float64)
+        vs, c, vo = self.cov_um2
+        return np.sqrt(x * x * vs + 2.0 * x * c + vo + self.resid_std_um**2)
 
     def predict(self, increase: ArrayLike) -> NDArray[np.float64]:
         """Flank wear for a relative torque increase [µm]."""
