@@ -657,7 +657,8 @@ def _build(args: argparse.Namespace) -> Any:
         sinks.append(OpcUaSink(args.opcua, machine=machine,
                                publish_hz=args.opcua_publish_hz, security=ua_security,
                                identification=dict(getattr(machine_file, "identification",
-                                                           {}) or {})))
+                                                           {}) or {}),
+                               tools=_tool_entries(getattr(args, "tool_table", None))))
     if args.mtconnect or args.shdr:
         sinks.append(_mtconnect_sink(args, machine))
     if getattr(args, "control_writer", None) is not None:
@@ -674,6 +675,15 @@ def _build(args: argparse.Namespace) -> Any:
               f"{info['after_cycle']} {how}; results it already emitted are not repeated",
               file=sys.stderr)
     return rt
+
+
+def _tool_entries(table: Any) -> dict[int, dict[str, Any]]:
+    """T number -> the tool table's entry as the OPC UA and MTConnect sinks describe it."""
+    if table is None:
+        return {}
+    keys = ("name", "kind", "diameter_mm", "flutes", "life_holes", "wear_limit_um",
+            "wear_um_per_increase")
+    return {t: {k: getattr(table.get(t), k) for k in keys} for t in table}
 
 
 def _mtconnect_sink(args: argparse.Namespace, machine: str) -> Any:

@@ -31,10 +31,12 @@ import contextlib
 import json
 import math
 import os
+import re
 import threading
 import time
 import urllib.parse
 from collections import deque
+from collections.abc import Mapping
 from concurrent.futures import Future
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
@@ -46,6 +48,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from cnctwin.edge.listen import check_bindable
+from cnctwin.edge.opcua_machinetool import EU_CODES, EU_NAMESPACE, eu_unit_id
 from cnctwin.edge.pipeline import Chunk
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import nc_program_name
@@ -63,37 +66,7 @@ __all__ = [
 ]
 
 DEFAULT_NAMESPACE = "urn:cnctwin:edge"
-_EU_NAMESPACE = "http://www.opcfoundation.org/UA/units/un/cefact"
 _EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
-
-EU_CODES: dict[str, str] = {
-    "rpm": "RPM", "Nm": "NU", "um": "4H", "degC": "CEL", "mm": "MMT", "J": "JOU", "s": "SEC",
-    "A": "AMP", "mm/min": "H81",
-}
-"""UNECE Recommendation 20 common codes of the units used (OPC UA Part 8, EUInformation)."""
-
-
-def eu_unit_id(code: str) -> int:
-    """``UnitId`` of an UNECE common code (OPC UA Part 8 §5.6.3: the code's bytes, big end).
-
-    >>> eu_unit_id("CEL")
-    4408652
-
-    Parameters
-    ----------
-    code : str
-        UNECE common code (``CEL``, ``AMP``, ``RPM``; at most 4 characters).
-
-    Returns
-    -------
-    int
-        The ``UnitId`` of OPC UA ``EUInformation``.
-    """
-    uid = 0
-    for ch in code.upper()[:4]:
-        uid = (uid << 8) | ord(ch)
-    return uid
-
 
 def decimate_peak(
     cycles: NDArray[np.int64], values: NDArray[np.float64], *, window_cycles: int
@@ -376,6 +349,11 @@ class OpcUaSink:
         (:mod:`cnctwin.edge.opcua_machinetool`; about 3 s more at start).
     identification : dict, optional
         The machine file's ``[identification]`` for the OPC 40501 Identification.
+    tools : mapping, optional
+        T number -> the tool table's entry (``name``, ``life_holes``, ``wear_limit_um``,
+        ``wear_um_per_increase``): OPC 40501 ``Equipment/Tools`` with each tool's
+        ``ToolLife`` and ``Notification/Prognoses`` with its ``ToolChangePrognosis``, filled
+        from the ``tool_life`` results.
 
     Raises
     ------
@@ -392,7 +370,8 @@ class OpcUaSink:
                  hole_history_s: float = 300.0, start_timeout_s: float = 60.0,
                  max_pending: int = 64, security: OpcUaSecurity | None = None,
                  machine_tool: bool = True,
-                 identification: dict[str, Any] | None = None) -> None:
+                 identification: dict[str, Any] | None = None,
+                 tools: Mapping[int, Mapping[str, Any]] | None = None) -> None:
         try:
             import asyncua  # noqa: F401
         except ImportError as exc:  # pragma: no cover - depends on the environment
@@ -425,6 +404,10 @@ class OpcUaSink:
         self.security = security
         self.machine_tool = machine_tool
         self.identification = dict(identification or {})
+        self.tools = {int(k): dict(v) for k, v in (tools or {}).items()}
+        self._conditions: Any = None
+        self._parts = 0
+        self._state = "Initializing"
         self._mirror: dict[Any, list[tuple[Any, Any]]] = {}
         self._program = ""
         self.published = 0
@@ -531,7 +514,7 @@ class OpcUaSink:
                                              ua.QualifiedName(name, idx), value,
                                              varianttype=vt)
             if unit is not None:
-                eu = ua.EUInformation(NamespaceUri=_EU_NAMESPACE,
+                eu = ua.EUInformation(NamespaceUri=EU_NAMESPACE,
                                       UnitId=eu_unit_id(EU_CODES[unit]),
                                       DisplayName=ua.LocalizedText(unit),
                                       Description=ua.LocalizedText(unit))
@@ -579,7 +562,8 @@ class OpcUaSink:
         if self.machine_tool:
             from cnctwin.edge.opcua_machinetool import add_machine_tool
 
-            mt = await add_machine_tool(server, m, idx, identification=self.identification)
+            mt = await add_machine_tool(server, m, idx, identification=self.identification,
+                                        tools=self.tools)
             same = lambda dv: dv  # noqa: E731
 
             def inverted(dv: Any) -> Any:
@@ -605,11 +589,28 @@ class OpcUaSink:
             # IsRotating is the state at the window's end (a spindle that stopped inside the
             # window is not rotating, though the window's mean speed is not zero)
             nodes["MT.IsRotating"] = mt["IsRotating"]
+            nodes["MT.PartsProduced"] = mt["PartsProduced"]
+            for key, nid in mt.items():
+                if key.startswith("Tool."):
+                    nodes[f"MT.{key}"] = nid
+            from cnctwin.edge.opcua_alarms import AlarmConditions
+
+            self._conditions = AlarmConditions(server, mt["Messages"], mt["Machine"],
+                                               own_idx=idx, mt_idx=self._mt_ns, machine=m)
+            await self._conditions.setup()
         await server.start()
         self._server = server
 
     async def _apply(self, updates: list[tuple[Any, Any]]) -> None:
         for nodeid, dv in updates:
+            if nodeid is _RAISE:  # an alarm condition's event: (alarm, text, time)
+                if self._conditions is not None:
+                    await self._conditions.raise_alarm(*dv)
+                continue
+            if nodeid is _CLEAR:
+                if self._conditions is not None:
+                    await self._conditions.clear_all(dv)
+                continue
             await self._server.write_attribute_value(nodeid, dv)
             for target, fn in self._mirror.get(nodeid, ()):
                 if dv.Value is not None and dv.Value.Value is not None:
@@ -682,6 +683,7 @@ class OpcUaSink:
                     (nd["Cycle"], self._dv(int(last[j]), "i", ts))]
             if self._alarm_until is not None and int(last[j]) > self._alarm_until:
                 out.append((nd["Alarm.Active"], self._dv(False, "b", ts)))
+                out.append((_CLEAR, _dt(ts)))
                 self._alarm_until = None
         self.windows += last.size
         return out
@@ -745,12 +747,55 @@ class OpcUaSink:
                 f"{det}: anomaly score {score:.3g} above {thr:.3g} at cycle {c}"
                 + (f" ({msg['time']})" if msg.get("time") else ""))
         return [(nd["Alarm.Active"], self._dv(True, "b", ts)),
+                (_RAISE, (dict(msg), text, _dt(ts))),
                 (nd["Alarm.Message"], self._dv(text, "s", ts)),
                 (nd["Alarm.Detector"], self._dv(det, "s", ts)),
                 (nd["Alarm.Score"], self._dv(score, "d", ts)),
                 (nd["Alarm.Threshold"], self._dv(thr, "d", ts)),
                 (nd["Alarm.Cycle"], self._dv(c, "i", ts)),
                 (nd["Alarm.Count"], self._dv(self._alarms, "i", ts))]
+
+    def _tool_life(self, msg: dict[str, Any]) -> list[tuple[Any, Any]]:
+        """OPC 40501 ToolLife and ToolChangePrognosis of the hole's tool."""
+        from asyncua import ua
+
+        nd = self._nodes
+        k = f"MT.Tool.{int(msg['tool'])}"
+        if f"{k}.Usages" not in nd:
+            return []
+        ts = self._time_ns(int(msg["cycle"]))
+        out = [(nd[f"{k}.Usages"], self._dv(msg.get("used_holes"), "d", ts)),
+               (nd[f"{k}.LastUsage"], self._dv(_dt(ts), "t", ts))]
+        if f"{k}.FlankWear" in nd and msg.get("wear_um") is not None:
+            out.append((nd[f"{k}.FlankWear"], self._dv(msg["wear_um"], "d", ts)))
+        never = bool(msg.get("never_reaches_limit"))
+        if msg.get("remaining_holes") is None and not never:
+            return out  # no estimate yet: the nodes keep BadWaitingForInitialData
+        beyond = ua.DataValue(StatusCode_=ua.StatusCode(ua.StatusCodes.BadOutOfRange),
+                              SourceTimestamp=_dt(ts))
+
+        def holes(key: str) -> float:
+            v = msg.get(key)
+            return math.inf if v is None else float(v)
+
+        for node, key in ((f"{k}.RemainingUsages", "remaining_holes"),
+                          (f"{k}.RemainingUsages.LowerBound", "remaining_low"),
+                          (f"{k}.RemainingUsages.UpperBound", "remaining_high"),
+                          (f"{k}.RemainingHoles", "remaining_holes")):
+            out.append((nd[node], self._dv(holes(key), "d", ts)))
+        out.append((nd[f"{k}.RemainingUsages.Basis"], self._dv(str(msg.get("basis", "")),
+                                                                "s", ts)))
+        # the predicted change: the remaining time from this hole (beyond the forecast's
+        # horizon: BadOutOfRange, nothing invented)
+        for node, key in ((f"{k}.PredictedTime", "remaining_s"),
+                          (f"{k}.PredictedTimeEarliest", "remaining_low_s"),
+                          (f"{k}.PredictedTimeLatest", "remaining_high_s")):
+            v = msg.get(key)
+            if v is None or not math.isfinite(float(v)):
+                out.append((nd[node], beyond))
+            else:
+                out.append((nd[node], self._dv(_dt(ts + round(float(v) * 1e9)), "t", ts)))
+        return out
 
     # ---------------------------------------------------------------- Sink protocol
     def write(self, messages: list[dict[str, Any]], chunk: Chunk | None) -> None:
@@ -780,6 +825,8 @@ class OpcUaSink:
                 updates += self._hole(msg)
             elif kind == "alarm":
                 updates += self._alarm(msg)
+            elif kind == "tool_life":
+                updates += self._tool_life(msg)
         if self._hist:
             horizon = int(self._hist[-1][0][-1]) - round(self.hole_history_s
                                                           / self._cycle_time_s)
@@ -804,10 +851,8 @@ class OpcUaSink:
             out.append((nd["MT.ChannelState"],
                         ua.DataValue(ua.Variant(0, ua.VariantType.Int32))))  # Active
             out.append((nd["MT.Light.Green"], self._dv(True, "b", t)))
-            from cnctwin.edge.opcua_machinetool import program_state
-
-            for key, dv in program_state("Running", self._mt_ns).items():
-                out.append((nd[f"MT.{key}"], dv))
+            out += self._set_state("Running")
+        out += self._nc_state(chunk, t)
         hours = int((time.monotonic() - self._started) // 3600)
         if hours != self._power_on_h:
             self._power_on_h = hours
@@ -819,7 +864,51 @@ class OpcUaSink:
             elif (msg.get("kind") == "alarm" and msg.get("detector") == "AdaptiveFeed"
                   and msg.get("fault") == "overload"):
                 out.append((nd["MT.Light.Yellow"], self._dv(True, "b", t)))
+                out += self._set_state("Interrupted")  # the control holds the feed
+            elif (msg.get("kind") == "alarm" and msg.get("detector") == "AdaptiveFeed"
+                  and msg.get("fault") == "breakage"):
+                out += self._set_state("Aborted")  # the control stops the program
         return out
+
+    def _set_state(self, name: str) -> list[tuple[Any, Any]]:
+        """The active program's state machine to ``name`` (nothing if it is there)."""
+        from cnctwin.edge.opcua_machinetool import program_state
+
+        if name == self._state:
+            return []
+        self._state = name
+        return [(self._nodes[f"MT.{key}"], dv)
+                for key, dv in program_state(name, self._mt_ns).items()]
+
+    def _nc_state(self, chunk: Chunk | None, t: int) -> list[tuple[Any, Any]]:
+        """Program transitions from the NC events: M30/M2 ends the program (a part
+        produced), M0/M1 interrupts it, a program call or any later block runs it again."""
+        if chunk is None or chunk.events.empty:
+            return []
+        ev = chunk.events
+        out: list[tuple[Any, Any]] = []
+        kinds = [str(k) for k in ev["kind"].tolist()]
+        codes = ([c if isinstance(c, str) else "" for c in ev["gcode"].tolist()]
+                 if "gcode" in ev else [""] * len(kinds))
+        for kind, code in zip(kinds, codes, strict=True):
+            words = set(_M_WORD.findall(code.upper()))
+            if kind == "block" and words & {"M30", "M2", "M02"}:
+                out += self._set_state("Ended")
+                self._parts += 1
+                out.append((self._nodes["MT.PartsProduced"],
+                            self._dv_uint(self._parts, t)))
+            elif kind == "block" and words & {"M0", "M00", "M1", "M01"}:
+                out += self._set_state("Interrupted")
+            elif kind == "call" or (kind == "block" and code.strip()
+                                    and self._state in ("Ended", "Interrupted")):
+                out += self._set_state("Running")
+        return out
+
+    def _dv_uint(self, value: int, t: int) -> Any:
+        from asyncua import ua
+
+        return ua.DataValue(ua.Variant(int(value), ua.VariantType.UInt32),
+                            SourceTimestamp=_dt(t), ServerTimestamp=datetime.now(UTC))
 
     def _program_update(self, chunk: Chunk | None) -> list[tuple[Any, Any]]:
         """``Production/ActiveProgram/Name`` of the OPC 40501 object from the NC call events."""
@@ -878,6 +967,10 @@ class OpcUaSink:
         if not loop.is_running() and not loop.is_closed():
             loop.close()
 
+
+_M_WORD = re.compile(r"\bM\d+\b")
+_RAISE = object()  # an update that raises an alarm condition (not a node)
+_CLEAR = object()  # an update that clears the active alarm conditions
 
 # LastHole variables: (browse name, value kind d/i/s/t, unit) and the hole-row key they show
 _HOLE_VARS: tuple[tuple[str, str, str | None], ...] = (
