@@ -286,6 +286,133 @@ def test_opcua_machine_tool_alarm() -> None:
     assert text.startswith("physics: torque 40 % above the model at cycle 120")
 
 
+def _events(rows: list[tuple[int, str, str]]) -> pd.DataFrame:
+    return pd.DataFrame({"cycle": [r[0] for r in rows], "kind": [r[1] for r in rows],
+                         "gcode": [r[2] for r in rows]})
+
+
+def test_opcua_tools_prognoses_program_states_and_alarm_conditions() -> None:
+    """Issue 27 point 1: a ``tool_life`` result fills the tool's ToolLife and its
+    ToolChangePrognosis (predicted time = the hole's time + the remaining time); M0, a block,
+    M30 and the adaptive feed's breakage stop move the ActiveProgram's state machine; an
+    alarm is an AlarmConditionType event that clears after the hold and is acknowledged."""
+    from asyncua import Client, ua
+
+    from cnctwin.edge.pipeline import Chunk
+
+    url = f"opc.tcp://127.0.0.1:{free_port()}/cnctwin"
+    tools = {1: {"name": "D20", "life_holes": 400, "wear_limit_um": 250.0,
+                 "wear_um_per_increase": 900.0}, 2: {"name": "T2 mill"}}
+    sink = OpcUaSink(url, machine="mill-3", tools=tools, alarm_hold_s=0.05)
+    t0 = 1_700_000_000 * 10**9
+
+    def chunk(first: int, events: list[tuple[int, str, str]] | None = None) -> Chunk:
+        c = np.arange(first, first + 50, dtype=np.int64)
+        return Chunk(c, t0 + (c - 100) * 2_000_000, {},
+                     events=_events(events) if events else _events([]))
+
+    life = {"kind": "tool_life", "cycle": 120, "tool": 1, "used_holes": 150,
+            "remaining_holes": 80.0, "remaining_low": 60.0, "remaining_high": 95.0,
+            "remaining_s": 320.0, "remaining_low_s": 240.0, "remaining_high_s": 380.0,
+            "wear_um": 180.5, "basis": "wear", "never_reaches_limit": False}
+    never = {**life, "tool": 2, "used_holes": 3, "remaining_holes": None,
+             "remaining_low": 5.0, "remaining_high": None, "remaining_s": None,
+             "remaining_low_s": 20.0, "remaining_high_s": None, "wear_um": None,
+             "never_reaches_limit": True}
+    states: list[str] = []
+    events: list[Any] = []
+
+    class Handler:
+        def event_notification(self, ev: Any) -> None:
+            events.append(ev)
+
+    async def run() -> dict[str, Any]:
+        async with Client(url) as c:
+            mt = await c.get_namespace_index("http://opcfoundation.org/UA/MachineTool/")
+            mach = await c.get_namespace_index("http://opcfoundation.org/UA/Machinery/")
+            idx = await c.get_namespace_index("urn:cnctwin:edge")
+            m = await c.nodes.objects.get_child([f"{mach}:Machines", f"{mt}:mill-3"])
+            msgs = await m.get_child([f"{mt}:Notification", f"{mt}:Messages"])
+            sub = await c.create_subscription(20, Handler())
+            await sub.subscribe_events(msgs, c.get_node(ua.NodeId(ua.ObjectIds.AlarmConditionType)))
+            state = await m.get_child([f"{mt}:Production", f"{mt}:ActiveProgram", f"{mt}:State",
+                                       "0:CurrentState"])
+            loop = asyncio.get_running_loop()
+
+            async def step(messages: list[dict[str, Any]], ch: Chunk) -> None:
+                await loop.run_in_executor(None, lambda: (sink.write(messages, ch),
+                                                          sink.flush()))
+                states.append((await state.read_value()).Text)
+
+            await step([life, never], chunk(100, [(110, "block", "M0")]))
+            await step([], chunk(150, [(160, "block", "G1 X10 F100")]))
+            await step([{"kind": "alarm", "cycle": 210, "detector": "HoleLoadJudge",
+                         "fault": "breakage", "message": "hole 9: broken"}],
+                       chunk(200, [(230, "block", "M30")]))
+            await step([], chunk(250, [(260, "call", "")]))
+            await step([{"kind": "alarm", "cycle": 310, "detector": "AdaptiveFeed",
+                         "fault": "breakage", "message": "stop"}], chunk(300))
+            await asyncio.sleep(0.3)
+            read: dict[str, Any] = {}
+            judged = [e for e in events if e.SourceName == "HoleLoadJudge"]
+            cond = c.get_node(judged[0].NodeId)  # the ConditionId
+            for eid in (b"not-an-event", judged[-1].EventId):  # its newest state is acked
+                try:
+                    await cond.call_method(ua.NodeId(9111), ua.Variant(
+                        eid, ua.VariantType.ByteString), ua.LocalizedText("seen"))
+                    read.setdefault("ack", []).append("Good")
+                except ua.UaStatusCodeError as exc:
+                    read.setdefault("ack", []).append(type(exc).__name__)
+            tool = [f"{mt}:Equipment", f"{mt}:Tools", f"{mt}:T1"]
+            for key, path in {
+                    "usages": [*tool, f"{mt}:ToolLife", f"{mt}:Usages"],
+                    "remaining": [*tool, f"{mt}:ToolLife", f"{mt}:RemainingUsages"],
+                    "low": [*tool, f"{mt}:ToolLife", f"{mt}:RemainingUsages", f"{idx}:LowerBound"],
+                    "high": [*tool, f"{mt}:ToolLife", f"{mt}:RemainingUsages", f"{idx}:UpperBound"],
+                    "limit": [*tool, f"{mt}:ToolLife", f"{mt}:Usages", f"{mt}:LimitValue"],
+                    "wear": [*tool, f"{mt}:ToolLife", f"{mt}:FlankWear"],
+                    "wear_limit": [*tool, f"{mt}:ToolLife", f"{mt}:FlankWear", f"{mt}:LimitValue"],
+                    "indication": [*tool, f"{mt}:ToolLife", f"{mt}:Usages", f"{mt}:Indication"],
+                    "t_number": [*tool, f"{mt}:ControlIdentifier1"],
+                    "predicted": [f"{mt}:Notification", f"{mt}:Prognoses",
+                                  f"{mt}:ToolChange T1", f"{mt}:PredictedTime"],
+                    "latest": [f"{mt}:Notification", f"{mt}:Prognoses", f"{mt}:ToolChange T1",
+                               f"{idx}:PredictedTimeLatest"],
+                    "t2_predicted": [f"{mt}:Notification", f"{mt}:Prognoses",
+                                     f"{mt}:ToolChange T2", f"{mt}:PredictedTime"],
+                    "t2_remaining": [f"{mt}:Equipment", f"{mt}:Tools", f"{mt}:T2",
+                                     f"{mt}:ToolLife", f"{mt}:RemainingUsages"],
+                    "parts": [f"{mt}:Production", f"{mt}:Statistics",
+                              f"{mt}:PartsProducedInLifetime"]}.items():
+                read[key] = await (await m.get_child(path)).read_data_value(
+                    raise_on_bad_status=False)
+            return read
+
+    try:
+        got = asyncio.run(run())
+    finally:
+        sink.close()
+    assert got["usages"].Value.Value == 150.0 and got["limit"].Value.Value == 400.0
+    assert got["indication"].Value.Value == 2  # ToolLifeIndication NumberOfUsages
+    assert got["t_number"].Value.Value == 1
+    assert (got["remaining"].Value.Value, got["low"].Value.Value,
+            got["high"].Value.Value) == (80.0, 60.0, 95.0)
+    assert got["wear"].Value.Value == 180.5 and got["wear_limit"].Value.Value == 250.0
+    hole_t = pd.Timestamp(t0 + 20 * 2_000_000, tz="UTC")  # cycle 120
+    assert pd.Timestamp(got["predicted"].Value.Value) == hole_t + pd.Timedelta(seconds=320)
+    assert pd.Timestamp(got["latest"].Value.Value) == hole_t + pd.Timedelta(seconds=380)
+    # a trend that never reaches its limit: no time invented
+    assert got["t2_predicted"].StatusCode.name == "BadOutOfRange"
+    assert math.isinf(got["t2_remaining"].Value.Value)
+    assert got["parts"].Value.Value == 1
+    assert states == ["Interrupted", "Running", "Ended", "Running", "Aborted"]
+    judge = [e for e in events if e.SourceName == "HoleLoadJudge"]
+    assert [e.ActiveState.Text for e in judge] == ["Active", "Inactive"]
+    assert judge[0].Severity == 900 and judge[0].Message.Text.startswith("HoleLoadJudge: hole 9")
+    assert judge[1].Retain is True  # inactive, not yet acknowledged: retained
+    assert got["ack"] == ["BadEventIdUnknown", "Good"]
+
+
 @pytest.mark.parametrize("hz", [0.0, -1.0, float("nan"), 1000.0])
 def test_bad_publish_rate(hz: float) -> None:
     with pytest.raises(ConfigError, match="publish_hz"):

@@ -184,3 +184,110 @@ def test_node_opcua_reads_every_node_the_umati_dashboard_requires(edge: Any,
     assert v["Monitoring/Channel 1/Name"]["value"] == "Channel 1"
     colors = [v[f"Monitoring/Stacklight/Light {k}/SignalColor"]["value"] for k in range(3)]
     assert colors == [2, 4, 1]  # green at the base, yellow, red (IA SignalColor)
+
+
+# ---------------------------------------------------------------------------- alarms, tools
+ALARM_CLIENT = Path(__file__).parent / "opcua_alarm_client.js"
+TOOL_TABLE = """[tools.1]
+kind = "drill"
+diameter_mm = 20
+name = "DRILL D20 HSS"
+life_holes = 40
+"""
+
+
+@pytest.fixture(scope="module")
+def broken_drill_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """A simulated drilling job (thesis §5.1 tool-wear program: CYCLE81 20 mm deep, sets of
+    6, M30 at the end) whose drill breaks in hole 9 (``ToolBreakage``: the torque falls to
+    the stub's rubbing), as a Capture4Analysis file."""
+    from cnctwin.sim.scenarios import tool_wear_run
+
+    out = tmp_path_factory.mktemp("broken_drill")
+    res = tool_wear_run(out, n_holes=12, holes_per_set=6, seed=3, fmt="c4a",
+                        dynamometer=False, faults=[{"type": "ToolBreakage", "hole": 9}])
+    path = next(p for p in res.recording_paths if str(p).endswith(".json"))
+    return {"path": Path(path), "dir": out}
+
+
+def test_node_opcua_sees_alarm_events_acknowledges_and_tool_life_counting(
+        broken_drill_run: dict[str, Any], tmp_path: Path) -> None:
+    """Issue 27 point 2: subscribe to the alarm events, acknowledge one, see a tool's
+    remaining life change as holes are drilled, the program end and the part counted."""
+    node = _node()
+    from cnctwin.edge import save_spindle_model
+    from cnctwin.spindle import SpindleModel
+
+    env = {**os.environ, "CNCTWIN_OPCUA_PASSWORD": PASSWORD}
+    subprocess.run([sys.executable, "-m", "cnctwin", "edge", "opcua-user", USER, "--users",
+                    str(tmp_path / "users")], env=env, check=True, capture_output=True)
+    model = save_spindle_model(SpindleModel.from_parameters("thesis_spinner_840dsl"),
+                               tmp_path / "spindle.json")
+    (tmp_path / "tools.toml").write_text(TOOL_TABLE)
+    port = free_port()
+    url = f"opc.tcp://127.0.0.1:{port}/cnctwin"
+    # the recording is 48 s of machine time: replayed at 2x, the client has ~20 s of holes
+    proc = subprocess.Popen([sys.executable, "-m", "cnctwin", "edge", "run", "--source",
+                             str(broken_drill_run["path"]), "--model", str(model), "--out",
+                             str(tmp_path / "out"), "--quiet", "--machine", "m1", "--speed",
+                             "2", "--tools", str(tmp_path / "tools.toml"), "--opcua", url,
+                             "--opcua-users", str(tmp_path / "users"), "--opcua-trust-any"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 120
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+                assert time.monotonic() < deadline, "the edge's OPC UA server did not start"
+                time.sleep(0.2)
+        life = [(MT, "Equipment"), (MT, "Tools"), (MT, "T1"), (MT, "ToolLife")]
+        watch = [[*life, (MT, "Usages")], [*life, (MT, "RemainingUsages")],
+                 [(MT, "Production"), (MT, "ActiveProgram"), (MT, "State"),
+                  (UA, "CurrentState")],
+                 [(MT, "Production"), (MT, "Statistics"), (MT, "PartsProducedInLifetime")],
+                 [(MT, "Notification"), (MT, "Prognoses"), (MT, "ToolChange T1"),
+                  (MT, "PredictedTime")]]
+        cl_env = {**os.environ, "NODE_PATH": str(ROOT / ".node" / "node_modules"),
+                  "CNCTWIN_OPCUA_USER": USER, "CNCTWIN_OPCUA_PASSWORD": PASSWORD}
+        res = subprocess.run([node, str(ALARM_CLIENT), url, "m1", str(tmp_path / "node-pki"),
+                              "90"], input=json.dumps([[list(e) for e in p] for p in watch]),
+                             capture_output=True, text=True, env=cl_env, timeout=150)
+        assert res.returncode == 0, res.stderr
+        assert proc.wait(timeout=60) == 0
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            proc.wait(timeout=15)
+    doc = json.loads(next(x for x in res.stdout.splitlines() if x.startswith('{"events"')))
+    # the broken drill: one AlarmConditionType event, active and unacknowledged, severity of a
+    # tool breakage; the acknowledgement answered Good and re-sent the condition acknowledged
+    raised = [e for e in doc["events"] if e["ActiveState.Id"] is True]
+    assert raised, doc["events"]
+    first = raised[0]
+    assert first["SourceName"] == "HoleLoadJudge"
+    assert "hole 9" in first["Message"]
+    assert first["Severity"] == 900
+    assert first["AckedState.Id"] is False and first["Retain"] is True
+    assert first["EventType"] == "ns=0;i=2915"  # AlarmConditionType
+    assert doc["ack"] == {"status": "Good", "condition": "HoleLoadJudge"}
+    acked = [e for e in doc["events"] if e["ConditionName"] == "HoleLoadJudge"
+             and e["AckedState.Id"] is True]
+    assert acked, doc["events"]
+    # the tool's life counted hole by hole against its 40-hole limit (tool table)
+    key = "Equipment/Tools/T1/ToolLife/"
+    used = [v for v, st in doc["values"][key + "Usages"] if st == "Good"]
+    remaining = [v for v, st in doc["values"][key + "RemainingUsages"] if st == "Good"]
+    assert len(set(used)) >= 3 and used == sorted(used) and used[-1] == 12.0
+    assert len(set(remaining)) >= 3 and remaining == sorted(remaining, reverse=True)
+    assert remaining[-1] == 40.0 - 12.0
+    predicted = [v for v, st in doc["values"][
+        "Notification/Prognoses/ToolChange T1/PredictedTime"] if st == "Good"]
+    assert predicted  # a time: the remaining holes at the tool's hole period
+    # the program ran to its M30: Ended, one part produced
+    states = [v for v, _ in doc["values"]["Production/ActiveProgram/State/CurrentState"]]
+    assert "Running" in states and states[-1] == "Ended"
+    parts = [v for v, _ in doc["values"]["Production/Statistics/PartsProducedInLifetime"]]
+    assert parts[-1] == 1

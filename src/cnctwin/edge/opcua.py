@@ -827,6 +827,13 @@ class OpcUaSink:
                 updates += self._alarm(msg)
             elif kind == "tool_life":
                 updates += self._tool_life(msg)
+        if (chunk is not None and len(chunk) and self._alarm_until is not None
+                and int(chunk.cycles[-1]) > self._alarm_until + (self._window or 50)):
+            # the hold is over and no torque window closed it (no torque in the stream)
+            ts = self._time_ns(self._alarm_until)
+            updates += [(self._nodes["Alarm.Active"], self._dv(False, "b", ts)),
+                        (_CLEAR, _dt(ts))]
+            self._alarm_until = None
         if self._hist:
             horizon = int(self._hist[-1][0][-1]) - round(self.hole_history_s
                                                           / self._cycle_time_s)
@@ -950,9 +957,15 @@ class OpcUaSink:
         self.flush()
 
     def close(self) -> None:
-        """Publish what is open, then stop the server and its thread."""
+        """Publish what is open, then stop the server and its thread; with subscriptions the
+        server stays up for one more second so that the final values (the ended program,
+        the last tool life) reach the subscribed clients."""
         if self._server is not None:
             self.finish()
+            subs = getattr(getattr(getattr(self._server, "iserver", None),
+                                   "subscription_service", None), "subscriptions", None)
+            if subs:
+                time.sleep(1.0)
         self._shutdown()
 
     def _shutdown(self) -> None:
