@@ -26,7 +26,7 @@ from cnctwin.edge.mtconnect import (
     OutOfRangeError,
     machine_tool_device,
 )
-from cnctwin.edge.mtconnect_server import MTConnectAgent, ShdrAdapter
+from cnctwin.edge.mtconnect_server import MTConnectAgent, MTConnectSink, ShdrAdapter
 from cnctwin.exceptions import ConfigError
 from tests._services import free_port
 
@@ -37,7 +37,7 @@ NS = {"m": NS_STREAMS}
 @pytest.fixture(scope="module")
 def schemas() -> dict[str, Any]:
     return {k: etree.XMLSchema(etree.parse(str(XSD_DIR / f"MTConnect{k}_2.3_1.0.xsd")))
-            for k in ("Devices", "Streams", "Error")}
+            for k in ("Devices", "Streams", "Error", "Assets")}
 
 
 def _valid(schemas: dict[str, Any], kind: str, body: bytes) -> Any:
@@ -422,3 +422,71 @@ def test_edge_run_serves_the_real_recording(
         ts, _, val = ln.split("|")[:3]
         np.testing.assert_allclose(float(val), by_time[ts], rtol=1e-5, atol=1e-9)
     assert any("|avail|UNAVAILABLE" in ln for ln in shdr_lines[-5:])
+
+
+def test_cutting_tool_assets_carry_the_tool_life(schemas: dict[str, Any]) -> None:
+    """Issue 27 point 3: one CuttingTool asset per tool-table entry, its
+    CuttingToolLifeCycle from the ``tool_life`` results (holes used against the planned life,
+    the remaining-life forecast counting down, the wear against its limit), BROKEN after a
+    breakage alarm of the tool, an AssetChanged observation per change; every document
+    valid against the official MTConnectAssets/Streams 2.3 XSDs."""
+    from cnctwin.edge.pipeline import Chunk
+
+    port = free_port()
+    tools = {1: {"name": "DRILL D20", "kind": "drill", "diameter_mm": 20.0,
+                 "life_holes": 400, "wear_limit_um": 250.0},
+             2: {"name": "TAP M8", "kind": "tap", "diameter_mm": 8.0}}
+    sink = MTConnectSink("mill-4", agent=("127.0.0.1", port), tools=tools)
+    base = f"http://127.0.0.1:{port}"
+    try:
+        status, body = _get(f"{base}/assets")
+        assert status == 200
+        doc = _valid(schemas, "Assets", body)
+        na = {"a": "urn:mtconnect.org:MTConnectAssets:2.3"}
+        ids = [e.get("assetId") for e in doc.iterfind(".//a:CuttingTool", na)]
+        assert sorted(ids) == ["mill_4.T1", "mill_4.T2"]
+        assert {e.text for e in doc.iterfind(".//a:Status", na)} == {"NEW"}
+        t0 = 1_700_000_000 * 10**9
+        c = np.arange(100, 150, dtype=np.int64)
+        chunk = Chunk(c, t0 + (c - 100) * 2_000_000, {})
+        life = {"kind": "tool_life", "cycle": 120, "tool": 1, "used_holes": 150,
+                "remaining_holes": 80.0, "remaining_low": 60.0, "remaining_high": 95.0,
+                "wear_um": 180.5, "basis": "wear", "never_reaches_limit": False}
+        sink.write([life], chunk)
+        status, body = _get(f"{base}/asset/mill_4.T1")
+        doc = _valid(schemas, "Assets", body)
+        lives = {(e.get("type"), e.get("countDirection")): e
+                 for e in doc.iterfind(".//a:ToolLife", na)}
+        assert lives[("PART_COUNT", "UP")].text == "150"
+        assert lives[("PART_COUNT", "UP")].get("limit") == "400"
+        assert lives[("PART_COUNT", "DOWN")].text == "80"
+        assert lives[("WEAR", "UP")].text == "180.5"
+        assert lives[("WEAR", "UP")].get("limit") == "250"
+        assert [e.text for e in doc.iterfind(".//a:Status", na)] == ["USED"]
+        desc = doc.find(".//a:Description", na).text
+        assert "remaining life 80 holes (90 %: 60 - 95), basis wear" in desc
+        assert doc.find(".//a:ProgramToolNumber", na).text == "1"
+        # the asset change is an observation, with the changed asset's id and type
+        status, body = _get(f"{base}/current")
+        cur = _valid(schemas, "Streams", body)
+        changed = cur.find(".//m:AssetChanged", NS)
+        assert changed.text == "mill_4.T1" and changed.get("assetType") == "CuttingTool"
+        # a breakage of the tool of the last hole: BROKEN, the newest asset first
+        sink.write([{"kind": "hole", "cycle": 130, "hole": 150, "row": {"tool": 1}},
+                    {"kind": "alarm", "cycle": 131, "detector": "HoleLoadJudge",
+                     "fault": "breakage", "message": "hole 150: broken"}], chunk)
+        status, body = _get(f"{base}/assets?count=1")
+        doc = _valid(schemas, "Assets", body)
+        (tool,) = doc.iterfind(".//a:CuttingTool", na)
+        assert tool.get("assetId") == "mill_4.T1"
+        assert [e.text for e in tool.iterfind(".//a:Status", na)] == ["BROKEN"]
+        assert doc.find("a:Header", na).get("assetCount") == "2"
+        status, body = _get(f"{base}/asset/nope")
+        assert status == 404
+        err = _valid(schemas, "Error", body)
+        assert err.find(".//{*}Error").get("errorCode") == "ASSET_NOT_FOUND"
+        status, body = _get(f"{base}/probe")
+        probe = _valid(schemas, "Devices", body)
+        assert probe.find("{*}Header").get("assetCount") == "2"
+    finally:
+        sink.close()

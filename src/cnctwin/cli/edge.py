@@ -704,7 +704,8 @@ def _mtconnect_sink(args: argparse.Namespace, machine: str) -> Any:
     token = token or os.environ.get("CNCTWIN_MTCONNECT_TOKEN", "").strip() or None
     return MTConnectSink(machine, agent=agent, shdr=shdr, buffer_size=args.mtconnect_buffer,
                          sample_hz=args.mtconnect_sample_hz, token=token,
-                         insecure=args.mtconnect_insecure, shdr_insecure=args.shdr_insecure)
+                         insecure=args.mtconnect_insecure, shdr_insecure=args.shdr_insecure,
+                         tools=_tool_entries(getattr(args, "tool_table", None)))
 
 
 def _machine_and_model(args: argparse.Namespace) -> tuple[str, Any, Any]:

@@ -25,7 +25,16 @@ Controller / Path      ``program``                 EVENT PROGRAM
                        ``hole_record``             EVENT MESSAGE (cnctwin: the per-hole record)
                        ``wear``                    EVENT MESSAGE (cnctwin: wear index)
                        ``system``                  CONDITION SYSTEM (runtime overload)
+Device                 ``asset_chg``               EVENT ASSET_CHANGED (a tool's asset updated)
 =====================  ==========================  =================================================
+
+Assets (``/assets``, ``/asset/ID``; :func:`assets_document`, namespace
+``urn:mtconnect.org:MTConnectAssets:2.3``): one ``CuttingTool`` per tool of the tool table
+(:func:`cutting_tool`), its ``CuttingToolLifeCycle`` carrying cnctwin's tool life: the
+``CutterStatus`` (NEW, USED, EXPIRED, BROKEN), ``ToolLife`` ``PART_COUNT`` counting up (holes
+drilled, ``limit`` the planned life), ``PART_COUNT`` counting down (the remaining-life
+forecast, its 90 % interval in the ``Description``) and ``WEAR`` (the flank-wear estimate
+[µm] against its limit), and the ``ProgramToolNumber``.
 
 The buffer (:class:`ObservationBuffer`) numbers every observation; ``sample?from=&count=``
 returns the observations ``from .. from+count-1`` still in the buffer and ``nextSequence``
@@ -54,15 +63,20 @@ from cnctwin.exceptions import ConfigError
 
 __all__ = [
     "MTCONNECT_VERSION",
+    "NS_ASSETS",
     "NS_DEVICES",
     "NS_ERROR",
     "NS_STREAMS",
+    "AssetStore",
     "Component",
+    "CuttingToolAsset",
     "DataItem",
     "DeviceModel",
     "Observation",
     "ObservationBuffer",
     "OutOfRangeError",
+    "assets_document",
+    "cutting_tool",
     "error_document",
     "iso_timestamp",
     "item_key",
@@ -76,6 +90,7 @@ MTCONNECT_VERSION = "2.3"
 NS_DEVICES = f"urn:mtconnect.org:MTConnectDevices:{MTCONNECT_VERSION}"
 NS_STREAMS = f"urn:mtconnect.org:MTConnectStreams:{MTCONNECT_VERSION}"
 NS_ERROR = f"urn:mtconnect.org:MTConnectError:{MTCONNECT_VERSION}"
+NS_ASSETS = f"urn:mtconnect.org:MTConnectAssets:{MTCONNECT_VERSION}"
 UNAVAILABLE = "UNAVAILABLE"
 
 
@@ -188,7 +203,8 @@ def machine_tool_device(
     dev = item_key(machine) or "machine"
     comps: list[Component] = [Component("axes", "Axes"), Component("ctrl", "Controller"),
                               Component("path", "Path", parent="ctrl")]
-    items: list[DataItem] = [DataItem("avail", "EVENT", "AVAILABILITY", dev)]
+    items: list[DataItem] = [DataItem("avail", "EVENT", "AVAILABILITY", dev),
+                             DataItem("asset_chg", "EVENT", "ASSET_CHANGED", dev)]
     for ax in axes:
         k = item_key(ax)
         comps.append(Component(k, "Linear", name=ax.rstrip("0123456789") or ax, parent="axes"))
@@ -427,14 +443,16 @@ def iso_timestamp(t_ns: int) -> str:
     return time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(s)) + f".{ns // 1000:06d}Z"
 
 
-def _header(root: ET.Element, tag: str, *, sender: str, instance_id: int, buffer_size: int,
-            extra: dict[str, str], model_time: bool = True) -> ET.Element:
+def _header(root: ET.Element, tag: str, *, sender: str, instance_id: int,
+            buffer_size: int | None, extra: dict[str, str], model_time: bool = True
+            ) -> ET.Element:
     h = ET.SubElement(root, tag)
     h.set("creationTime", iso_timestamp(time.time_ns()).split(".")[0] + "Z")
     h.set("sender", sender)
     h.set("instanceId", str(instance_id))
     h.set("version", f"{MTCONNECT_VERSION}.0")
-    h.set("bufferSize", str(buffer_size))
+    if buffer_size is not None:  # an assets header has none
+        h.set("bufferSize", str(buffer_size))
     if model_time:
         h.set("deviceModelChangeTime", iso_timestamp(instance_id * 1_000_000_000))
     for k, v in extra.items():
@@ -447,7 +465,8 @@ def _doc(root: ET.Element) -> bytes:
 
 
 def probe_document(model: DeviceModel, buffer: ObservationBuffer, *,
-                   sender: str = "cnctwin") -> bytes:
+                   sender: str = "cnctwin", asset_count: int = 0,
+                   asset_buffer_size: int = 1024) -> bytes:
     """The ``/probe`` document (MTConnectDevices): the device model.
 
     Parameters
@@ -458,6 +477,8 @@ def probe_document(model: DeviceModel, buffer: ObservationBuffer, *,
         The agent's observation buffer (for the header).
     sender : str, default 'cnctwin'
         Agent host name in the header.
+    asset_count, asset_buffer_size : int
+        Assets held and the most the agent keeps (header).
 
     Returns
     -------
@@ -466,7 +487,8 @@ def probe_document(model: DeviceModel, buffer: ObservationBuffer, *,
     """
     root = ET.Element("MTConnectDevices", {"xmlns": NS_DEVICES})
     _header(root, "Header", sender=sender, instance_id=buffer.instance_id,
-            buffer_size=buffer.size, extra={"assetBufferSize": "1024", "assetCount": "0"})
+            buffer_size=buffer.size, extra={"assetBufferSize": str(asset_buffer_size),
+                                            "assetCount": str(asset_count)})
     devices = ET.SubElement(root, "Devices")
     dev = ET.SubElement(devices, "Device", {"id": model.id, "name": model.name,
                                             "uuid": model.uuid})
@@ -584,6 +606,8 @@ def _observation(box: ET.Element, d: DataItem, o: Observation) -> None:
         if o.message:
             el.text = o.message
         return
+    if d.type == "ASSET_CHANGED":
+        attrs["assetType"] = "CuttingTool" if o.value is not None else "UNAVAILABLE"
     el = ET.SubElement(box, d.element, attrs)
     v = o.value
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
@@ -620,3 +644,194 @@ def error_document(code: str, message: str, *, buffer: ObservationBuffer,
     errors = ET.SubElement(root, "Errors")
     ET.SubElement(errors, "Error", {"errorCode": code}).text = message
     return _doc(root)
+
+
+# ---------------------------------------------------------------------------- assets
+@dataclass(frozen=True)
+class CuttingToolAsset:
+    """One ``CuttingTool`` asset (MTConnect Part 4, Cutting Tools).
+
+    Attributes
+    ----------
+    asset_id : str
+        Unique asset id (``<device>.T<n>``).
+    tool_id : str
+        The tool's id (``T<n>``).
+    serial_number : str
+        Serial number of the physical tool (cnctwin: the tool table's name).
+    timestamp_ns : int
+        Time of the last change [ns since the epoch].
+    status : tuple of str
+        ``CutterStatus`` values (``NEW``, ``USED``, ``EXPIRED``, ``BROKEN``, ...).
+    life : tuple
+        ``ToolLife`` entries: (type, countDirection, value, limit or None, initial or None),
+        at most three (``PART_COUNT``, ``MINUTES``, ``WEAR``).
+    program_tool_number : int
+        The T number of the program.
+    description : str
+        Free text (the remaining-life forecast with its interval and basis).
+    """
+
+    asset_id: str
+    tool_id: str
+    serial_number: str
+    timestamp_ns: int
+    status: tuple[str, ...] = ("NEW",)
+    life: tuple[tuple[str, str, float, float | None, float | None], ...] = ()
+    program_tool_number: int = 0
+    description: str = ""
+
+
+def cutting_tool(device: str, number: int, spec: dict[str, Any],
+                 life: dict[str, Any] | None = None, *, timestamp_ns: int,
+                 broken: bool = False) -> CuttingToolAsset:
+    """The ``CuttingTool`` asset of a tool-table entry and its latest ``tool_life`` result.
+
+    Parameters
+    ----------
+    device : str
+        The device id (prefix of the asset id).
+    number : int
+        T number.
+    spec : dict
+        The tool table's entry (``name``, ``kind``, ``diameter_mm``, ``life_holes``,
+        ``wear_limit_um``).
+    life : dict, optional
+        The latest ``tool_life`` payload of the tool (None: not used yet).
+    timestamp_ns : int
+        Time of the change [ns since the epoch].
+    broken : bool, default False
+        A breakage alarm of this tool: status ``BROKEN``.
+
+    Returns
+    -------
+    CuttingToolAsset
+    """
+    used = int((life or {}).get("used_holes") or 0)
+    entries: list[tuple[str, str, float, float | None, float | None]] = []
+    limit = spec.get("life_holes")
+    entries.append(("PART_COUNT", "UP", float(used),
+                    None if limit is None else float(limit), 0.0))
+    text = [f"T{number} {spec.get('kind', 'tool')} D{spec.get('diameter_mm', '?')} mm"]
+    remaining = (life or {}).get("remaining_holes")
+    status = ["NEW"] if used == 0 else ["USED"]
+    if life is not None and (remaining is not None or life.get("never_reaches_limit")):
+        rem = math.inf if remaining is None else float(remaining)
+        lo, hi = life.get("remaining_low"), life.get("remaining_high")
+        if math.isfinite(rem):
+            entries.append(("PART_COUNT", "DOWN", rem, 0.0, None))
+        text.append(f"remaining life {rem:.0f} holes (90 %: {_fmt(lo)} - {_fmt(hi)}), "
+                    f"basis {life.get('basis', '')}")
+        if math.isfinite(rem) and rem <= 0.0:
+            status = ["EXPIRED"]
+    elif life is not None and life.get("reason"):
+        text.append(f"remaining life unknown: {life['reason']}")
+    wear = (life or {}).get("wear_um")
+    if wear is not None and spec.get("wear_limit_um") is not None:
+        entries.append(("WEAR", "UP", float(wear), float(spec["wear_limit_um"]), 0.0))
+    if broken:
+        status = ["BROKEN"]
+    return CuttingToolAsset(asset_id=f"{device}.T{number}", tool_id=f"T{number}",
+                            serial_number=str(spec.get("name") or f"T{number}"),
+                            timestamp_ns=int(timestamp_ns), status=tuple(status),
+                            life=tuple(entries), program_tool_number=int(number),
+                            description="; ".join(text))
+
+
+def _fmt(v: Any) -> str:
+    return "inf" if v is None else f"{float(v):.0f}"
+
+
+def assets_document(model: DeviceModel, assets: Iterable[CuttingToolAsset], *,
+                    buffer: ObservationBuffer, asset_buffer_size: int = 1024,
+                    asset_count: int | None = None, sender: str = "cnctwin") -> bytes:
+    """An ``/assets`` or ``/asset/ID`` document (MTConnectAssets).
+
+    Parameters
+    ----------
+    model : DeviceModel
+        The device (``deviceUuid`` of the assets).
+    assets : iterable of CuttingToolAsset
+        The assets to include.
+    buffer : ObservationBuffer
+        The agent's observation buffer (for the header).
+    asset_buffer_size : int, default 1024
+        The most assets the agent keeps.
+    asset_count : int, optional
+        Assets the agent holds (default: those given).
+    sender : str, default 'cnctwin'
+        Agent host name in the header.
+
+    Returns
+    -------
+    bytes
+        An ``MTConnectAssets`` XML document.
+    """
+    items = list(assets)
+    root = ET.Element("MTConnectAssets", {"xmlns": NS_ASSETS})
+    _header(root, "Header", sender=sender, instance_id=buffer.instance_id,
+            buffer_size=None,
+            extra={"assetBufferSize": str(asset_buffer_size),
+                   "assetCount": str(len(items) if asset_count is None else asset_count)})
+    box = ET.SubElement(root, "Assets")
+    for a in items:
+        el = ET.SubElement(box, "CuttingTool", {
+            "assetId": a.asset_id, "timestamp": iso_timestamp(a.timestamp_ns),
+            "deviceUuid": model.uuid, "serialNumber": a.serial_number, "toolId": a.tool_id})
+        if a.description:
+            ET.SubElement(el, "Description").text = a.description
+        cycle = ET.SubElement(el, "CuttingToolLifeCycle")
+        st = ET.SubElement(cycle, "CutterStatus")
+        for v in a.status:
+            ET.SubElement(st, "Status").text = v
+        for kind, direction, value, limit, initial in a.life[:3]:
+            attrs = {"type": kind, "countDirection": direction}
+            if limit is not None:
+                attrs["limit"] = f"{limit:.6g}"
+            if initial is not None:
+                attrs["initial"] = f"{initial:.6g}"
+            ET.SubElement(cycle, "ToolLife", attrs).text = f"{value:.6g}"
+        ET.SubElement(cycle, "ProgramToolNumber").text = str(a.program_tool_number)
+    return _doc(root)
+
+
+class AssetStore:
+    """The agent's assets, newest change last, at most ``size`` (the oldest leave first).
+
+    Parameters
+    ----------
+    size : int, default 1024
+        Most assets kept (the header's ``assetBufferSize``).
+    """
+
+    def __init__(self, size: int = 1024) -> None:
+        if size < 1:
+            raise ConfigError(f"the asset buffer needs room for at least 1 asset, not {size}")
+        self.size = size
+        self._assets: dict[str, CuttingToolAsset] = {}
+        self._lock = threading.Lock()
+        self.changes = 0
+
+    def put(self, asset: CuttingToolAsset) -> None:
+        """Add or replace an asset (it becomes the newest)."""
+        with self._lock:
+            self._assets.pop(asset.asset_id, None)
+            self._assets[asset.asset_id] = asset
+            while len(self._assets) > self.size:
+                self._assets.pop(next(iter(self._assets)))
+            self.changes += 1
+
+    def get(self, asset_id: str) -> CuttingToolAsset | None:
+        """The asset with this id (None: not held)."""
+        with self._lock:
+            return self._assets.get(asset_id)
+
+    def all(self, *, count: int | None = None) -> list[CuttingToolAsset]:
+        """The assets, newest first, at most ``count``."""
+        with self._lock:
+            out = list(reversed(self._assets.values()))
+        return out if count is None else out[:count]
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._assets)

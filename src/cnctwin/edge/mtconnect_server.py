@@ -2,8 +2,9 @@
 them (``cnctwin edge run --mtconnect http://HOST:PORT --shdr tcp://HOST:PORT``).
 
 * :class:`MTConnectAgent`: ``GET /probe``, ``/current``, ``/sample?from=&count=`` (also under
-  ``/<device name>/``), MTConnect 2.3 XML from :mod:`cnctwin.edge.mtconnect`; errors as
-  MTConnectError documents (``OUT_OF_RANGE``, ``INVALID_REQUEST``, ``UNSUPPORTED``). A
+  ``/<device name>/``), ``/assets`` and ``/asset/ID`` (the tools' ``CuttingTool`` assets),
+  MTConnect 2.3 XML from :mod:`cnctwin.edge.mtconnect`; errors as MTConnectError documents
+  (``OUT_OF_RANGE``, ``INVALID_REQUEST``, ``UNSUPPORTED``, ``ASSET_NOT_FOUND``). A
   non-loopback address needs an access token (``Authorization: Bearer``) and may use TLS;
   without a token it serves only with ``insecure=True``.
 * :class:`ShdrAdapter`: the line protocol the reference agent (cppagent) reads from an
@@ -28,6 +29,7 @@ import ssl
 import threading
 import time
 import urllib.parse
+from collections.abc import Mapping
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 
@@ -35,9 +37,12 @@ import numpy as np
 
 from cnctwin.edge.listen import is_loopback
 from cnctwin.edge.mtconnect import (
+    AssetStore,
     DeviceModel,
     ObservationBuffer,
     OutOfRangeError,
+    assets_document,
+    cutting_tool,
     error_document,
     iso_timestamp,
     item_key,
@@ -99,6 +104,8 @@ class MTConnectAgent:
         PEM certificate and key: serve HTTPS.
     insecure : bool, default False
         Serve a non-loopback address without a token.
+    assets : AssetStore, optional
+        The assets served by ``/assets`` and ``/asset/ID`` (default: none yet).
 
     Raises
     ------
@@ -108,11 +115,13 @@ class MTConnectAgent:
 
     def __init__(self, model: DeviceModel, buffer: ObservationBuffer, *, host: str = "127.0.0.1",
                  port: int = 5000, token: str | None = None, tls_cert: str | None = None,
-                 tls_key: str | None = None, insecure: bool = False) -> None:
+                 tls_key: str | None = None, insecure: bool = False,
+                 assets: AssetStore | None = None) -> None:
         if token is None and not insecure and not is_loopback(host):
             raise ConfigError(f"the MTConnect agent on {host} faces the network: give an "
                               "access token (--mtconnect-token-file) or --mtconnect-insecure")
         self.model, self.buffer, self.token = model, buffer, token
+        self.assets = assets if assets is not None else AssetStore()
         agent = self
 
         class Handler(BaseHTTPRequestHandler):
@@ -179,16 +188,22 @@ class MTConnectAgent:
         u = urllib.parse.urlsplit(path)
         parts = [urllib.parse.unquote(p) for p in u.path.split("/") if p]
         names = (self.model.name, self.model.id, self.model.uuid)
-        requests = ("probe", "current", "sample")
+        requests = ("probe", "current", "sample", "assets", "asset")
+        if parts and parts[0] in ("asset", "assets") and len(parts) <= 2:
+            q = urllib.parse.parse_qs(u.query)
+            if len(parts) == 2:
+                q["asset_ids"] = parts[1].split(";")
+            return parts[0], q
         if parts and parts[0] in names:
             parts = parts[1:]
         elif len(parts) == 2 or (len(parts) == 1 and parts[0] not in requests):
             return 404, error_document("NO_DEVICE", f"no device {parts[0]!r}; this agent "
                                        f"serves {self.model.name!r}", buffer=b)
         req = parts[0] if parts else "probe"
-        if len(parts) > 1 or req not in requests:
+        if len(parts) > 1 or req not in requests or req == "asset":
             return 404, error_document("INVALID_REQUEST", f"unknown request {u.path!r}; use "
-                                       "/probe, /current or /sample?from=&count=", buffer=b)
+                                       "/probe, /current, /sample?from=&count=, /assets or "
+                                       "/asset/ID", buffer=b)
         return req, urllib.parse.parse_qs(u.query)
 
     def _items(self, q: dict[str, list[str]]) -> set[str] | tuple[int, bytes] | None:
@@ -216,7 +231,7 @@ class MTConnectAgent:
         # many clients ask the same while nothing new arrived: one document per (request,
         # query, buffer state), the newest 256 kept
         key = (req, tuple(sorted((k, tuple(v)) for k, v in q.items())), b.next_sequence,
-               b.first_sequence)
+               b.first_sequence, self.assets.changes)
         with self._cache_lock:
             hit = self._cache.get(key)
         if hit is not None:
@@ -232,7 +247,10 @@ class MTConnectAgent:
     def _respond(self, b: ObservationBuffer, req: str, q: dict[str, list[str]]
                  ) -> tuple[int, bytes]:
         if req == "probe":
-            return 200, probe_document(self.model, b)
+            return 200, probe_document(self.model, b, asset_count=len(self.assets),
+                                       asset_buffer_size=self.assets.size)
+        if req in ("assets", "asset"):
+            return self._assets(b, q)
         items = self._items(q)
         if isinstance(items, tuple):
             return items
@@ -259,6 +277,30 @@ class MTConnectAgent:
         return 200, streams_document(self.model, obs, buffer=b, first_sequence=first,
                                      next_sequence=nxt, last_sequence=last)
 
+    def _assets(self, b: ObservationBuffer, q: dict[str, list[str]]) -> tuple[int, bytes]:
+        """``/assets`` (``type=``, ``count=``, ``removed=``) and ``/asset/ID;ID``."""
+        store = self.assets
+        if "asset_ids" in q:
+            found = [store.get(i) for i in q["asset_ids"]]
+            missing = [i for i, a in zip(q["asset_ids"], found, strict=True) if a is None]
+            if missing:
+                return 404, error_document("ASSET_NOT_FOUND", f"no asset {missing[0]!r}; "
+                                           "/assets lists those held", buffer=b)
+            chosen = [a for a in found if a is not None]
+        else:
+            try:
+                count = int(q["count"][0]) if "count" in q else None
+            except ValueError:
+                return 400, error_document("INVALID_REQUEST", "count must be an integer",
+                                           buffer=b)
+            if count is not None and count < 1:
+                return 400, error_document("INVALID_REQUEST", "count must be at least 1",
+                                           buffer=b)
+            kind = q.get("type", ["CuttingTool"])[0]
+            chosen = store.all(count=count) if kind == "CuttingTool" else []
+        return 200, assets_document(self.model, chosen, buffer=b, asset_count=len(store),
+                                    asset_buffer_size=store.size)
+
     def stream_request(self, path: str, authorization: str | None
                        ) -> tuple[str, dict[str, list[str]]] | None:
         """``(request, query)`` when ``path`` asks for a stream (``interval=``), else None."""
@@ -266,8 +308,8 @@ class MTConnectAgent:
         if "interval" not in urllib.parse.parse_qs(u.query):
             return None
         parsed = self._parse(path, authorization)
-        if isinstance(parsed[0], int) or parsed[0] == "probe":
-            return None  # the error (or the probe) is answered as a document
+        if isinstance(parsed[0], int) or parsed[0] in ("probe", "assets", "asset"):
+            return None  # the error (or the probe, the assets) is answered as a document
         return parsed
 
     def stream(self, handler: Any, req: str, q: dict[str, list[str]]) -> None:
@@ -585,6 +627,10 @@ class MTConnectSink:
         Linear axes of the device model.
     token, tls_cert, tls_key, insecure, shdr_insecure
         Security of the agent and the adapter (:class:`MTConnectAgent`, :class:`ShdrAdapter`).
+    tools : mapping, optional
+        T number -> the tool table's entry: one ``CuttingTool`` asset per tool, updated from
+        the ``tool_life`` results (an ``AssetChanged`` observation each time) and marked
+        ``BROKEN`` by a breakage alarm of the tool.
     """
 
     name = "mtconnect"
@@ -594,7 +640,8 @@ class MTConnectSink:
                  sample_hz: float = 10.0, axes: tuple[str, ...] = ("X1", "Y1", "Z1"),
                  spindle: str = "SP1", token: str | None = None, tls_cert: str | None = None,
                  tls_key: str | None = None, insecure: bool = False,
-                 shdr_insecure: bool = False) -> None:
+                 shdr_insecure: bool = False,
+                 tools: Mapping[int, Mapping[str, Any]] | None = None) -> None:
         if not (math.isfinite(sample_hz) and 0.01 <= sample_hz <= 500):
             raise ConfigError(f"the MTConnect sample rate must be 0.01 ... 500 Hz, not "
                               f"{sample_hz!r}")
@@ -602,9 +649,17 @@ class MTConnectSink:
         self.buffer = ObservationBuffer(buffer_size)
         self.axes, self.spindle, self.sample_hz = axes, spindle, sample_hz
         self._sp = item_key(spindle)
+        self.tools = {int(k): dict(v) for k, v in (tools or {}).items()}
+        self.assets = AssetStore()
+        now = time.time_ns()
+        for n, spec in sorted(self.tools.items()):
+            self.assets.put(cutting_tool(self.model.id, n, spec, timestamp_ns=now))
+        self._life: dict[int, dict[str, Any]] = {}
+        self._broken: set[int] = set()
+        self._tool: int | None = None  # the tool of the last hole
         self.agent = (MTConnectAgent(self.model, self.buffer, host=agent[0], port=agent[1],
                                      token=token, tls_cert=tls_cert, tls_key=tls_key,
-                                     insecure=insecure) if agent else None)
+                                     insecure=insecure, assets=self.assets) if agent else None)
         try:
             self.adapter = (ShdrAdapter(self.model, host=shdr[0], port=shdr[1],
                                         insecure=shdr_insecure) if shdr else None)
@@ -666,8 +721,21 @@ class MTConnectSink:
         for msg in messages:
             t_ns = self._msg_time(msg, chunk)
             items = by_time.setdefault(t_ns, [])
+            if msg["kind"] == "tool_life" and int(msg["tool"]) in self.tools:
+                n = int(msg["tool"])
+                self._life[n] = msg
+                items.append(("asset_chg", self._asset(n, t_ns)))
+            elif msg["kind"] == "alarm" and "break" in str(msg.get("fault", "")):
+                tool = msg.get("tool")
+                n = int(tool) if tool is not None else (self._tool if self._tool is not None
+                                                        else -1)
+                if n in self.tools and n not in self._broken:
+                    self._broken.add(n)
+                    items.append(("asset_chg", self._asset(n, t_ns)))
             if msg["kind"] == "hole":
                 row = msg["row"]
+                if row.get("tool") is not None:
+                    self._tool = int(row["tool"])
                 self._holes += 1
                 items += [("holes", self._holes),
                           (f"{self._sp}_hole_torque", row.get("torque_mean_nm")),
@@ -686,6 +754,13 @@ class MTConnectSink:
                 items.append(("system", ("WARNING", msg["kind"], str(msg["message"]))))
         for t_ns in sorted(by_time):
             self._put(t_ns, by_time[t_ns])
+
+    def _asset(self, n: int, t_ns: int) -> str:
+        """Update tool ``n``'s asset from its latest tool life; its asset id."""
+        asset = cutting_tool(self.model.id, n, self.tools[n], self._life.get(n),
+                             timestamp_ns=t_ns, broken=n in self._broken)
+        self.assets.put(asset)
+        return asset.asset_id
 
     def _msg_time(self, msg: dict[str, Any], chunk: Chunk | None) -> int:
         if chunk is not None and len(chunk):
