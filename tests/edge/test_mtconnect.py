@@ -481,6 +481,16 @@ def test_cutting_tool_assets_carry_the_tool_life(schemas: dict[str, Any]) -> Non
         assert tool.get("assetId") == "mill_4.T1"
         assert [e.text for e in tool.iterfind(".//a:Status", na)] == ["BROKEN"]
         assert doc.find("a:Header", na).get("assetCount") == "2"
+        status, body = _get(f"{base}/current?path=" + urllib.parse.quote(
+            "//DataItem[@type='LOAD' and @category='CONDITION']"))
+        cond = _valid(schemas, "Streams", body).find(".//m:Condition", NS)
+        assert [e.tag.split("}")[1] for e in cond] == ["Fault"]
+        later = np.arange(700, 750, dtype=np.int64)  # past the 1 s hold (500 cycles)
+        sink.write([], Chunk(later, t0 + (later - 100) * 2_000_000, {}))
+        status, body = _get(f"{base}/current?path=" + urllib.parse.quote(
+            "//DataItem[@type='LOAD' and @category='CONDITION']"))
+        cond = _valid(schemas, "Streams", body).find(".//m:Condition", NS)
+        assert [e.tag.split("}")[1] for e in cond] == ["Normal"]
         status, body = _get(f"{base}/asset/nope")
         assert status == 404
         err = _valid(schemas, "Error", body)

@@ -249,7 +249,8 @@ def test_node_opcua_sees_alarm_events_acknowledges_and_tool_life_counting(
                   (UA, "CurrentState")],
                  [(MT, "Production"), (MT, "Statistics"), (MT, "PartsProducedInLifetime")],
                  [(MT, "Notification"), (MT, "Prognoses"), (MT, "ToolChange T1"),
-                  (MT, "PredictedTime")]]
+                  (MT, "PredictedTime")],
+                 [(MT, "Monitoring"), (MT, "Spindle"), (MT, "Override")]]
         cl_env = {**os.environ, "NODE_PATH": str(ROOT / ".node" / "node_modules"),
                   "CNCTWIN_OPCUA_USER": USER, "CNCTWIN_OPCUA_PASSWORD": PASSWORD}
         res = subprocess.run([node, str(ALARM_CLIENT), url, "m1", str(tmp_path / "node-pki"),
@@ -286,6 +287,9 @@ def test_node_opcua_sees_alarm_events_acknowledges_and_tool_life_counting(
     predicted = [v for v, st in doc["values"][
         "Notification/Prognoses/ToolChange T1/PredictedTime"] if st == "Good"]
     assert predicted  # a time: the remaining holes at the tool's hole period
+    # the program's S2400 and the drive's 2400 rpm command: no spindle override
+    override = [v for v, st in doc["values"]["Monitoring/Spindle/Override"] if st == "Good"]
+    assert override and set(override) == {100.0}
     # the program ran to its M30: Ended, one part produced
     states = [v for v, _ in doc["values"]["Production/ActiveProgram/State/CurrentState"]]
     assert "Running" in states and states[-1] == "Ended"

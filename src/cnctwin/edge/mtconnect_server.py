@@ -631,6 +631,9 @@ class MTConnectSink:
         T number -> the tool table's entry: one ``CuttingTool`` asset per tool, updated from
         the ``tool_life`` results (an ``AssetChanged`` observation each time) and marked
         ``BROKEN`` by a breakage alarm of the tool.
+    alarm_hold_s : float, default 1.0
+        An alarm's condition (``Fault``) returns to ``Normal`` this long after the last
+        alarm on the recording's clock [s] (as the OPC UA alarm's hold).
     """
 
     name = "mtconnect"
@@ -641,7 +644,8 @@ class MTConnectSink:
                  spindle: str = "SP1", token: str | None = None, tls_cert: str | None = None,
                  tls_key: str | None = None, insecure: bool = False,
                  shdr_insecure: bool = False,
-                 tools: Mapping[int, Mapping[str, Any]] | None = None) -> None:
+                 tools: Mapping[int, Mapping[str, Any]] | None = None,
+                 alarm_hold_s: float = 1.0) -> None:
         if not (math.isfinite(sample_hz) and 0.01 <= sample_hz <= 500):
             raise ConfigError(f"the MTConnect sample rate must be 0.01 ... 500 Hz, not "
                               f"{sample_hz!r}")
@@ -654,6 +658,8 @@ class MTConnectSink:
         now = time.time_ns()
         for n, spec in sorted(self.tools.items()):
             self.assets.put(cutting_tool(self.model.id, n, spec, timestamp_ns=now))
+        self.alarm_hold_s = alarm_hold_s
+        self._cond_until: int | None = None  # the alarm condition clears after this cycle
         self._life: dict[int, dict[str, Any]] = {}
         self._broken: set[int] = set()
         self._tool: int | None = None  # the tool of the last hole
@@ -746,12 +752,23 @@ class MTConnectSink:
                               default=str))]
             elif msg["kind"] == "alarm":
                 level = "WARNING" if msg.get("severity") == "warning" else "FAULT"
+                if chunk is not None and len(chunk):
+                    self._cond_until = int(msg["cycle"]) + round(self.alarm_hold_s
+                                                                 / chunk.cycle_time_s)
                 items.append((f"{self._sp}_cond", (level, str(msg.get("detector", "cnctwin")),
                                                    str(msg.get("message", "anomaly")))))
             elif msg["kind"] == "wear" and "wear" in msg:
                 items.append(("wear", f"{float(msg['wear']):.4g}"))
             elif msg["kind"] in ("overload", "status") and msg.get("message"):
                 items.append(("system", ("WARNING", msg["kind"], str(msg["message"]))))
+        if (self._cond_until is not None and chunk is not None and len(chunk)
+                and int(chunk.cycles[-1]) > self._cond_until):
+            # the hold is over: Normal clears the alarm conditions (Part 2, Condition)
+            t = int(chunk.time_ns[0]) + round((self._cond_until - chunk.first_cycle)
+                                              * chunk.cycle_time_s * 1e9)
+            by_time.setdefault(max(t, int(chunk.time_ns[0])), []).append(
+                (f"{self._sp}_cond", ("NORMAL", None, None)))
+            self._cond_until = None
         for t_ns in sorted(by_time):
             self._put(t_ns, by_time[t_ns])
 

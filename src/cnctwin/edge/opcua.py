@@ -408,6 +408,8 @@ class OpcUaSink:
         self._conditions: Any = None
         self._parts = 0
         self._state = "Initializing"
+        self._programmed_rpm = 0.0
+        self._spindle_override = math.nan
         self._mirror: dict[Any, list[tuple[Any, Any]]] = {}
         self._program = ""
         self.published = 0
@@ -590,6 +592,7 @@ class OpcUaSink:
             # window is not rotating, though the window's mean speed is not zero)
             nodes["MT.IsRotating"] = mt["IsRotating"]
             nodes["MT.PartsProduced"] = mt["PartsProduced"]
+            nodes["MT.SpindleOverride"] = mt["SpindleOverride"]
             for key, nid in mt.items():
                 if key.startswith("Tool."):
                     nodes[f"MT.{key}"] = nid
@@ -669,7 +672,7 @@ class OpcUaSink:
             return []
         c, t, n = cyc[:n_done], tau[:n_done], spd[:n_done]
         _, t_mean, t_peak, last = decimate_peak(c, t, window_cycles=m)
-        _, n_mean, _, _ = decimate_peak(c, n, window_cycles=m)
+        _, n_mean, n_peak, _ = decimate_peak(c, n, window_cycles=m)
         n_end = n[np.minimum(np.searchsorted(c, last), c.size - 1)]
         out: list[tuple[Any, Any]] = []
         nd = self._nodes
@@ -677,6 +680,15 @@ class OpcUaSink:
             ts = self._time_ns(int(last[j]))
             if "MT.IsRotating" in nd:
                 out.append((nd["MT.IsRotating"], self._dv(bool(abs(n_end[j]) > 1.0), "b", ts)))
+                s_prog = self._programmed_rpm
+                # the spindle override: commanded / programmed speed, only at a constant
+                # command (a run-up or a new S word is not an override)
+                if (s_prog > 0.0 and abs(n_end[j]) > 1.0
+                        and abs(abs(n_peak[j]) - abs(n_mean[j])) <= 0.002 * s_prog):
+                    pct = round(100.0 * abs(float(n_end[j])) / s_prog, 1)
+                    if pct != self._spindle_override:
+                        self._spindle_override = pct
+                        out.append((nd["MT.SpindleOverride"], self._dv(pct, "d", ts)))
             out += [(nd["SpindleSpeed"], self._dv(n_mean[j], "d", ts)),
                     (nd["CuttingTorque"], self._dv(t_mean[j], "d", ts)),
                     (nd["CuttingTorquePeak"], self._dv(t_peak[j], "d", ts)),
@@ -899,6 +911,9 @@ class OpcUaSink:
                  if "gcode" in ev else [""] * len(kinds))
         for kind, code in zip(kinds, codes, strict=True):
             words = set(_M_WORD.findall(code.upper()))
+            speed = _S_WORD.search(code.upper())
+            if speed is not None:
+                self._programmed_rpm = float(speed.group(1))
             if kind == "block" and words & {"M30", "M2", "M02"}:
                 out += self._set_state("Ended")
                 self._parts += 1
@@ -982,6 +997,7 @@ class OpcUaSink:
 
 
 _M_WORD = re.compile(r"\bM\d+\b")
+_S_WORD = re.compile(r"(?<![A-Z_])S=?(\d+(?:\.\d*)?)\b")  # S2400, S=2400; not SPOS
 _RAISE = object()  # an update that raises an alarm condition (not a node)
 _CLEAR = object()  # an update that clears the active alarm conditions
 

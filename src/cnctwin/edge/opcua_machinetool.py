@@ -254,6 +254,20 @@ async def add_machine_tool(server: Any, machine: str, own_idx: int, *,
         await name_node.write_value("SP1")
     except ua.UaStatusCodeError:
         pass
+    # Override (AnalogUnitRangeType, optional): the commanded over the programmed speed,
+    # published while the spindle turns at a constant command (BadWaitingForInitialData
+    # before: the recording has no override signal of its own)
+    override = await spindle.add_variable(ua.NodeId(f"{machine}.MT.SpindleOverride", own_idx),
+                                          ua.QualifiedName("Override", mt), 100.0,
+                                          varianttype=ua.VariantType.Double)
+    await override.add_property(ua.NodeId(f"{machine}.MT.SpindleOverride.EURange", own_idx),
+                                ua.QualifiedName("EURange", 0), ua.Range(Low=0.0, High=200.0))
+    await override.add_property(ua.NodeId(f"{machine}.MT.SpindleOverride.EU", own_idx),
+                                ua.QualifiedName("EngineeringUnits", 0),
+                                eu_information("%", "percent"))
+    await server.write_attribute_value(override.nodeid, ua.DataValue(
+        StatusCode_=ua.StatusCode(ua.StatusCodes.BadWaitingForInitialData)))
+    out["SpindleOverride"] = override.nodeid
     await own_var(spindle, "ActualSpeed", float("nan"), ua.VariantType.Double)
     await own_var(spindle, "CuttingTorque", float("nan"), ua.VariantType.Double)
     ia = nsa.index(IA_NS)
