@@ -261,7 +261,18 @@ def _cmd_wear(args: argparse.Namespace) -> int:
         args.out.mkdir(parents=True, exist_ok=True)
         out.to_csv(args.out / "wear.csv", index=False)
         plot_hole_means(holes, wear_um=wear).savefig(args.out / "wear_trend.png", dpi=110)
-        print(f"wrote {args.out / 'wear.csv'} and wear_trend.png")
+        written = ["wear.csv", "wear_trend.png"]
+        if wear is not None:  # the keys of the live tool life, for the tool table
+            (args.out / "wear_calibration.toml").write_text(
+                f"# cnctwin wear: flank wear calibrated on {len(measured)} measured holes "
+                f"({', '.join(str(h) for h in measured)});\n# copy into the tool's "
+                "[tools.N] table of the tool table (cnctwin edge run --tools)\n"
+                f"wear_um_per_increase = {est.slope_um:.6g}\n"
+                f"wear_offset_um = {est.offset_um:.6g}\nwear_std_um = {wear_std:.4g}\n"
+                f"wear_baseline_holes = {baseline}\nwear_limit_um = {args.limit_um:g}\n",
+                encoding="utf-8")
+            written.append("wear_calibration.toml")
+        print(f"wrote {', '.join(written)} to {args.out}")
     return 0
 
 

@@ -223,7 +223,8 @@ def _number(src: str, t: str, key: str, v: Any, *, lo: float = 0.0,
     if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
         raise ConfigError(f"{src}: tools.{t}.{key} must be a number, got {v!r}")
     if v <= lo and key not in ("corner_radius_mm", "helix_deg", "wear_offset_um"):
-        raise ConfigError(f"{src}: tools.{t}.{key} must be > {lo:g}, got {v!r}")
+        bound = ">= 0" if -1e-9 < lo < 0 else f"> {lo:g}"
+        raise ConfigError(f"{src}: tools.{t}.{key} must be {bound}, got {v!r}")
     if integer and v != int(v):
         raise ConfigError(f"{src}: tools.{t}.{key} must be a whole number, got {v!r}")
     return float(v)

@@ -312,6 +312,21 @@ class ToolLifeTracker:
         d = d[np.isfinite(d) & (d > 0)]
         return float(np.median(d)) if d.size else float("nan")
 
+    def _trend_points(self, wear: Any, used: int, base: int) -> tuple[Any, Any]:
+        """The wear trend's points after the baseline: one per set at its centre (a set
+        mean belongs to the set's middle hole, not to its last: fitted at the last hole
+        the trend would lag half a set), or one per hole without sets."""
+        k = self.set_size or 1
+        if k == 1:
+            return np.arange(base, used, dtype=np.float64), wear[base:]
+        starts = np.arange(0, used, k)
+        ends = np.minimum(starts + k, used)
+        centres = (starts + ends - 1) / 2.0
+        keep = starts >= base
+        if keep.sum() < 4:  # too few sets yet: the holes after the baseline
+            return np.arange(base, used, dtype=np.float64), wear[base:]
+        return centres[keep], wear[starts[keep]]
+
     def _wear_forecast(self, t: _Tool, used: int, wear: Any, lim: ToolLifeLimits,
                        base: int) -> tuple[float, float, float] | None:
         limit_um = float(lim.wear_limit_um or 0.0)
@@ -323,13 +338,15 @@ class ToolLifeTracker:
             return None
         last = t.forecast
         if last is None or used - last[0] >= self.forecast_every:
-            idx = np.arange(used, dtype=np.float64)[base:]
-            w = np.asarray(wear[base:])  # after the baseline: the run-in is not the wear rate
+            idx, w = self._trend_points(np.asarray(wear, dtype=np.float64), used, base)
+            ahead = float(used - 1) - float(idx[-1])  # holes since the last point's centre
             rem, lo, hi = math.inf, math.inf, 0.0
             # the whole trend and the recent one (wear accelerates towards the end of life:
             # the recent trend sees it first); the nearer forecast, the union of intervals
-            for window in (self.window_holes, max(self.min_trend_holes,
-                                                  self.window_holes // 5)):
+            per = float(self.set_size or 1)  # holes per trend point
+            for window in (max(int(self.window_holes / per), 4),
+                           max(int(max(self.min_trend_holes, self.window_holes // 5) / per),
+                               4)):
                 kw: dict[str, Any] = {"window": window, "degree": 2, "n_boot": self.n_boot,
                                       "seed": used}
                 fc = forecast_remaining_life(idx, w, limit_um=limit_um, **kw)
@@ -340,7 +357,7 @@ class ToolLifeTracker:
                                                          **kw).remaining_low)
                     hi = max(hi, forecast_remaining_life(idx, w, limit_um=limit_um + band,
                                                          **kw).remaining_high)
-            t.forecast = last = (used, rem, lo, hi)
+            t.forecast = last = (used, rem - ahead, lo - ahead, hi - ahead)
         since = float(used - last[0])
         return (max(last[1] - since, 0.0), max(last[2] - since, 0.0),
                 max(last[3] - since, 0.0))
