@@ -91,7 +91,7 @@ def test_remaining_life_forecast_against_the_true_end_of_life(runs: dict[str, An
     """The forecast of the hole at which B reaches the wear limit, from the holes drilled so
     far. The accelerating end of life (exponent 6 of the hidden curve) is not in the data
     before it starts, so early forecasts are late; what is asserted is what was measured
-    (docs/plant.md records the figures), with tolerances."""
+    (docs/tool-life.md records the figures), with tolerances."""
     life, truth = runs["life"], runs["b_truth"]
     true_end = int(np.argmax(truth["wear_um"].to_numpy() >= LIMIT_UM))
     assert 0.8 * N < true_end < N  # the limit lies inside the run
@@ -108,7 +108,7 @@ def test_remaining_life_forecast_against_the_true_end_of_life(runs: dict[str, An
     # +25..+55 holes at 60 % of the life, +6..+15 at 80 %, +5..+8 at 90 %; the 90 %
     # interval's early end within 0-8 holes after the true end from 80 % on. The interval
     # holds the trend's statistics and the wear estimate's uncertainty, not the onset of
-    # accelerated wear (docs/plant.md): asserted is the measured lateness, not a coverage
+    # accelerated wear (docs/tool-life.md): asserted is the measured lateness, not a coverage
     assert 0.0 <= errors[0.9] <= 10.0
     assert 0.0 <= errors[0.8] <= 20.0
     assert errors[0.9] <= errors[0.6]
