@@ -10,7 +10,6 @@ import socket
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pytest
 
 from cnctwin.cli import main
@@ -163,28 +162,33 @@ def test_the_private_key_is_the_owners_only(secured: Any) -> None:
     assert (d / "out" / "opcua-key.pem").stat().st_mode & 0o777 == 0o600
 
 
-def test_unknown_user_and_wrong_password_take_the_same_time_and_guessing_is_throttled(
-) -> None:
+def test_unknown_user_and_wrong_password_cost_the_same_and_guessing_is_throttled(
+        monkeypatch: pytest.MonkeyPatch) -> None:
     """Issue 27, point 5: a refusal costs the same key derivation whether the name exists or
-    not (within 20 %, the acceptance's tolerance; median of 5 each, interleaved), and five
-    refusals of a name within a minute lock it for 30 s."""
-    import time
+    not: one PBKDF2-SHA256 with the users' iteration count and a 32-byte salt either way
+    (counted here; the time itself, equal within 20 % as the acceptance asks, is measured by
+    benchmarks/bench_opcua_login.py: a timing assert under a loaded test run flakes); and
+    five refusals of a name within a minute lock it for 30 s."""
+    import hashlib
 
     from cnctwin.edge.opcua import _UserManager, hash_password
 
     um = _UserManager({USER: hash_password(PASSWORD, iterations=100_000)}, max_failures=1000)
+    calls: list[tuple[str, int, int]] = []
+    real = hashlib.pbkdf2_hmac
 
-    def cost(name: str, pw: str) -> float:
-        t0 = time.perf_counter()
-        assert um.get_user(None, username=name, password=pw) is None
-        return time.perf_counter() - t0
+    def counting(name: str, password: bytes, salt: bytes, iterations: int,
+                 *args: object) -> bytes:
+        calls.append((name, len(salt), iterations))
+        return real(name, password, salt, iterations, *args)
 
-    unknown, wrong = [], []
-    for i in range(5):
-        unknown.append(cost(f"nobody{i}", "x"))
-        wrong.append(cost(USER, f"wrong{i}"))
-    ratio = float(np.median(unknown) / np.median(wrong))
-    assert 0.8 <= ratio <= 1.2, ratio
+    monkeypatch.setattr(hashlib, "pbkdf2_hmac", counting)
+    assert um.get_user(None, username="nobody", password="x") is None
+    unknown, calls[:] = list(calls), []
+    assert um.get_user(None, username=USER, password="wrong") is None
+    wrong = list(calls)
+    assert len(wrong) == 1 and wrong[0][0] == "sha256" and wrong[0][2] == 100_000
+    assert unknown == wrong  # the same derivation: hash, salt length, iterations
     assert um.get_user(None, username=USER, password=PASSWORD) is not None
     # throttling: the 5th failure locks the name; the right password is then refused too
     th = _UserManager({USER: hash_password(PASSWORD, iterations=1000)})
