@@ -106,3 +106,15 @@ def test_a_loose_tap_is_its_extraction_fluctuation() -> None:
     v = j.judge(_row(7, 25.0, reverse_current_fluct_a=0.05 * 1.51, **tap))
     assert v is not None and v.kind == "loose_tool" and "loose" in v.message
     assert v.ratio == pytest.approx(1.51)
+
+
+def test_a_standing_load_rise_is_raised_once_then_at_each_further_step() -> None:
+    """A drill wearing out: +30 % for many holes is one alarm, +55 % a second (a further
+    25 %), back under +12.5 % re-arms it (ANSI/ISA-18.2: no repeating alarm)."""
+    j = HoleLoadJudge()
+    j.judge(_row(0, 4.0))
+    kinds = [j.judge(_row(k, 4.0 * r)) for k, r in enumerate(
+        [1.30, 1.32, 1.35, 1.40, 1.45, 1.55, 1.60, 1.10, 1.30], start=1)]
+    raised = [(v.hole, v.kind) for v in kinds if v is not None]
+    assert raised == [(1, "load_rise"), (6, "load_rise"), (9, "load_rise")]
+    assert "up from +30 %" in kinds[5].message  # type: ignore[union-attr]

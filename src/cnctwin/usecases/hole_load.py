@@ -22,10 +22,15 @@ teach-in cut, per tool and cut) and judges each later hole of the same condition
   300 rpm on the calibrated soak machine, where the healthy level itself grows with the speed;
   healthy taps of one condition scatter by ~5 %).
 
-A hole that alarmed is not learned. A condition is one (tool, cycle) with the depth within
-0.5 mm, the speed within 1 % + 5 rpm and the feed within 2 % + 2 mm/min of the first hole's
-(measured values scatter: a tapping depth reads 11.7 or 11.8 mm): a change beyond that is a
-new cut and is taught anew.
+A load rise or drop is raised once, not at every hole (alarm management, ANSI/ISA-18.2: no
+repeating alarm for one standing condition): the same condition's next holes alarm again
+only if the load moves a further ``rise`` (``drop``) beyond the last alarm's, e.g. +25 % then
++50 % for a drill wearing out; the alarm re-arms when the load is back within half the
+threshold. A hole that alarmed is not learned.
+
+A condition is one (tool, cycle) with the depth within 0.5 mm, the speed within 1 % + 5 rpm
+and the feed within 2 % + 2 mm/min of the first hole's (measured values scatter: a tapping
+depth reads 11.7 or 11.8 mm): a change beyond that is a new cut and is taught anew.
 The first hole of a condition is never judged against a reference (there is none), except:
 
 * a drilling-cycle hole whose torque at the end of the cut (the drill fully engaged, where it
@@ -106,6 +111,8 @@ class HoleLoadJudge:
         default_factory=dict)
     broken: dict[Any, float] = field(default_factory=dict)
     """Tool -> torque of its broken stub [Nm] (after a breakage, until it cuts again)."""
+    raised: dict[tuple[Any, ...], float] = field(default_factory=dict)
+    """(condition, kind) -> ratio of the last load_rise/load_drop alarm, until it re-arms."""
 
     def __post_init__(self) -> None:
         if self.teach_holes < 1:
@@ -225,12 +232,27 @@ class HoleLoadJudge:
                 f"{100 * last / ref_last:.0f} % of the {ref_last:.2f} Nm taught: the drill "
                 "broke in this hole")
         ratio = mean / ref_mean
+        up, down = (*key, "load_rise"), (*key, "load_drop")
+        if ratio <= 1 + self.rise / 2:  # back to normal: re-armed
+            self.raised.pop(up, None)
+        if ratio >= 1 - self.drop / 2:
+            self.raised.pop(down, None)
         if ratio > 1 + self.rise:
+            last_up = self.raised.get(up)
+            if last_up is not None and ratio < last_up + self.rise:
+                return None  # the standing rise, already raised
+            self.raised[up] = ratio
+            further = "" if last_up is None else (
+                f", up from {100 * (last_up - 1):+.0f} % at the last alarm")
             return HoleLoadVerdict(
                 "load_rise", hole, ratio, ref_mean,
                 f"hole {hole}: {mean:.2f} Nm, {100 * (ratio - 1):+.0f} % over the "
-                f"{ref_mean:.2f} Nm taught (worn or chipped drill, harder material)")
+                f"{ref_mean:.2f} Nm taught{further} (worn or chipped drill, harder material)")
         if ratio < 1 - self.drop:
+            last_down = self.raised.get(down)
+            if last_down is not None and ratio > last_down - self.drop:
+                return None
+            self.raised[down] = ratio
             return HoleLoadVerdict(
                 "load_drop", hole, ratio, ref_mean,
                 f"hole {hole}: {mean:.2f} Nm, {100 * (ratio - 1):+.0f} % under the "
