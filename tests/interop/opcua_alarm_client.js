@@ -10,11 +10,10 @@
 //   "ack": {status}} once SECONDS have passed or the server has gone.
 "use strict";
 const {
-  OPCUAClient, MessageSecurityMode, SecurityPolicy, UserTokenType, AttributeIds,
-  makeBrowsePath, ClientSubscription, ClientMonitoredItem, TimestampsToReturn,
+  AttributeIds, makeBrowsePath, ClientSubscription, ClientMonitoredItem, TimestampsToReturn,
   constructEventFilter, DataType,
 } = require("node-opcua-client");
-const { OPCUACertificateManager } = require("node-opcua-certificate-manager");
+const { openSession } = require("./opcua_interop_session.js");
 
 const FIELDS = ["EventId", "EventType", "SourceName", "Message", "Severity", "Time",
   "ActiveState", "ActiveState.Id", "AckedState", "AckedState.Id", "Retain", "ConditionName",
@@ -35,28 +34,12 @@ function plain(v) {
 async function main() {
   const [url, machine, pki, seconds] = process.argv.slice(2);
   const paths = JSON.parse(require("fs").readFileSync(0, "utf8"));
-  const certificateManager = new OPCUACertificateManager({
-    rootFolder: pki, automaticallyAcceptUnknownCertificate: true });
-  await certificateManager.initialize();
-  const client = OPCUAClient.create({
-    applicationName: "cnctwin-interop-node-opcua-alarms",
-    securityMode: MessageSecurityMode.SignAndEncrypt,
-    securityPolicy: SecurityPolicy.Basic256Sha256,
-    endpointMustExist: false,
-    clientCertificateManager: certificateManager,
-    connectionStrategy: { maxRetry: 0, initialDelay: 100, maxDelay: 200 },
-  });
   const out = { events: [], values: {}, ack: null, ended: "timeout" };
   let closed = false;
+  const { client, session, ns } = await openSession(url, pki,
+    "cnctwin-interop-node-opcua-alarms");
   client.on("connection_lost", () => { closed = true; });
   client.on("close", () => { closed = true; });
-  await client.connect(url);
-  const session = await client.createSession({
-    type: UserTokenType.UserName, userName: process.env.CNCTWIN_OPCUA_USER,
-    password: process.env.CNCTWIN_OPCUA_PASSWORD });
-  const nsArray = (await session.read({ nodeId: "i=2255", attributeId: AttributeIds.Value }))
-    .value.value;
-  const ns = (uri) => nsArray.indexOf(uri);
   const mt = ns("http://opcfoundation.org/UA/MachineTool/");
   const machinery = ns("http://opcfoundation.org/UA/Machinery/");
   const resolve = async (rel) => {

@@ -8,35 +8,16 @@
 // Prints one JSON document: {"machines": [...], "values": {path: value or {"error": ...}}}.
 "use strict";
 const {
-  OPCUAClient, MessageSecurityMode, SecurityPolicy, UserTokenType, AttributeIds,
-  makeBrowsePath, BrowseDirection, NodeClassMask,
+  AttributeIds, makeBrowsePath, BrowseDirection, NodeClassMask,
 } = require("node-opcua-client");
-// a dependency of node-opcua-client (its certificate store)
-const { OPCUACertificateManager } = require("node-opcua-certificate-manager");
+const { openSession } = require("./opcua_interop_session.js");
 
 async function main() {
   const [url, machine, pki] = process.argv.slice(2);
   const paths = JSON.parse(require("fs").readFileSync(0, "utf8"));
-  const certificateManager = new OPCUACertificateManager({
-    rootFolder: pki, automaticallyAcceptUnknownCertificate: true });
-  await certificateManager.initialize();
-  const client = OPCUAClient.create({
-    applicationName: "cnctwin-interop-node-opcua",
-    securityMode: MessageSecurityMode.SignAndEncrypt,
-    securityPolicy: SecurityPolicy.Basic256Sha256,
-    endpointMustExist: false,
-    clientCertificateManager: certificateManager,
-    connectionStrategy: { maxRetry: 0, initialDelay: 100, maxDelay: 200 },
-  });
   const out = { machines: [], values: {} };
-  await client.connect(url);
+  const { client, session, ns } = await openSession(url, pki, "cnctwin-interop-node-opcua");
   try {
-    const session = await client.createSession({
-      type: UserTokenType.UserName, userName: process.env.CNCTWIN_OPCUA_USER,
-      password: process.env.CNCTWIN_OPCUA_PASSWORD });
-    const nsArray = (await session.read({ nodeId: "i=2255", attributeId: AttributeIds.Value }))
-      .value.value;
-    const ns = (uri) => nsArray.indexOf(uri);
     const machinery = ns("http://opcfoundation.org/UA/Machinery/");
     // Objects/Machines (Machinery), its children are the machines
     const found = await session.translateBrowsePath(

@@ -102,12 +102,13 @@ def _node() -> str:
     return node
 
 
-@pytest.fixture(scope="module")
-def edge(tmp_path_factory: pytest.TempPathFactory, c4a_file: Path) -> Any:
+def _start_edge(d: Path, source: Path, *options: str) -> tuple[subprocess.Popen[bytes], str]:
+    """``cnctwin edge run --source SOURCE --opcua URL`` with a users file (USER/PASSWORD) and
+    the thesis spindle model in ``d``, running once its OPC UA server listens (the NodeSets
+    load in ~3 s, more on a busy CI host): the process and the URL."""
     from cnctwin.edge import save_spindle_model
     from cnctwin.spindle import SpindleModel
 
-    d = tmp_path_factory.mktemp("ua40501")
     env = {**os.environ, "CNCTWIN_OPCUA_PASSWORD": PASSWORD}
     subprocess.run([sys.executable, "-m", "cnctwin", "edge", "opcua-user", USER, "--users",
                     str(d / "users")], env=env, check=True, capture_output=True)
@@ -115,25 +116,35 @@ def edge(tmp_path_factory: pytest.TempPathFactory, c4a_file: Path) -> Any:
                                d / "spindle.json")
     port = free_port()
     url = f"opc.tcp://127.0.0.1:{port}/cnctwin"
+    proc = subprocess.Popen([sys.executable, "-m", "cnctwin", "edge", "run", "--source",
+                             str(source), "--model", str(model), "--out", str(d / "out"),
+                             "--quiet", "--opcua", url, "--opcua-users", str(d / "users"),
+                             *options], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    while True:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            return proc, url
+        except OSError:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                if proc.poll() is None:
+                    proc.terminate()
+                err = proc.stderr.read().decode() if proc.stderr else ""
+                raise AssertionError(f"the edge's OPC UA server did not start: {err}") \
+                    from None
+            time.sleep(0.2)
+
+
+@pytest.fixture(scope="module")
+def edge(tmp_path_factory: pytest.TempPathFactory, c4a_file: Path) -> Any:
+
+    d = tmp_path_factory.mktemp("ua40501")
     machine = d / "m1.toml"  # the machine file's [identification], as a user gives it
     machine.write_text('name = "m1"\n\n[identification]\n' + "".join(
         f"{k} = {json.dumps(v)}\n" for k, v in IDENTIFICATION.items()))
-    proc = subprocess.Popen([sys.executable, "-m", "cnctwin", "edge", "run", "--source",
-                             str(c4a_file), "--model", str(model), "--out", str(d / "out"),
-                             "--quiet", "--machine", str(machine), "--speed", "0.2",
-                             "--opcua", url,
-                             "--opcua-users", str(d / "users"), "--opcua-trust",
-                             str(d / "pki")], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc, url = _start_edge(d, c4a_file, "--machine", str(machine), "--speed", "0.2",
+                            "--opcua-trust", str(d / "pki"))
     try:
-        deadline = time.monotonic() + 120  # NodeSets load ~3 s, more on a busy CI host
-        while True:
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                break
-            except OSError:
-                assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
-                assert time.monotonic() < deadline, "the edge's OPC UA server did not start"
-                time.sleep(0.2)
         yield url, d
     finally:
         proc.terminate()
@@ -215,34 +226,11 @@ def test_node_opcua_sees_alarm_events_acknowledges_and_tool_life_counting(
     """Issue 27 point 2: subscribe to the alarm events, acknowledge one, see a tool's
     remaining life change as holes are drilled, the program end and the part counted."""
     node = _node()
-    from cnctwin.edge import save_spindle_model
-    from cnctwin.spindle import SpindleModel
-
-    env = {**os.environ, "CNCTWIN_OPCUA_PASSWORD": PASSWORD}
-    subprocess.run([sys.executable, "-m", "cnctwin", "edge", "opcua-user", USER, "--users",
-                    str(tmp_path / "users")], env=env, check=True, capture_output=True)
-    model = save_spindle_model(SpindleModel.from_parameters("thesis_spinner_840dsl"),
-                               tmp_path / "spindle.json")
     (tmp_path / "tools.toml").write_text(TOOL_TABLE)
-    port = free_port()
-    url = f"opc.tcp://127.0.0.1:{port}/cnctwin"
     # the recording is 48 s of machine time: replayed at 2x, the client has ~20 s of holes
-    proc = subprocess.Popen([sys.executable, "-m", "cnctwin", "edge", "run", "--source",
-                             str(broken_drill_run["path"]), "--model", str(model), "--out",
-                             str(tmp_path / "out"), "--quiet", "--machine", "m1", "--speed",
-                             "2", "--tools", str(tmp_path / "tools.toml"), "--opcua", url,
-                             "--opcua-users", str(tmp_path / "users"), "--opcua-trust-any"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc, url = _start_edge(tmp_path, broken_drill_run["path"], "--machine", "m1", "--speed",
+                            "2", "--tools", str(tmp_path / "tools.toml"), "--opcua-trust-any")
     try:
-        deadline = time.monotonic() + 120
-        while True:
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                break
-            except OSError:
-                assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
-                assert time.monotonic() < deadline, "the edge's OPC UA server did not start"
-                time.sleep(0.2)
         life = [(MT, "Equipment"), (MT, "Tools"), (MT, "T1"), (MT, "ToolLife")]
         watch = [[*life, (MT, "Usages")], [*life, (MT, "RemainingUsages")],
                  [(MT, "Production"), (MT, "ActiveProgram"), (MT, "State"),
