@@ -435,20 +435,19 @@ async def add_tools(server: Any, machine: str, own_idx: int, mt: int, equipment:
         await put(node, value, vt)
         return node
 
-    tool_list = await equipment.add_object(ua.NodeId(f"{machine}.MT.Tools", own_idx),
-                                           ua.QualifiedName("Tools", mt),
-                                           objecttype=ua.NodeId(_TOOL_LIST_TYPE, mt),
-                                           instantiate_optional=False)
-    await tool_list.add_property(ua.NodeId(f"{machine}.MT.Tools.NodeVersion", own_idx),
-                                 ua.QualifiedName("NodeVersion", 0), "1",
-                                 varianttype=ua.VariantType.String)
-    prognoses = await notification.add_object(ua.NodeId(f"{machine}.MT.Prognoses", own_idx),
-                                              ua.QualifiedName("Prognoses", mt),
-                                              objecttype=ua.NodeId(_PROGNOSIS_LIST_TYPE, mt),
-                                              instantiate_optional=False)
-    await prognoses.add_property(ua.NodeId(f"{machine}.MT.Prognoses.NodeVersion", own_idx),
-                                 ua.QualifiedName("NodeVersion", 0), "1",
-                                 varianttype=ua.VariantType.String)
+    async def node_list(parent: Any, name: str, type_id: int) -> Any:
+        """A list object (ToolListType, PrognosisListType) with its NodeVersion."""
+        obj = await parent.add_object(ua.NodeId(f"{machine}.MT.{name}", own_idx),
+                                      ua.QualifiedName(name, mt),
+                                      objecttype=ua.NodeId(type_id, mt),
+                                      instantiate_optional=False)
+        await obj.add_property(ua.NodeId(f"{machine}.MT.{name}.NodeVersion", own_idx),
+                               ua.QualifiedName("NodeVersion", 0), "1",
+                               varianttype=ua.VariantType.String)
+        return obj
+
+    tool_list = await node_list(equipment, "Tools", _TOOL_LIST_TYPE)
+    prognoses = await node_list(notification, "Prognoses", _PROGNOSIS_LIST_TYPE)
     for n in sorted(tools):
         spec = tools[n]
         name = str(spec.get("name") or f"T{n}")
