@@ -282,11 +282,40 @@ class LifeForecast:
     model: str
 
 
-def _crossing(coef: NDArray[np.float64], start: float, limit: float, horizon: float) -> float:
-    grid = np.linspace(start, start + horizon, 4001)
-    vals = np.polyval(coef, grid)
-    above = np.flatnonzero(vals >= limit)
-    return float(grid[above[0]]) if above.size else float("inf")
+def _crossings(coef: ArrayLike, start: float, limit: float,
+               horizon: float) -> NDArray[np.float64]:
+    """First index at or after ``start`` (within ``horizon``) where each polynomial (rows of
+    ``coef``, highest power first) reaches ``limit``; ``inf`` where it does not. Closed form
+    up to degree 2 (the roots), a 4001-point grid above."""
+    c = np.atleast_2d(np.asarray(coef, dtype=np.float64))
+    out = np.full(c.shape[0], np.inf)
+    p0 = np.array([np.polyval(row, start) for row in c]) if c.shape[1] > 3 else \
+        sum(c[:, k] * start ** (c.shape[1] - 1 - k) for k in range(c.shape[1]))
+    above = np.asarray(p0 >= limit)
+    out[above] = start
+    end = start + horizon
+    if c.shape[1] > 3:
+        grid = np.linspace(start, end, 4001)
+        for i in np.flatnonzero(~above):
+            hit = np.flatnonzero(np.polyval(c[i], grid) >= limit)
+            out[i] = grid[hit[0]] if hit.size else np.inf
+        return out
+    pad = np.zeros((c.shape[0], 3))
+    pad[:, 3 - c.shape[1]:] = c
+    a, b, cc = pad[:, 0], pad[:, 1], pad[:, 2] - limit
+    roots = np.full((c.shape[0], 2), np.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lin = np.abs(a) <= 1e-300
+        roots[lin, 0] = -cc[lin] / b[lin]
+        disc = b * b - 4.0 * a * cc
+        ok = ~lin & (disc >= 0)
+        sq = np.sqrt(np.where(ok, disc, 0.0))
+        roots[ok, 0] = (-b[ok] - sq[ok]) / (2.0 * a[ok])
+        roots[ok, 1] = (-b[ok] + sq[ok]) / (2.0 * a[ok])
+    valid = np.isfinite(roots) & (roots > start) & (roots <= end)
+    first = np.where(valid, roots, np.inf).min(axis=1)
+    out[~above] = first[~above]
+    return out
 
 
 def forecast_remaining_life(
@@ -338,17 +367,18 @@ def forecast_remaining_life(
     last = float(x[-1])
     if y[-1] >= limit_um:
         return LifeForecast(last, 0.0, 0.0, 0.0, f"poly{degree}")
-    coef = np.polyfit(x, y, degree)
+    # the fit in an index relative to the last point (conditioning), crossings back in index
+    v = np.vander(x - last, degree + 1)
+    coef = np.linalg.lstsq(v, y, rcond=None)[0]
     horizon = 10.0 * max(float(x[-1] - x[0]), 1.0)
-    at = _crossing(coef, last, limit_um, horizon)
+    at = float(_crossings(coef, 0.0, limit_um, horizon)[0]) + last
     rng = np.random.default_rng(seed)
-    fitted = np.polyval(coef, x)
+    fitted = v @ coef
     resid = y - fitted
-    boots = []
-    for _ in range(n_boot):
-        yb = fitted + rng.choice(resid, size=resid.size, replace=True)
-        boots.append(_crossing(np.polyfit(x, yb, degree), last, limit_um, horizon) - last)
-    b = np.sort(np.array(boots))  # inf (never reaches the limit) sorts last
+    # all draws at once: resampled residuals on the fit, one least-squares solve
+    yb = fitted[:, None] + resid[rng.integers(0, resid.size, size=(resid.size, n_boot))]
+    coef_b = np.linalg.lstsq(v, yb, rcond=None)[0].T
+    b = np.sort(_crossings(coef_b, 0.0, limit_um, horizon))  # inf sorts last
     # order statistics, not np.percentile: draws that never reach the limit are +inf
     lo = float(b[int(np.floor(0.05 * (b.size - 1)))])
     hi = float(b[int(np.ceil(0.95 * (b.size - 1)))])
