@@ -8,7 +8,8 @@ const {
 // a dependency of node-opcua-client (its certificate store)
 const { OPCUACertificateManager } = require("node-opcua-certificate-manager");
 
-// Connect and open the session: {client, session, ns} with ns(uri) the namespace index.
+// Connect and open the session: {client, session, ns, nsArray} with ns(uri) the namespace
+// index.
 async function openSession(url, pki, applicationName) {
   const certificateManager = new OPCUACertificateManager({
     rootFolder: pki, automaticallyAcceptUnknownCertificate: true });
@@ -27,7 +28,7 @@ async function openSession(url, pki, applicationName) {
     password: process.env.CNCTWIN_OPCUA_PASSWORD });
   const nsArray = (await session.read({ nodeId: "i=2255", attributeId: AttributeIds.Value }))
     .value.value;
-  return { client, session, ns: (uri) => nsArray.indexOf(uri) };
+  return { client, session, ns: (uri) => nsArray.indexOf(uri), nsArray };
 }
 
 module.exports = { openSession };

@@ -5,7 +5,8 @@
 //   (user from CNCTWIN_OPCUA_USER, password from CNCTWIN_OPCUA_PASSWORD;
 //    paths.json: a JSON list of browse paths below the machine object, each a list of
 //    [namespace URI, browse name] pairs)
-// Prints one JSON document: {"machines": [...], "values": {path: value or {"error": ...}}}.
+// Prints one JSON document: {"machines": [...], "components": {name: {typeNamespace, typeId}},
+//   "values": {path: value or {"error": ...}}}.
 "use strict";
 const {
   AttributeIds, makeBrowsePath, BrowseDirection, NodeClassMask,
@@ -16,7 +17,8 @@ async function main() {
   const [url, machine, pki] = process.argv.slice(2);
   const paths = JSON.parse(require("fs").readFileSync(0, "utf8"));
   const out = { machines: [], values: {} };
-  const { client, session, ns } = await openSession(url, pki, "cnctwin-interop-node-opcua");
+  const { client, session, ns, nsArray } = await openSession(url, pki,
+    "cnctwin-interop-node-opcua");
   try {
     const machinery = ns("http://opcfoundation.org/UA/Machinery/");
     // Objects/Machines (Machinery), its children are the machines
@@ -32,6 +34,17 @@ async function main() {
       if (ref.browseName.name === machine) { machineId = ref.nodeId; }
     }
     if (machineId === null) { throw new Error(`no machine ${machine} in Objects/Machines`); }
+    // the machine's components and their types, as the umati observer finds the
+    // identification (a HasComponent, subtypes included, of the namespace's identification type)
+    out.components = {};
+    const comps = await session.browse({
+      nodeId: machineId, referenceTypeId: "HasComponent", includeSubtypes: true,
+      browseDirection: BrowseDirection.Forward, nodeClassMask: NodeClassMask.Object,
+      resultMask: 63 });
+    for (const ref of comps.references) {
+      out.components[ref.browseName.name] = {
+        typeNamespace: nsArray[ref.typeDefinition.namespace], typeId: ref.typeDefinition.value };
+    }
     for (const p of paths) {
       const key = p.map((e) => e[1]).join("/");
       const rel = p.map((e) => `/${ns(e[0])}:${e[1]}`).join("");

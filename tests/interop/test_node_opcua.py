@@ -10,8 +10,11 @@ Manufacturer, ProductInstanceUri, SerialNumber; Monitoring/MachineTool Operation
 PowerOnDuration; a channel's ChannelMode, ChannelState, FeedOverride with EURange and
 EngineeringUnits, Name; the Stacklight's NodeVersion, StacklightMode and three lights'
 IsPartOfBase, NumberInList, SignalColor, SignalMode, SignalOn; Production/ActiveProgram Name,
-NumberInList, State/CurrentState with Id and Number). The client's own certificate is refused
-until it is approved (moved from ``pki/rejected`` to ``pki/trusted``), as an administrator does.
+NumberInList, State/CurrentState with Id and Number), and the identification where the
+dashboard's observer looks for it (``MachineObserver/DashboardMachineObserver.cpp``: a
+HasComponent of the namespace's identification type, ``MachineToolIdentificationType``). The
+client's own certificate is refused until it is approved (moved from ``pki/rejected`` to
+``pki/trusted``), as an administrator does.
 """
 
 from __future__ import annotations
@@ -186,6 +189,15 @@ def test_node_opcua_reads_every_node_the_umati_dashboard_requires(edge: Any,
         got = doc["values"][key]
         if kind in kinds:
             assert isinstance(got.get("value"), kinds[kind]), (key, got)
+    # the umati dashboard's observer takes a machine as online when it finds, among the
+    # machine's HasComponent references (subtypes included), one whose type is the
+    # namespace's identification type, and publishes that component's variables
+    # (umati/Dashboard-OPCUA-Client MachineObserver/DashboardMachineObserver.cpp, isOnline
+    # and browseIdentificationValues; the type per namespace in its configuration)
+    assert doc["components"]["Identification"] == {"typeNamespace": MT, "typeId": 11}
+    for name, type_id in (("Monitoring", 14), ("Production", 21), ("Notification", 7),
+                          ("Equipment", 12)):
+        assert doc["components"][name] == {"typeNamespace": MT, "typeId": type_id}, name
     v = doc["values"]
     assert v["Identification/SerialNumber"]["value"] == "SN-4711"
     assert v["Identification/Manufacturer"]["value"] == "DMG MORI"
