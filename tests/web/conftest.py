@@ -91,10 +91,13 @@ def model_client(wear12: dict[str, Any], model_file: Path) -> Iterator[Any]:
 @pytest.fixture(scope="session")
 def live_dir(wear12: dict[str, Any], model_file: Path,
              tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The state directory of a finished `cnctwin edge run` replay of the wear run."""
+    """The state directory of a finished `cnctwin edge run --tools` replay of the wear run."""
     from cnctwin.cli import main
 
     live = tmp_path_factory.mktemp("live")
+    tools = live.parent / "live-tools.toml"  # T1 of the wear program, planned for 40 holes
+    tools.write_text('[tools.1]\nkind = "drill"\ndiameter_mm = 20\nname = "D20 HSS"\n'
+                     "life_holes = 40\n")
     assert main(["edge", "run", "--source", str(wear12["path"]), "--model", str(model_file),
-                 "--out", str(live), "--quiet", "--learn-s", "2"]) == 0
+                 "--out", str(live), "--quiet", "--learn-s", "2", "--tools", str(tools)]) == 0
     return live

@@ -117,6 +117,13 @@ def test_live_page_receives_events(server: str, tmp_path: Path, live_dir: Path) 
     assert ticks and min(ticks) >= 22.0 and 45.0 <= max(ticks) <= 52.4
     table = re.search(r'<table id="live-holes">(.*?)</table>', dom, re.S).group(1)  # type: ignore[union-attr]
     assert table.count("<tr>") == 1 + 12  # header + the 12 holes of the run
+    # the tool's life after its last hole: 12 used of the 40 planned, 28 left, and the time
+    # left at its hole period (~4 s per hole in the wear program: 28 x 4 s ~ 2 min)
+    tools = re.search(r'<table id="live-tools">(.*?)</table>', dom, re.S).group(1)  # type: ignore[union-attr]
+    cells = re.findall(r"<td>(.*?)</td>", tools)
+    assert cells[:4] == ["T1", "D20 HSS", "12", "40"], cells
+    assert cells[6].startswith("28 (90 %: 28") and cells[7] == "2 min", cells
+    assert cells[8] == "usage"
 
 
 def test_live_page_of_a_finished_run_shows_its_final_counts(server: str, tmp_path: Path,

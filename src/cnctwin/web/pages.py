@@ -466,7 +466,8 @@ order.</p><ul>{rows}</ul>
 
 def live_page(title: str, results: str | None, *, machine: str | None = None,
               machines: Sequence[str] = ()) -> str:
-    """Edge-runtime status, rolling cutting torque, holes and alarms as they arrive (SSE);
+    """Edge-runtime status, rolling cutting torque, holes, alarms and each tool's life as they
+    arrive (SSE);
     a machine picker when several runtimes are followed.
 
     Parameters
@@ -508,6 +509,9 @@ def live_page(title: str, results: str | None, *, machine: str | None = None,
 <div class="row"><div class="grow"><h2>Holes</h2><div class="scroll">
 <table id="live-holes"></table></div></div>
 <div><h2>Alarms and gaps</h2><ul id="live-events"></ul></div></div>
+<h2>Tools</h2><p class="muted">each tool's life after its last hole (with
+<code>edge run --tools</code>; docs/tool-life.md)</p>
+<div class="scroll"><table id="live-tools"></table></div>
 """
     return _page(f"{title}: live", body, page="live",
                  config={"results": results, "machine": machine})

@@ -23,6 +23,17 @@ const cnctwin = (() => {
     return body;
   }
 
+  // a time span as an operator reads it: 42 s, 12 min, 3 h 05 min
+  const duration = (s) => {
+    if (typeof s !== "number" || !Number.isFinite(s)) return "–";
+    if (s < 90) return `${Math.round(s)} s`;
+    if (s < 5400) return `${Math.round(s / 60)} min`;
+    const h = Math.floor(s / 3600), m = Math.round((s - 3600 * h) / 60);
+    return `${h} h ${String(m).padStart(2, "0")} min`;
+  };
+  const TOOL_COLS = ["tool", "name", "used", "planned", "wear [µm]", "wear limit [µm]", "holes left",
+    "time left", "basis"];
+
   function table(el, columns, rows, max) {
     const shown = max ? rows.slice(0, max) : rows;
     el.innerHTML = `<thead><tr>${columns.map((c) => `<th>${esc(c)}</th>`).join("")}</tr></thead><tbody>` +
@@ -162,7 +173,7 @@ const cnctwin = (() => {
 
   // ---------------------------------------------------------------- live
   function livePage(c) {
-    const plot = $("live-plot"), state = $("live-state"), holes = [], events = $("live-events");
+    const plot = $("live-plot"), state = $("live-state"), holes = [], tools = new Map(), events = $("live-events");
     const xs = [], ys = [];
     let WINDOW_S = Number($("live-window").value) || 30;
     let t0 = null, cycleTime = 0.002, pending = false;
@@ -211,8 +222,9 @@ const cnctwin = (() => {
       // never mixes two runs (time running backwards)
       const m = JSON.parse(ev.data);
       if (t0 !== null || holes.length) {
-        xs.length = 0; ys.length = 0; t0 = null; holes.length = 0;
+        xs.length = 0; ys.length = 0; t0 = null; holes.length = 0; tools.clear();
         table($("live-holes"), [], [], 200);
+        table($("live-tools"), [], [], 50);
         redraw();
       }
       const li = document.createElement("li");
@@ -225,6 +237,18 @@ const cnctwin = (() => {
       const m = JSON.parse(ev.data);
       holes.push(m.row);
       table($("live-holes"), HOLE_COLS.filter((c) => c in m.row), holes.slice().reverse(), 200);
+    });
+    // each tool's life after its last hole (docs/tool-life.md): used, wear, remaining
+    es.addEventListener("tool_life", (ev) => {
+      const m = JSON.parse(ev.data);
+      const left = m.remaining_holes === null || m.remaining_holes === undefined
+        ? (m.never_reaches_limit ? "beyond the trend" : (m.reason || "unknown"))
+        : `${fmt(m.remaining_holes)} (90 %: ${fmt(m.remaining_low)} – ${m.remaining_high === null ? "∞" : fmt(m.remaining_high)})`;
+      tools.set(m.tool, {tool: `T${m.tool}`, name: m.name, used: m.used_holes, planned: m.life_holes,
+        "wear [µm]": m.wear_um, "wear limit [µm]": m.wear_limit_um, "holes left": left,
+        "time left": m.remaining_s === null || m.remaining_s === undefined ? "–" : duration(m.remaining_s),
+        basis: m.basis});
+      table($("live-tools"), TOOL_COLS, [...tools.values()], 50);
     });
     for (const kind of ["alarm", "gap"]) es.addEventListener(kind, (ev) => {
       const m = JSON.parse(ev.data);
