@@ -500,3 +500,50 @@ def test_cutting_tool_assets_carry_the_tool_life(schemas: dict[str, Any]) -> Non
         assert probe.find("{*}Header").get("assetCount") == "2"
     finally:
         sink.close()
+
+
+def test_edge_run_with_tools_serves_the_tool_assets(
+    wear_run: dict[str, Any], spindle_model: Any, tmp_path: Path, schemas: dict[str, Any]
+) -> None:
+    """``cnctwin edge run --tools --mtconnect`` on the simulated 3-hole drilling run (T1, 20 mm
+    holes, thesis §5.1), followed while it runs: T1's CuttingTool asset counts its holes
+    against the tool table's planned 40 and forecasts the rest; an unused T2 stays NEW. (The
+    last hole ends with the stream, when the agent closes: the run's first two are seen.)"""
+    from cnctwin.edge import save_spindle_model
+
+    model = save_spindle_model(spindle_model, tmp_path / "spindle.json")
+    tools = tmp_path / "tools.toml"
+    tools.write_text('[tools.1]\nkind = "drill"\ndiameter_mm = 20\nname = "D20"\n'
+                     'life_holes = 40\n\n[tools.2]\nkind = "tap"\ndiameter_mm = 8\n'
+                     "pitch_mm = 1.25\n")
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cnctwin", "edge", "run", "--source", str(wear_run["path"]),
+         "--model", str(model), "--out", str(tmp_path / "state"), "--quiet", "--no-anomaly",
+         "--speed", "1", "--machine", "m1", "--tools", str(tools), "--mtconnect", url],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    na = {"a": "urn:mtconnect.org:MTConnectAssets:2.3"}
+    seen: dict[str, tuple[str, ...]] = {}  # holes used -> (left, status, T2's status)
+    try:
+        deadline = time.time() + 60
+        while proc.poll() is None and time.time() < deadline and "2" not in seen:
+            try:
+                _, body = _get(f"{url}/asset/m1.T1;m1.T2")
+            except (urllib.error.URLError, ConnectionError):
+                time.sleep(0.2)
+                continue
+            doc = _valid(schemas, "Assets", body)
+            t1, t2 = doc.iterfind(".//a:CuttingTool", na)
+            up = t1.find(".//a:ToolLife[@countDirection='UP']", na)
+            down = t1.find(".//a:ToolLife[@countDirection='DOWN']", na)
+            seen[up.text] = (down.text if down is not None else "",
+                             ",".join(e.text for e in t1.iterfind(".//a:Status", na)),
+                             ",".join(e.text for e in t2.iterfind(".//a:Status", na)))
+            time.sleep(0.2)
+    finally:
+        proc.kill()
+        proc.wait(10)
+    assert seen.get("0") == ("", "NEW", "NEW"), seen  # before its first hole
+    assert seen.get("1") == ("39", "USED", "NEW"), seen
+    assert seen.get("2") == ("38", "USED", "NEW"), seen
