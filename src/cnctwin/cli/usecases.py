@@ -237,16 +237,17 @@ def _cmd_wear(args: argparse.Namespace) -> int:
         out["wear_um"] = wear
         std = est.predict_std(inc[-1:])
         wear_std = float(std[0]) if np.isfinite(std[0]) else 0.0
+        # the keys of the live tool life (docs/tool-life.md), for the tool's [tools.N]
+        keys = [f"wear_um_per_increase = {est.slope_um:.6g}",
+                f"wear_offset_um = {est.offset_um:.6g}", f"wear_std_um = {wear_std:.4g}",
+                f"wear_baseline_holes = {baseline}", f"wear_limit_um = {args.limit_um:g}"]
         summary += [("wear per unit increase", f"{est.slope_um:.4g} ± {est.slope_std_um:.2g} µm"),
                     ("wear at the baseline", f"{est.offset_um:.4g} µm"),
                     ("estimated wear at the last hole", f"{wear[-1]:.1f} µm"),
                     ("uncertainty of a wear estimate",
                      f"{wear_std:.3g} µm (at the last hole; fit and scatter of the "
                      "measured points)"),
-                    ("tool table keys (live tool life)",
-                     f"wear_um_per_increase = {est.slope_um:.6g}, wear_offset_um = "
-                     f"{est.offset_um:.6g}, wear_std_um = {wear_std:.3g}, "
-                     f"wear_baseline_holes = {baseline}, wear_limit_um = {args.limit_um:g}")]
+                    ("tool table keys (live tool life)", ", ".join(keys))]
         try:
             fc = forecast_remaining_life(holes["hole"], wear, limit_um=args.limit_um)
             summary.append((f"holes to {args.limit_um:g} µm",
@@ -262,15 +263,12 @@ def _cmd_wear(args: argparse.Namespace) -> int:
         out.to_csv(args.out / "wear.csv", index=False)
         plot_hole_means(holes, wear_um=wear).savefig(args.out / "wear_trend.png", dpi=110)
         written = ["wear.csv", "wear_trend.png"]
-        if wear is not None:  # the keys of the live tool life, for the tool table
+        if wear is not None:
             (args.out / "wear_calibration.toml").write_text(
                 f"# cnctwin wear: flank wear calibrated on {len(measured)} measured holes "
                 f"({', '.join(str(h) for h in measured)});\n# copy into the tool's "
                 "[tools.N] table of the tool table (cnctwin edge run --tools)\n"
-                f"wear_um_per_increase = {est.slope_um:.6g}\n"
-                f"wear_offset_um = {est.offset_um:.6g}\nwear_std_um = {wear_std:.4g}\n"
-                f"wear_baseline_holes = {baseline}\nwear_limit_um = {args.limit_um:g}\n",
-                encoding="utf-8")
+                + "".join(f"{k}\n" for k in keys), encoding="utf-8")
             written.append("wear_calibration.toml")
         print(f"wrote {', '.join(written)} to {args.out}")
     return 0

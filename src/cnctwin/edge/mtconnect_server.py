@@ -278,7 +278,8 @@ class MTConnectAgent:
                                      next_sequence=nxt, last_sequence=last)
 
     def _assets(self, b: ObservationBuffer, q: dict[str, list[str]]) -> tuple[int, bytes]:
-        """``/assets`` (``type=``, ``count=``, ``removed=``) and ``/asset/ID;ID``."""
+        """``/assets`` (``type=``, ``count=``; no asset is ever removed, so ``removed=``
+        changes nothing) and ``/asset/ID;ID``."""
         store = self.assets
         if "asset_ids" in q:
             found = [store.get(i) for i in q["asset_ids"]]
@@ -732,9 +733,9 @@ class MTConnectSink:
                 self._life[n] = msg
                 items.append(("asset_chg", self._asset(n, t_ns)))
             elif msg["kind"] == "alarm" and "break" in str(msg.get("fault", "")):
-                tool = msg.get("tool")
-                n = int(tool) if tool is not None else (self._tool if self._tool is not None
-                                                        else -1)
+                # the alarm's tool (adaptive feed), else the tool of the hole it judged
+                tool = msg.get("tool") if msg.get("tool") is not None else self._tool
+                n = -1 if tool is None else int(tool)
                 if n in self.tools and n not in self._broken:
                     self._broken.add(n)
                     items.append(("asset_chg", self._asset(n, t_ns)))
@@ -764,8 +765,7 @@ class MTConnectSink:
         if (self._cond_until is not None and chunk is not None and len(chunk)
                 and int(chunk.cycles[-1]) > self._cond_until):
             # the hold is over: Normal clears the alarm conditions (Part 2, Condition)
-            t = int(chunk.time_ns[0]) + round((self._cond_until - chunk.first_cycle)
-                                              * chunk.cycle_time_s * 1e9)
+            t = self._msg_time({"cycle": self._cond_until}, chunk)
             by_time.setdefault(max(t, int(chunk.time_ns[0])), []).append(
                 (f"{self._sp}_cond", ("NORMAL", None, None)))
             self._cond_until = None

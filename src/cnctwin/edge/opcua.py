@@ -624,12 +624,14 @@ class OpcUaSink:
         from asyncua import ua
 
         variant = {"d": ua.VariantType.Double, "i": ua.VariantType.Int64,
-                   "s": ua.VariantType.String, "b": ua.VariantType.Boolean,
-                   "t": ua.VariantType.DateTime}[vt]
+                   "u": ua.VariantType.UInt32, "s": ua.VariantType.String,
+                   "b": ua.VariantType.Boolean, "t": ua.VariantType.DateTime}[vt]
         if vt == "d":
             value = float("nan") if value is None else float(value)
         elif vt == "i":
             value = -1 if value is None else int(value)
+        elif vt == "u":
+            value = int(value)
         return ua.DataValue(ua.Variant(value, variant), SourceTimestamp=_dt(t_ns),
                             ServerTimestamp=datetime.now(UTC))
 
@@ -694,9 +696,7 @@ class OpcUaSink:
                     (nd["CuttingTorquePeak"], self._dv(t_peak[j], "d", ts)),
                     (nd["Cycle"], self._dv(int(last[j]), "i", ts))]
             if self._alarm_until is not None and int(last[j]) > self._alarm_until:
-                out.append((nd["Alarm.Active"], self._dv(False, "b", ts)))
-                out.append((_CLEAR, _dt(ts)))
-                self._alarm_until = None
+                out += self._clear_alarm(ts)
         self.windows += last.size
         return out
 
@@ -766,6 +766,11 @@ class OpcUaSink:
                 (nd["Alarm.Threshold"], self._dv(thr, "d", ts)),
                 (nd["Alarm.Cycle"], self._dv(c, "i", ts)),
                 (nd["Alarm.Count"], self._dv(self._alarms, "i", ts))]
+
+    def _clear_alarm(self, ts: int) -> list[tuple[Any, Any]]:
+        """The held alarm is over at ``ts``: ``Alarm/Active`` false, conditions inactive."""
+        self._alarm_until = None
+        return [(self._nodes["Alarm.Active"], self._dv(False, "b", ts)), (_CLEAR, _dt(ts))]
 
     def _tool_life(self, msg: dict[str, Any]) -> list[tuple[Any, Any]]:
         """OPC 40501 ToolLife and ToolChangePrognosis of the hole's tool."""
@@ -842,10 +847,7 @@ class OpcUaSink:
         if (chunk is not None and len(chunk) and self._alarm_until is not None
                 and int(chunk.cycles[-1]) > self._alarm_until + (self._window or 50)):
             # the hold is over and no torque window closed it (no torque in the stream)
-            ts = self._time_ns(self._alarm_until)
-            updates += [(self._nodes["Alarm.Active"], self._dv(False, "b", ts)),
-                        (_CLEAR, _dt(ts))]
-            self._alarm_until = None
+            updates += self._clear_alarm(self._time_ns(self._alarm_until))
         if self._hist:
             horizon = int(self._hist[-1][0][-1]) - round(self.hole_history_s
                                                           / self._cycle_time_s)
@@ -910,27 +912,21 @@ class OpcUaSink:
         codes = ([c if isinstance(c, str) else "" for c in ev["gcode"].tolist()]
                  if "gcode" in ev else [""] * len(kinds))
         for kind, code in zip(kinds, codes, strict=True):
-            words = set(_M_WORD.findall(code.upper()))
-            speed = _S_WORD.search(code.upper())
+            upper = code.upper()
+            words = set(_M_WORD.findall(upper))
+            speed = _S_WORD.search(upper)
             if speed is not None:
                 self._programmed_rpm = float(speed.group(1))
             if kind == "block" and words & {"M30", "M2", "M02"}:
                 out += self._set_state("Ended")
                 self._parts += 1
-                out.append((self._nodes["MT.PartsProduced"],
-                            self._dv_uint(self._parts, t)))
+                out.append((self._nodes["MT.PartsProduced"], self._dv(self._parts, "u", t)))
             elif kind == "block" and words & {"M0", "M00", "M1", "M01"}:
                 out += self._set_state("Interrupted")
             elif kind == "call" or (kind == "block" and code.strip()
                                     and self._state in ("Ended", "Interrupted")):
                 out += self._set_state("Running")
         return out
-
-    def _dv_uint(self, value: int, t: int) -> Any:
-        from asyncua import ua
-
-        return ua.DataValue(ua.Variant(int(value), ua.VariantType.UInt32),
-                            SourceTimestamp=_dt(t), ServerTimestamp=datetime.now(UTC))
 
     def _program_update(self, chunk: Chunk | None) -> list[tuple[Any, Any]]:
         """``Production/ActiveProgram/Name`` of the OPC 40501 object from the NC call events."""

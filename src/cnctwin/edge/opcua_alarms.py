@@ -95,7 +95,6 @@ class AlarmConditions:
         self._conditions: dict[str, _Condition] = {}
         self._by_node: dict[Any, _Condition] = {}
         self._gens: list[Any] = []
-        self.acknowledged = 0
 
     async def setup(self) -> None:
         """Event generators on ``Messages`` and ``Server``; the ``Acknowledge`` method."""
@@ -149,10 +148,6 @@ class AlarmConditions:
                 c.active = False
                 await self._emit(c, when)
 
-    def active(self) -> list[str]:
-        """Names of the active conditions."""
-        return [c.name for c in self._conditions.values() if c.active]
-
     async def _emit(self, c: _Condition, when: datetime) -> None:
         from asyncua import ua
 
@@ -190,7 +185,6 @@ class AlarmConditions:
         if c.acked:
             return ua.StatusCode(ua.StatusCodes.BadConditionBranchAlreadyAcked)
         c.acked = True
-        self.acknowledged += 1
         note = getattr(comment, "Value", comment)
         if note is not None and getattr(note, "Text", None):
             c.fields["Comment"] = note

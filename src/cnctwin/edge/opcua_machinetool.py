@@ -265,8 +265,7 @@ async def add_machine_tool(server: Any, machine: str, own_idx: int, *,
     await override.add_property(ua.NodeId(f"{machine}.MT.SpindleOverride.EU", own_idx),
                                 ua.QualifiedName("EngineeringUnits", 0),
                                 eu_information("%", "percent"))
-    await server.write_attribute_value(override.nodeid, ua.DataValue(
-        StatusCode_=ua.StatusCode(ua.StatusCodes.BadWaitingForInitialData)))
+    await server.write_attribute_value(override.nodeid, _waiting())
     out["SpindleOverride"] = override.nodeid
     await own_var(spindle, "ActualSpeed", float("nan"), ua.VariantType.Double)
     await own_var(spindle, "CuttingTorque", float("nan"), ua.VariantType.Double)
@@ -373,7 +372,11 @@ async def add_machine_tool(server: Any, machine: str, own_idx: int, *,
     return out
 
 
-_WAITING = "BadWaitingForInitialData"
+def _waiting() -> Any:
+    """The value of a node that has none yet (``BadWaitingForInitialData``)."""
+    from asyncua import ua
+
+    return ua.DataValue(StatusCode_=ua.StatusCode(ua.StatusCodes.BadWaitingForInitialData))
 
 
 async def add_tools(server: Any, machine: str, own_idx: int, mt: int, equipment: Any,
@@ -418,7 +421,7 @@ async def add_tools(server: Any, machine: str, own_idx: int, mt: int, equipment:
     # instantiating a variable type logs each attribute the type node does not have
     logging.getLogger("asyncua.common.copy_node_util").setLevel(logging.ERROR)
     out: dict[str, Any] = {}
-    waiting = ua.DataValue(StatusCode_=ua.StatusCode(getattr(ua.StatusCodes, _WAITING)))
+    waiting = _waiting()
     D = ua.VariantType.Double
 
     async def put(node: Any, value: Any, vt: Any) -> None:
@@ -479,10 +482,10 @@ async def add_tools(server: Any, machine: str, own_idx: int, mt: int, equipment:
             entries.append(("FlankWear", 7, True, "um", spec.get("wear_limit_um")))
         for entry, indication, up, unit, limit in entries:
             # a ToolLifeType variable with its mandatory properties
-            (node,) = (await instantiate(
+            node = (await instantiate(
                 life, server.get_node(ua.NodeId(_TOOL_LIFE_TYPE, mt)),
                 nodeid=ua.NodeId(f"{machine}.MT.Tool{n}.{entry}", own_idx),
-                bname=ua.QualifiedName(entry, mt), instantiate_optional=False))[:1]
+                bname=ua.QualifiedName(entry, mt), instantiate_optional=False))[0]
             out[f"{k}.{entry}"] = node.nodeid
             pk = f"{k}.{entry}"
             await child(node, "EngineeringUnits", eu_information(unit), None,

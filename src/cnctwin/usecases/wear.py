@@ -289,9 +289,8 @@ def _crossings(coef: ArrayLike, start: float, limit: float,
     up to degree 2 (the roots), a 4001-point grid above."""
     c = np.atleast_2d(np.asarray(coef, dtype=np.float64))
     out = np.full(c.shape[0], np.inf)
-    p0 = np.array([np.polyval(row, start) for row in c]) if c.shape[1] > 3 else \
-        sum(c[:, k] * start ** (c.shape[1] - 1 - k) for k in range(c.shape[1]))
-    above = np.asarray(p0 >= limit)
+    p0 = c @ (float(start) ** np.arange(c.shape[1] - 1, -1, -1))  # each polynomial at start
+    above = p0 >= limit
     out[above] = start
     end = start + horizon
     if c.shape[1] > 3:
