@@ -70,3 +70,20 @@ def test_missing_axis_signals() -> None:
     rep = check_relations(rec, "Y1")
     assert all(not r.checkable for r in rep.relations.values())
     assert "ENC_POS|Y1" in rep["ctrl_diff2"].reason
+
+
+def test_constant_velocity_runs_by_construction() -> None:
+    """Known runs: a 100-cycle hold at 30, a 39-cycle hold (too short), a step within 2 %
+    (same run) and NaN breaking a run; the compiled kernel returns them with the first
+    quarter dropped (``cnctwin.servo.identify.constant_velocity_runs``)."""
+    import numpy as np
+
+    from cnctwin.servo.identify import constant_velocity_runs
+
+    v = np.r_[np.zeros(10), np.full(100, 30.0), np.zeros(5), np.full(39, -20.0), np.zeros(5),
+              np.full(60, 50.0), np.full(60, 50.9), np.full(3, np.nan), np.full(80, -40.0)]
+    runs = constant_velocity_runs(v, [slice(0, v.size)])
+    assert runs == [slice(10 + 25, 110), slice(159 + 30, 279), slice(282 + 20, 362)]
+    # a second segment is searched on its own and offset by its start
+    runs2 = constant_velocity_runs(v, [slice(0, 100), slice(159, v.size)])
+    assert runs2 == [slice(10 + 22, 100), slice(159 + 30, 279), slice(282 + 20, 362)]

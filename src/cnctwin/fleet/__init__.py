@@ -21,12 +21,15 @@ from cnctwin.fleet.ingest import (
 from cnctwin.fleet.jobs import (
     Partition,
     compare_partition,
+    health_estimates,
     health_partition,
+    health_table,
     holes_partition,
     machine_files_in,
     partitions,
     quality_partition,
     run_job,
+    split_partitions,
 )
 
 __all__ = [
@@ -41,7 +44,9 @@ __all__ = [
     "drift_alarms",
     "find_recordings",
     "fleet_client",
+    "health_estimates",
     "health_partition",
+    "health_table",
     "holes_partition",
     "ingest_recordings",
     "machine_files_in",
@@ -49,5 +54,6 @@ __all__ = [
     "partitions",
     "quality_partition",
     "run_job",
+    "split_partitions",
     "wear_trend",
 ]

@@ -746,24 +746,45 @@ def constant_velocity_runs(
     vmax = float(np.nanmax(np.abs(v_per_s))) if np.isfinite(v_per_s).any() else 0.0
     if vmax == 0.0:
         return []
+    global _runs_compiled
+    if _runs_compiled is None:
+        import numba
+
+        _runs_compiled = numba.njit(cache=True, nogil=True)(_runs_py)
     runs: list[slice] = []
     for s in segs:
-        v = v_per_s[s]
-        k = 0
-        n = v.size
-        while k < n:
-            if not np.isfinite(v[k]) or abs(v[k]) < min_speed_frac * vmax:
-                k += 1
-                continue
-            j = k
-            ref = v[k]
-            while j < n and np.isfinite(v[j]) and abs(v[j] - ref) <= rel_tol * abs(ref):
-                j += 1
-            if j - k >= min_cycles:
-                start = k + (j - k) // 4
-                runs.append(slice(s.start + start, s.start + j))
-            k = max(j, k + 1)
+        v = np.ascontiguousarray(v_per_s[s], dtype=np.float64)
+        found = _runs_compiled(v, float(min_speed_frac * vmax), float(rel_tol),
+                               int(min_cycles))
+        runs.extend(slice(s.start + int(a), s.start + int(b)) for a, b in found)
     return runs
+
+
+def _runs_py(v: FloatArray, v_min: float, rel_tol: float, min_cycles: int
+             ) -> np.ndarray:  # pragma: no cover - compiled by numba; the body is the reference
+    """The (start, stop) pairs of :func:`constant_velocity_runs` in one segment: greedy runs
+    within ``rel_tol`` of their first value, above ``v_min``, the first quarter dropped."""
+    out = np.empty((v.size // max(min_cycles, 1) + 1, 2), dtype=np.int64)
+    m = 0
+    k = 0
+    n = v.size
+    while k < n:
+        if not np.isfinite(v[k]) or abs(v[k]) < v_min:
+            k += 1
+            continue
+        j = k
+        ref = v[k]
+        while j < n and np.isfinite(v[j]) and abs(v[j] - ref) <= rel_tol * abs(ref):
+            j += 1
+        if j - k >= min_cycles:
+            out[m, 0] = k + (j - k) // 4
+            out[m, 1] = j
+            m += 1
+        k = max(j, k + 1)
+    return out[:m]
+
+
+_runs_compiled: Any = None  # numba-compiled _runs_py, made on first use (numba imports slowly)
 
 
 def _outside(runs: list[slice], cut: np.ndarray, *, min_cycles: int) -> list[slice]:

@@ -56,6 +56,7 @@ __all__ = [
     "resolve_columns",
     "time_runs",
     "to_utc",
+    "wanted_columns",
 ]
 
 CATALOG_COLUMNS: tuple[str, ...] = (
@@ -561,6 +562,14 @@ def holes_frame(rows: Sequence[Sequence[Any]], columns: Sequence[str]) -> pd.Dat
 
 
 # ---------------------------------------------------------------------------- the interface
+def wanted_columns(columns: Sequence[str], signals: Iterable[str] | None) -> list[str]:
+    """The stored columns a :meth:`Store.load` ``signals`` selection keeps, in stored order."""
+    if signals is None:
+        return list(columns)
+    wanted = set(signals)
+    return [c for c in columns if c in wanted or parse_column(c)[0] in wanted]
+
+
 class Store(abc.ABC):
     """A store of recordings; see :func:`cnctwin.store.open`.
 
@@ -705,8 +714,21 @@ class Store(abc.ABC):
         """
 
     @abc.abstractmethod
-    def load(self, recording_id: str) -> Recording:
+    def load(self, recording_id: str, *, signals: Iterable[str] | None = None,
+             cycles: tuple[int | None, int | None] | None = None) -> Recording:
         """Read a stored recording back (HF, LF, events, external channels, metadata).
+
+        Parameters
+        ----------
+        recording_id : str
+            The recording.
+        signals : iterable of str, optional
+            Only these HF signals (codes such as ``"CURRENT"`` or full column names, as
+            :meth:`cnctwin.recording.Recording.select`); the others are not read. Default:
+            every signal.
+        cycles : (int or None, int or None), optional
+            Only this inclusive range of the cycle counter (LF values and events cut to it);
+            the store reads only the data that overlaps it.
 
         Raises
         ------

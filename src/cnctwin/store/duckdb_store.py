@@ -37,7 +37,7 @@ import os
 import re
 import time
 import urllib.parse
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -64,6 +64,7 @@ from cnctwin.store.base import (
     normalize_events,
     normalize_lf,
     to_utc,
+    wanted_columns,
 )
 
 __all__ = ["DuckDBStore", "StagedRecording", "hf_table", "stage_recording"]
@@ -606,29 +607,35 @@ class DuckDBStore(Store):
             frames.append(frame)
         return frames
 
-    def load(self, recording_id: str) -> Recording:
+    def load(self, recording_id: str, *, signals: Iterable[str] | None = None,
+             cycles: tuple[int | None, int | None] | None = None) -> Recording:
         meta_text, external_text = self._catalog_entry(recording_id)
         meta = meta_from_json(meta_text)
+        lo, hi = (None if c is None else int(c) for c in (cycles or (None, None)))
         rows = _run(
             self.con,
-            "SELECT kind, path FROM files WHERE recording_id = ? ORDER BY kind, first_cycle",
-            [recording_id],
+            "SELECT kind, path FROM files WHERE recording_id = ? AND (kind <> 'hf' OR ("
+            "(? IS NULL OR last_cycle IS NULL OR last_cycle >= ?) AND "
+            "(? IS NULL OR first_cycle IS NULL OR first_cycle <= ?))) "
+            "ORDER BY kind, first_cycle",
+            [recording_id, lo, lo, hi, hi],
         )
         by_kind: dict[str, list[str]] = {}
         for kind, rel in rows:
             by_kind.setdefault(kind, []).append(rel)
-        columns = json.loads(
+        columns = wanted_columns(json.loads(
             _run(
             self.con,
                 "SELECT columns FROM recordings WHERE recording_id = ?", [recording_id]
             )[0][0]
-        )
+        ), signals)
         hf_paths = by_kind.get("hf", [])
         if hf_paths:
             hf = pd.concat(
-                [pq.read_table(self._abs(p)).to_pandas() for p in hf_paths], ignore_index=True
+                [pq.read_table(self._abs(p), columns=["cycle", "time", *columns]).to_pandas()
+                 for p in hf_paths], ignore_index=True
             )
-            hf = hf.drop(columns="recording_id").sort_values("cycle", kind="stable")
+            hf = hf.sort_values("cycle", kind="stable")
             hf = hf.set_index("cycle")
         else:
             hf = pd.DataFrame(
@@ -644,7 +651,8 @@ class DuckDBStore(Store):
         for name, d in json.loads(external_text).items():
             data = pq.read_table(self._abs(d["path"])).to_pandas()
             external[name] = external_channel(name, data, d)
-        return Recording(hf, lf=lf, events=events, external=external, meta=meta)
+        rec = Recording(hf, lf=lf, events=events, external=external, meta=meta)
+        return rec if cycles is None else rec.select(cycles=cycles)
 
     def sql(self, query: str) -> pd.DataFrame:
         self._refresh_views()

@@ -43,7 +43,7 @@ import io
 import json
 import struct
 import urllib.parse
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -71,6 +71,7 @@ from cnctwin.store.base import (
     normalize_lf,
     time_runs,
     to_utc,
+    wanted_columns,
 )
 
 __all__ = ["DEFAULT_SCHEMA", "PostgresStore", "hf_block_copy", "parse_pg_url"]
@@ -735,10 +736,11 @@ class PostgresStore(Store):
             frames.append(frame)
         return frames
 
-    def load(self, recording_id: str) -> Recording:
+    def load(self, recording_id: str, *, signals: Iterable[str] | None = None,
+             cycles: tuple[int | None, int | None] | None = None) -> Recording:
         meta_text, external_text, columns_text = self._meta_row(recording_id)
         meta = meta_from_json(meta_text)
-        columns = json.loads(columns_text)
+        columns = wanted_columns(json.loads(columns_text), signals)
         runs = self.conn.execute(
             psql.SQL(
                 "SELECT first_cycle, n, t0_ns FROM {} WHERE recording_id = %s ORDER BY first_cycle"
@@ -802,7 +804,8 @@ class PostgresStore(Store):
             frame = pq.read_table(io.BytesIO(bytes(blob))).to_pandas()
             external[name] = external_channel(name, frame, d)
         external = {k: external[k] for k in ext_meta if k in external}
-        return Recording(hf, lf=lf, events=events, external=external, meta=meta)
+        rec = Recording(hf, lf=lf, events=events, external=external, meta=meta)
+        return rec if cycles is None else rec.select(cycles=cycles)
 
     def sql(self, query: str) -> pd.DataFrame:
         try:
