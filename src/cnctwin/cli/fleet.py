@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -70,8 +71,29 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
             j.add_argument("--machines-dir", type=Path, metavar="DIR",
                            help="machine files <machine>.toml (cnctwin calibrate): each machine's "
                            "own spindle model; default the thesis machine's")
+        if job == "health":
+            w = j.add_mutually_exclusive_group()
+            w.add_argument("--window-s", type=_positive_s, default=20.0, metavar="S",
+                           help="seconds analysed per shift: the shift's first recordings, "
+                           "whole, until S are covered (a longer recording: its first S); "
+                           "default 20, about one part cycle")
+            w.add_argument("--all-cycles", action="store_true",
+                           help="analyse every recorded cycle (the cost grows with the "
+                           "recorded time: ~30 us per cycle)")
+            j.add_argument("--shift-hours", type=_positive_s, default=8.0, metavar="H",
+                           help="shift length, shifts from 06:00 UTC (default 8)")
         _cluster_options(j)
         j.set_defaults(func=_cmd_job, job=job)
+
+
+def _positive_s(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"{text!r}: give a positive number")
+    return v
 
 
 _HELP = {
@@ -185,17 +207,22 @@ def _cmd_job(args: argparse.Namespace) -> int:
     from cnctwin.fleet import (
         compare_partition,
         drift_alarms,
-        health_partition,
+        health_estimates,
+        health_table,
         holes_partition,
         machine_files_in,
         partitions,
         quality_partition,
         run_job,
+        split_partitions,
         wear_trend,
     )
 
+    window = None
+    if args.job == "health" and not args.all_cycles:
+        window = {"window_s": args.window_s, "shift_hours": args.shift_hours}
     try:
-        parts = partitions(args.store, machines=args.machines)
+        parts = partitions(args.store, machines=args.machines, **(window or {}))
     except StoreError as exc:
         if "no cnctwin store at" not in str(exc):
             raise
@@ -210,13 +237,25 @@ def _cmd_job(args: argparse.Namespace) -> int:
                           + "; fill it with `cnctwin fleet ingest DIR --store URL`")
     print(f"{len(parts)} partitions (machine x day), "
           f"{len({p.machine for p in parts})} machines", file=sys.stderr)
+    if window is not None:
+        n_an = sum(p.n_cycles for p in parts)
+        n_rec = sum(p.recorded_cycles or 0 for p in parts)
+        print(f"analysing {n_an:,} of {n_rec:,} recorded cycles ({n_an / max(n_rec, 1):.1%}): "
+              f"{args.window_s:g} s per {args.shift_hours:g} h shift (--all-cycles for all)",
+              file=sys.stderr)
     kw: dict[str, Any] = {"store_url": args.store}
     if args.job != "quality":
         kw["machine_files"] = machine_files_in(getattr(args, "machines_dir", None))
-    fn = {"holes": holes_partition, "wear": holes_partition, "health": health_partition,
+    fn = {"holes": holes_partition, "wear": holes_partition, "health": health_estimates,
           "quality": quality_partition, "compare": compare_partition}[args.job]
     with _client(args) as client, _progress(args.job) as progress:
-        table = run_job(fn, parts, client=client, progress=progress, **kw)
+        tasks = parts
+        if args.job == "health":  # combined per day afterwards: split for busy workers
+            n_workers = len(client.scheduler_info().get("workers", {})) or 1
+            tasks = split_partitions(parts, n_tasks=4 * n_workers)
+        table = run_job(fn, tasks, client=client, progress=progress, **kw)
+    if args.job == "health":
+        table = health_table(table)
     out: Path = args.out
     written: list[Path] = []
     partial = sorted({f"{m} {d}" for m, d, p in zip(table.get("machine", []),

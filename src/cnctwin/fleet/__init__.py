@@ -19,6 +19,7 @@ from cnctwin.fleet.ingest import (
     ingest_recordings,
 )
 from cnctwin.fleet.jobs import (
+    LONG_RECORDING_S,
     Partition,
     compare_partition,
     health_estimates,
@@ -34,6 +35,7 @@ from cnctwin.fleet.jobs import (
 
 __all__ = [
     "DRIFT_RULES",
+    "LONG_RECORDING_S",
     "SCHEDULER_ENV",
     "DriftRule",
     "IngestOutcome",

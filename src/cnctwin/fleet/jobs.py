@@ -29,6 +29,7 @@ from cnctwin.fleet.cluster import map_tasks
 __all__ = [
     "ESTIMATE_COLUMNS",
     "HEALTH_AXES",
+    "LONG_RECORDING_S",
     "Partition",
     "compare_partition",
     "health_estimates",
@@ -47,6 +48,11 @@ HEALTH_AXES = ("X1", "Y1", "Z1")
 """Feed axes whose loop health is identified where they moved enough."""
 
 
+LONG_RECORDING_S = 600.0
+"""A recording longer than this (or than the window) is a stream, not a part cycle: a shift's
+window takes only its first seconds (:func:`partitions`) [s]."""
+
+
 @dataclass(frozen=True)
 class Partition:
     """The recordings of one machine on one UTC day.
@@ -60,7 +66,12 @@ class Partition:
     recording_ids : tuple of str
         The recordings, in start-time order.
     n_cycles : int
-        Their HF cycles.
+        Their HF cycles analysed.
+    cycle_ranges : tuple of (int, int)
+        Per recording the inclusive cycle range analysed (a shift's window,
+        :func:`partitions` ``window_s``); empty: the whole recordings.
+    recorded_cycles : int or None
+        All HF cycles of the day's recordings (None for a piece of a partition).
     """
 
     machine: str
@@ -85,8 +96,12 @@ def partitions(
         Only these machines.
     window_s : float, optional
         Analyse only a window of each shift: the shift's first recordings (in start order)
-        until ``window_s`` seconds of recording are covered, the last one cut at the window's
-        end (``Partition.cycle_ranges``). None: every recorded cycle.
+        until ``window_s`` seconds are covered, each whole (a part cycle is the unit the
+        analyses expect: holes and air plateaus cut at a window's edge would bias them); a
+        recording longer than ``max(window_s, LONG_RECORDING_S)`` (a continuous stream, not
+        a part cycle) is cut to its first that many seconds (``Partition.cycle_ranges``).
+        With one recording per part cycle that is the shift's first part cycle(s). None:
+        every recorded cycle.
     shift_hours : float, default 8
         Shift length [h]; a recording belongs to the shift its first cycle is in.
     shift_start_h : float, default 6
@@ -135,7 +150,8 @@ def partitions(
                     sg["cycle_time_s"].to_numpy(dtype=np.float64), strict=True):
                 if left <= 0:
                     break
-                take = min(int(n_rec), max(1, math.ceil(left / float(dt))))
+                cap = max(1, math.ceil(max(window_s, LONG_RECORDING_S) / float(dt)))
+                take = min(int(n_rec), cap)
                 ids.append(rid)
                 ranges.append((int(c0), int(c0) + take - 1 if take < n_rec else int(c1)))
                 n += take
