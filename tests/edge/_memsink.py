@@ -9,6 +9,7 @@ class MemorySink:
     """Keeps every message the runtime writes, in order."""
 
     name = "memory"
+    needs: tuple[str, ...] = ()  # results only (cnctwin.edge.pipeline.needed_columns)
 
     def __init__(self) -> None:
         self.messages: list[dict[str, Any]] = []

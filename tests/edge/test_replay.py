@@ -159,3 +159,46 @@ def test_model_file_round_trip(tmp_path: Path, suffix: str) -> None:
     bad.write_text('{"kt_nm_per_a": 1.0, "b_nm_per_rpm": 1e-4}')
     with pytest.raises(ConfigError, match="tau_f_nm"):
         load_spindle_model(bad)
+
+
+def test_a_parquet_replay_reads_only_the_columns_the_pipeline_needs(
+        tmp_path: Path, wear_recording: Recording, spindle_model: SpindleModel) -> None:
+    """Issue 28: a replay plant reads only what its processors and sinks use. A Parquet file
+    is opened with its clock, metadata and events; the runtime then asks for the union of the
+    pipeline's ``needs`` (torque, holes, anomaly: 11 of the file's columns) and the results
+    equal those of the whole recording in memory, message for message."""
+    from cnctwin.edge.pipeline import needed_columns
+    from cnctwin.iotools.parquet import write_parquet
+
+    rec = wear_recording
+    path = tmp_path / "rec.parquet"
+    write_parquet(rec, path)
+    model = spindle_model
+
+    def procs() -> list[Any]:
+        return [TorqueProcessor(model), HoleProcessor(model),
+                AnomalyProcessor(model=model, learn_s=5.0)]
+
+    want = needed_columns([*procs(), MemorySink()])
+    assert want is not None and "CURRENT|SP1" in want and "DES_POS|Z1" in want
+    assert len(want) < len(rec.columns)
+    src = ReplaySource(path, chunk_cycles=50)
+    assert src.recording.columns == []  # nothing of the HF table read yet
+    assert src.identity()["n_cycles"] == rec.n_cycles  # the clock is there (checkpoints)
+    mem = MemorySink()
+    EdgeRuntime(src, procs(), [mem]).run()
+    assert sorted(src.recording.columns) == sorted(c for c in want if rec.has(c))
+    ref = MemorySink()
+    EdgeRuntime(ReplaySource(rec, chunk_cycles=50), procs(), [ref]).run()
+
+    def plain(msgs: list[dict[str, Any]]) -> list[str]:  # NaN compares equal as text
+        return [json.dumps(m, sort_keys=True) for m in msgs
+                if m["kind"] not in ("status", "run")]
+
+    assert plain(mem.messages) == plain(ref.messages)
+    assert len([m for m in mem.messages if m["kind"] == "hole"]) == 3
+    # a part that does not say what it needs gets every column
+    assert needed_columns([TorqueProcessor(model), object()]) is None
+    src2 = ReplaySource(path, chunk_cycles=50)
+    src2.select_columns(None)
+    assert src2.recording.columns == rec.columns

@@ -54,6 +54,7 @@ class ControlWriter:
     """
 
     name = "control"
+    needs: tuple[str, ...] = ()  # results only
 
     def __init__(self, url: str, write_nodes: dict[str, str], *, options: Any,
                  min_pct: float, max_pct: float) -> None:

@@ -638,6 +638,7 @@ class MTConnectSink:
     """
 
     name = "mtconnect"
+    needs = None  # the axes' samples: every column
 
     def __init__(self, machine: str, *, agent: tuple[str, int] | None = None,
                  shdr: tuple[str, int] | None = None, buffer_size: int = 131_072,

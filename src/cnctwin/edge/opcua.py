@@ -362,6 +362,7 @@ class OpcUaSink:
     """
 
     name = "opcua"
+    needs: tuple[str, ...] = ()  # results and NC events only
 
     def __init__(self, endpoint: str = "opc.tcp://0.0.0.0:4840/cnctwin", *, machine: str,
                  publish_hz: float = 10.0, namespace_uri: str = DEFAULT_NAMESPACE,

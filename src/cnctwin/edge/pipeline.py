@@ -14,7 +14,7 @@ a consumer downstream can order and deduplicate them (``seq`` is set by the runt
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from cnctwin.recording import CounterGap, Recording, RecordingMeta, empty_events
 
 __all__ = ["RESULT_KINDS", "Chunk", "MessageBatch", "Processor", "Result", "Sink", "Source",
-           "dumps", "no_events"]
+           "dumps", "needed_columns", "no_events"]
 
 _NO_EVENTS = empty_events()  # shared and never modified: building one costs ~3 ms
 
@@ -236,3 +236,30 @@ class Sink(Protocol):
     def close(self) -> None:
         """Flush and release."""
         ...
+
+
+def needed_columns(parts: Iterable[Any]) -> list[str] | None:
+    """The HF columns a pipeline's processors and sinks read from the chunks.
+
+    Each declares ``needs``: a tuple of ``CODE|AXIS`` names (empty: results only, e.g. the
+    JSON-lines and MQTT sinks) or None (every column: the store, MTConnect's axis samples,
+    the twin compare). A part without the attribute counts as None, so a user's own
+    processor gets every column.
+
+    Parameters
+    ----------
+    parts : iterable
+        Processors and sinks.
+
+    Returns
+    -------
+    list of str or None
+        The union in sorted order, or None when some part needs every column.
+    """
+    cols: set[str] = set()
+    for p in parts:
+        need = getattr(p, "needs", None)
+        if need is None:
+            return None
+        cols.update(need)
+    return sorted(cols)

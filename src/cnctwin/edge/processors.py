@@ -84,6 +84,11 @@ class TorqueProcessor:
 
     name = "torque"
 
+    @property
+    def needs(self) -> tuple[str, ...]:
+        """The HF columns read (:func:`cnctwin.edge.pipeline.needed_columns`)."""
+        return (self.i_col, self.n_col)
+
     def __init__(self, model: SpindleModel, *, spindle: str = "SP1",
                  accel_term: bool = True, speed_step_rpm: float = 1.0,
                  settle_s: float = 0.3, min_speed_rpm: float = 10.0) -> None:
@@ -236,6 +241,11 @@ class HoleProcessor:
     """
 
     name = "holes"
+
+    @property
+    def needs(self) -> tuple[str, ...]:
+        """The HF columns read (:func:`cnctwin.edge.pipeline.needed_columns`)."""
+        return tuple(self.columns)
 
     def __init__(self, model: SpindleModel | None = None, *, spindle: str = "SP1",
                  z_axis: str = "Z1", xy_axes: tuple[str, str] = ("X1", "Y1"),
@@ -607,6 +617,13 @@ class AnomalyProcessor:
     is scored with the torque unknown (NaN: not judged by the torque detectors).
     """
 
+    @property
+    def needs(self) -> tuple[str, ...]:
+        """The HF columns read (:func:`cnctwin.edge.pipeline.needed_columns`)."""
+        sp, z = self.spindle, self.z_axis
+        return (f"CURRENT|{sp}", f"CMD_SPEED|{sp}", f"DES_POS|{z}", f"ENC_POS|{z}",
+                *(f"DES_POS|{a}" for a in self.xy_axes))
+
     def __init__(self, detector: Detector | None = None, *, model: SpindleModel | None = None,
                  spindle: str = "SP1", z_axis: str = "Z1", learn_s: float = 10.0,
                  learn_holes: int | None = None, threshold: float = 0.0,
@@ -869,6 +886,7 @@ class TwinCompareProcessor:
     """
 
     name = "twin"
+    needs = None  # compares every axis and the spindle with the twin: every column
 
     def __init__(self, machine_file: MachineFile, *, window_s: float = 30.0,
                  parameters: bool = True, n_bootstrap: int = 30) -> None:

@@ -27,7 +27,15 @@ import numpy as np
 import orjson
 
 from cnctwin.edge.cycles import CycleTracker
-from cnctwin.edge.pipeline import Chunk, MessageBatch, Processor, Result, Sink, Source
+from cnctwin.edge.pipeline import (
+    Chunk,
+    MessageBatch,
+    Processor,
+    Result,
+    Sink,
+    Source,
+    needed_columns,
+)
 from cnctwin.edge.sinks import tail_messages
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import CounterGap
@@ -486,6 +494,9 @@ class EdgeRuntime:
         self._on_status = on_status
         self.state = "running"
         src = self.source
+        select = getattr(src, "select_columns", None)
+        if select is not None:  # a replay reads only what the pipeline uses
+            select(needed_columns([*self.processors, *self.sinks]))
         self._hold_acks()
         self._emit([Result("run", -1, {
             "started": _iso(time.time_ns()), "source": type(src).__name__,

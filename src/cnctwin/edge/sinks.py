@@ -155,6 +155,7 @@ class JsonLinesSink:
     """
 
     name = "jsonl"
+    needs: tuple[str, ...] = ()  # results only
 
     def __init__(self, path: str | PathLike[str], *, kinds: set[str] | None = None,
                  rotate_bytes: int | None = None, keep_files: int | None = None) -> None:
@@ -261,6 +262,7 @@ class MqttSink:
     """
 
     name = "mqtt"
+    needs: tuple[str, ...] = ()  # results only
 
     def __init__(self, host: str, port: int = 1883, *, state_dir: str | PathLike[str],
                  machine: str, topic_prefix: str = "cnctwin",
@@ -556,6 +558,7 @@ class StoreSink:
     """
 
     name = "store"
+    needs: tuple[str, ...] = ()  # derived values and results only
     replays = True
     """The runtime hands this sink the results a resumed run repeats (writes are by id)."""
 

@@ -142,7 +142,7 @@ class ReplaySource:
         Pace: ``1`` = real time, ``N`` = N times real time on the cycle clock, ``None`` or
         ``0`` = as fast as possible.
     columns : list of str, optional
-        Only these HF columns (default all).
+        Only these HF columns (default all; :meth:`select_columns` narrows it later).
 
     Attributes
     ----------
@@ -163,11 +163,16 @@ class ReplaySource:
         if speed is not None and speed < 0:
             raise ConfigError(f"speed must be >= 0 (0 = as fast as possible), not {speed}")
         self.path: str | None = None
+        self._lazy = False
         if not isinstance(recording, Recording):
             from cnctwin.iotools import read_recording
+            from cnctwin.iotools._detect import reads_columns
 
             self.path = str(Path(recording).resolve())
-            recording = read_recording(recording)
+            # a columnar file (Parquet): the metadata, events and cycle clock now, the HF
+            # columns once the pipeline has said which it needs (select_columns)
+            self._lazy = columns is None and reads_columns(recording)
+            recording = read_recording(recording, columns=[] if self._lazy else None)
         self.recording = recording
         self.start_after_cycle: int | None = None
         self.catch_up_cycle: int | None = None
@@ -180,6 +185,22 @@ class ReplaySource:
                                                           if recording.has(c)]
         self._cols = cols
         self.scheduled_ns = 0
+
+    def select_columns(self, columns: list[str] | None) -> None:
+        """Replay only these HF columns (None: every column of the recording).
+
+        Called by the runtime before the first chunk with what its processors and sinks
+        need (:func:`cnctwin.edge.pipeline.needed_columns`); a columnar file is read now,
+        and only those columns of it.
+        """
+        if self._lazy:
+            from cnctwin.iotools import read_recording
+
+            assert self.path is not None
+            self.recording = read_recording(self.path, columns=columns)
+            self._lazy = False
+        rec = self.recording
+        self._cols = rec.columns if columns is None else [c for c in columns if rec.has(c)]
 
     def identity(self) -> dict[str, Any]:
         """What a checkpoint of this replay must match: the file and its cycle range."""
@@ -203,6 +224,8 @@ class ReplaySource:
 
     def chunks(self) -> Iterator[Chunk]:
         """Chunks of ``chunk_cycles`` rows (a chunk can contain a recorded gap)."""
+        if self._lazy:  # nobody said what is needed: every column
+            self.select_columns(None)
         rec = self.recording
         cyc = rec.cycles
         t_ns = rec.hf["time"].to_numpy(dtype="datetime64[ns]").view(np.int64)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import importlib
 import zipfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -227,7 +227,8 @@ def _reader(kind: str, path: Path) -> Callable[..., Any]:
     return func
 
 
-def read_recording(path: str | PathLike[str], *, salvage: bool = False) -> Recording:
+def read_recording(path: str | PathLike[str], *, salvage: bool = False,
+                   columns: Iterable[str] | None = None) -> Recording:
     """Open any supported recording, detecting its format from name and content.
 
     Parameters
@@ -238,6 +239,10 @@ def read_recording(path: str | PathLike[str], *, salvage: bool = False) -> Recor
     salvage : bool, default False
         Keep what can be read from damaged input and mark the recording partial
         (``rec.meta.partial``) instead of raising. Passed to readers that support it.
+    columns : iterable of str, optional
+        Only these HF columns (full names or signal codes; names the recording does not have
+        are ignored). A reader that can skip columns (Parquet) reads only these; the others
+        read everything and keep these. Default: all.
 
     Returns
     -------
@@ -261,6 +266,10 @@ def read_recording(path: str | PathLike[str], *, salvage: bool = False) -> Recor
     kwargs: dict[str, Any] = {}
     if "salvage" in params:
         kwargs["salvage"] = salvage
+    if columns is not None:
+        columns = list(columns)
+        if "columns" in params:
+            kwargs["columns"] = columns
     rec = func(p, **kwargs)
     if isinstance(rec, ExternalChannel):
         # a source with its own clock only (dynamometer): an empty HF table plus the channel
@@ -271,7 +280,24 @@ def read_recording(path: str | PathLike[str], *, salvage: bool = False) -> Recor
     if not isinstance(rec, Recording):
         # readers may return a Recording plus extras; the first element is the recording
         if isinstance(rec, tuple) and rec and isinstance(rec[0], Recording):
-            return rec[0]
-        raise FormatError(f"reader {func.__module__}.{func.__name__} did not return a "
-                          "Recording", path=str(p))
+            rec = rec[0]
+        else:
+            raise FormatError(f"reader {func.__module__}.{func.__name__} did not return a "
+                              "Recording", path=str(p))
+    if columns is not None and "columns" not in params:
+        rec = rec.select(signals=columns)
     return rec
+
+
+def reads_columns(path: str | PathLike[str]) -> bool:
+    """Whether the reader of this recording's format reads only the columns asked for
+    (:func:`read_recording` ``columns``), so that reading twice (first none, then what is
+    needed) costs less than reading everything once."""
+    import inspect
+
+    p = Path(path)
+    try:
+        func = _reader(detect_format(p), p)
+        return "columns" in inspect.signature(func).parameters
+    except (FormatError, TypeError, ValueError):
+        return False

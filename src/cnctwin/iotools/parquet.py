@@ -19,6 +19,7 @@ file with a ``cycle`` column (e.g. ``Recording.to_arrow()`` written by hand); a 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterable
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -104,13 +105,18 @@ def _objects(df: pd.DataFrame) -> pd.DataFrame:
     return df
 
 
-def read_parquet(path: str | PathLike[str]) -> Recording:
+def read_parquet(path: str | PathLike[str], *,
+                 columns: Iterable[str] | None = None) -> Recording:
     """Read a recording written by :func:`write_parquet`.
 
     Parameters
     ----------
     path : str or path-like
         The directory, its ``hf.parquet``, or a single Parquet file with a ``cycle`` column.
+    columns : iterable of str, optional
+        Only these HF columns (full names ``CODE|AXIS`` or signal codes, as
+        :meth:`cnctwin.recording.Recording.select`); the others are not read from the file
+        (Parquet is columnar). Names the file does not have are ignored. Default: all.
 
     Returns
     -------
@@ -135,7 +141,14 @@ def read_parquet(path: str | PathLike[str]) -> Recording:
     elif p.name == "hf.parquet":
         folder = p.parent
     try:
-        table = pq.read_table(p)
+        names = None
+        if columns is not None:
+            from cnctwin.signals import parse_column
+
+            wanted = set(columns)
+            names = [n for n in pq.read_schema(p).names
+                     if n in ("cycle", "time") or n in wanted or parse_column(n)[0] in wanted]
+        table = pq.read_table(p, columns=names)
     except (pa.ArrowInvalid, OSError) as exc:
         raise FormatError(f"not a readable Parquet file ({exc})", path=str(p)) from exc
     md = table.schema.metadata or {}
