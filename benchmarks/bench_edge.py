@@ -43,7 +43,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from _common import best_wall_cpu, cpu_model
+from _common import best_wall_cpu, cpu_model, export_rev
 from cnctwin.edge import (
     AnomalyProcessor,
     EdgeRuntime,
@@ -80,7 +80,8 @@ def _broker() -> tuple[subprocess.Popen[bytes], int] | None:
 
 
 def _plant_marginal(rec: Recording, tmp: Path, port: int, n_machines: int,
-                    chunk_cycles: int = 50) -> tuple[float, float, float]:
+                    chunk_cycles: int = 50, env: dict[str, str] | None = None
+                    ) -> tuple[float, float, float]:
     """What a machine costs in a plant (``edge run --config``, one worker process, N
     machines as threads): cycles per CPU-second of the process in steady state, the
     start-up CPU per machine [s], and cycles per CPU-second of the machines' pipelines.
@@ -119,7 +120,7 @@ def _plant_marginal(rec: Recording, tmp: Path, port: int, n_machines: int,
         r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         subprocess.run([sys.executable, "-m", "cnctwin", "edge", "run", "--config",
                         str(d / "plant.toml"), "--quiet"], check=True, cwd=d,
-                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
         r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu[key] = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
         if key == "full":
@@ -135,6 +136,11 @@ def main() -> None:
     ap.add_argument("--holes", type=int, default=12)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--plant-machines", type=int, default=20)
+    ap.add_argument("--plant-only", action="store_true",
+                    help="only the plant rows (whole process and pipelines)")
+    ap.add_argument("--baseline-rev", metavar="COMMIT",
+                    help="also the plant rows with the code of this commit (git archive), "
+                    "in the same run")
     args = ap.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
@@ -174,6 +180,32 @@ def main() -> None:
 
     rows: list[tuple[str, float, float]] = []
     target: list[float] = []  # CPU s of the 1 s-message full path with MQTT (replay, plant)
+    if args.plant_only:
+        br = _broker()
+        if br is None:
+            raise SystemExit("mosquitto not found (apt-get install mosquitto)")
+        proc, port = br
+        try:
+            envs: list[tuple[str, dict[str, str] | None]] = [("this code", None)]
+            if args.baseline_rev:
+                old = export_rev(args.baseline_rev, Path(tempfile.mkdtemp(dir=tmp)))
+                envs.append((f"code of {args.baseline_rev}",
+                             {**os.environ, "PYTHONPATH": str(old)}))
+            for chunk in (500, 50):
+                for label, env in envs:
+                    per, start, pipe = _plant_marginal(rec, tmp, port, args.plant_machines,
+                                                       chunk_cycles=chunk, env=env)
+                    rows.append((f"{chunk}-cycle chunks, plant `edge run --config`, 1 worker, "
+                                 f"{args.plant_machines} machines, full path + MQTT, {label}: "
+                                 f"whole process (start-up {start:.2f} CPU-s per machine, not "
+                                 "counted)", float("nan"), per))
+                    rows.append((f"{chunk}-cycle chunks, same run ({label}), the machines' "
+                                 "pipelines", float("nan"), pipe))
+        finally:
+            proc.terminate()
+            proc.wait(timeout=5)
+        _table(rows, args, rec, [])
+        return
     w, c = best_wall_cpu(floor, args.repeat)
     rows.append(("floor: StreamingTorqueEstimator.update, 50-cycle chunks", n / w, n / c))
     w, c = best_wall_cpu(runtime(False), args.repeat)
@@ -252,6 +284,12 @@ def main() -> None:
     else:
         print("mosquitto not found: MQTT row skipped (apt-get install mosquitto)")
     shutil.rmtree(tmp, ignore_errors=True)
+    _table(rows, args, rec, target)
+
+
+def _table(rows: list[tuple[str, float, float]], args: argparse.Namespace, rec: Recording,
+           target: list[float]) -> None:
+    n = rec.n_cycles
     load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
     print(f"machine: {cpu_model()}, {os.cpu_count()} vCPU, pinned to 1; load average "
           f"{load[0]:.1f}/{load[1]:.1f}/{load[2]:.1f}; python {platform.python_version()}")

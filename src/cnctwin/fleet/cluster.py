@@ -23,12 +23,26 @@ from typing import Any, TypeVar
 
 from cnctwin.exceptions import ClusterError
 
-__all__ = ["SCHEDULER_ENV", "fleet_client", "map_tasks"]
+__all__ = ["SCHEDULER_ENV", "WORKER_CONFIG", "fleet_client", "map_tasks"]
 
 SCHEDULER_ENV = "CNCTWIN_SCHEDULER"
 """Environment variable naming the scheduler address when ``--scheduler`` is not given."""
 
 T = TypeVar("T")
+
+
+WORKER_CONFIG: dict[str, Any] = {
+    # the statistical profiler samples the task's stack every 10 ms: ~25 % of a fleet task's
+    # CPU; the dashboard's profile page is the only loss
+    "distributed.worker.profile.enabled": False,
+    # Dask's nanny gives workers MALLOC_TRIM_THRESHOLD_=65536: glibc then returns freed heap
+    # to the system after nearly every analysis array and faults it back in for the next
+    # (health: 29.5 s of worker CPU against 15.6 s in one process; 16-128 MiB: no difference
+    # from the process)
+    "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": 64 * 2**20,
+}
+"""Dask configuration of the embedded cluster's workers (docs/fleet.md gives it for workers
+started by hand)."""
 
 
 @contextmanager
@@ -84,10 +98,9 @@ def fleet_client(
     # client and are raised there
     import dask
 
-    # the workers' statistical profiler (a stack sample every 10 ms) cost a fleet task about a
-    # quarter of its CPU (bench_fleet.py: 0.85-0.95 s against 0.67 s in this process); the
-    # dashboard's profile page is the only loss
-    with dask.config.set({"distributed.worker.profile.enabled": False}):
+    # WORKER_CONFIG: without it a fleet task cost its worker 1.9x the CPU it costs in this
+    # process (docs/fleet.md)
+    with dask.config.set(WORKER_CONFIG):
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                memory_limit=memory_limit, dashboard_address=":0",
                                silence_logs=logging.CRITICAL)
