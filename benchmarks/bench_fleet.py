@@ -94,16 +94,19 @@ def _health(parts: list[Any], store: str, client: Any) -> pd.DataFrame:
     return health_table(run_job(health_estimates, tasks, client=client, store_url=store))
 
 
-def _run_cluster(n: int, parts: list[Any], store: str) -> tuple[float, pd.DataFrame, list[Any]]:
+def _run_cluster(n: int, parts: list[Any], store: str, repeat: int
+                 ) -> tuple[float, pd.DataFrame, list[Any]]:
     from cnctwin.fleet import fleet_client
 
     with fleet_client(n_workers=n) as client:
         client.wait_for_workers(n)
         base = client.run(_warm)
         _health(parts[:n], store, client)  # one throw-away partition per worker
-        t0 = time.perf_counter()
-        table = _health(parts, store, client)
-        dt = time.perf_counter() - t0
+        dt = float("inf")
+        for _ in range(repeat):  # best of: the 2 vCPU are shared with other jobs of the host
+            t0 = time.perf_counter()
+            table = _health(parts, store, client)
+            dt = min(dt, time.perf_counter() - t0)
         peak = client.run(_peak_rss_mb)
         mem = [(w, base[w], peak[w]) for w in sorted(base)]
     return dt, table, mem
@@ -135,6 +138,8 @@ def main() -> int:
     ap.add_argument("--days", type=int, default=3)
     ap.add_argument("--cycles-per-day", type=int, default=32)
     ap.add_argument("--baseline-machines", type=int, default=1)
+    ap.add_argument("--repeat", type=int, default=3,
+                    help="cluster runs of the job, best taken (default 3)")
     ap.add_argument("--baseline-rev", default="8d20024",
                     help="the commit whose health job is the baseline (before issue 28's "
                     "window; default 8d20024)")
@@ -172,8 +177,8 @@ def main() -> int:
         with cstore.open(store, read_only=True) as st:
             n_rec = len(st.recordings())
 
-        t1, r1, mem1 = _run_cluster(1, parts, store)
-        t2, r2, mem2 = _run_cluster(2, parts, store)
+        t1, r1, mem1 = _run_cluster(1, parts, store, args.repeat)
+        t2, r2, mem2 = _run_cluster(2, parts, store, args.repeat)
 
         # baseline and per-job costs on the first machines, every recorded cycle
         base_m = sorted({p.machine for p in parts})[: args.baseline_machines]
@@ -230,7 +235,8 @@ def main() -> int:
         f"{analysed:,} cycles, {analysed / recorded:.1%} of the recorded), the axis and "
         "spindle columns only. One BLAS/OpenMP thread per process; the single-process paths "
         f"pinned to one core ({pinned}); cluster start and one warm-up task per worker "
-        "excluded; results identical on the three windowed paths (checked).",
+        f"excluded, best of {args.repeat} runs per cluster; results identical on the three "
+        "windowed paths (checked).",
         "",
         "| path | wall s | s per recorded machine-hour | x lower than 89.8 us/cycle "
         "(161.6 s/h) | parallel efficiency |",
