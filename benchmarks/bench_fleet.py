@@ -306,7 +306,11 @@ def main() -> int:
         "job. Task sizing: `fleet health` splits the (machine, day) partitions at recording "
         "boundaries until there are 4 tasks per worker (`split_partitions`; 16 workers: 64 "
         "tasks), tested with a fleet of two large partitions (tests/fleet/test_windows.py); "
-        "a shift window is at most one part cycle or 600 s of a stream, so no task is large.",
+        "a shift window is at most one part cycle or 600 s of a stream, so no task is large."
+        " The 1-worker cluster costs about what one process does since its workers keep "
+        "glibc's heap (Dask's nanny sets `MALLOC_TRIM_THRESHOLD_=65536`: the same tasks took "
+        "1.9x the CPU) and run without Dask's statistical profiler "
+        "(`cnctwin.fleet.cluster.WORKER_CONFIG`, docs/fleet.md).",
     ]
     text = "\n".join(lines)
     print(text)
