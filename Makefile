@@ -41,7 +41,7 @@ services:
 	@bash scripts/ensure-services.sh
 
 pytest: $(STAMP) services
-	$(BIN)/python -m pytest -n 2 --dist loadgroup -q
+	$(BIN)/python -m pytest -n 2 --dist loadgroup -q --durations=15
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py

@@ -119,3 +119,15 @@ def test_split_rule_keeps_16_workers_busy_and_the_table_unchanged(
     pd.testing.assert_frame_equal(split.sort_values(key, ignore_index=True),
                                   whole.sort_values(key, ignore_index=True))
     assert (whole["n"] == 4).any()  # the day's 4 recordings combined
+
+
+@pytest.mark.parametrize("bad", [["--window-s", "0"], ["--window-s", "x"],
+                                 ["--window-s", "20", "--all-cycles"], ["--shift-hours", "-1"]])
+def test_bad_window_options_are_one_line(shift_store: str, tmp_path: Path,
+                                         bad: list[str]) -> None:
+    res = cnctwin("fleet", "health", "--store", shift_store, "--out", str(tmp_path / "r"),
+                  *bad, check=False)
+    assert res.returncode == 2
+    assert "Traceback" not in res.stderr
+    assert ("--window-s" in res.stderr or "--shift-hours" in res.stderr
+            or "--all-cycles" in res.stderr), res.stderr

@@ -563,7 +563,20 @@ def holes_frame(rows: Sequence[Sequence[Any]], columns: Sequence[str]) -> pd.Dat
 
 # ---------------------------------------------------------------------------- the interface
 def wanted_columns(columns: Sequence[str], signals: Iterable[str] | None) -> list[str]:
-    """The stored columns a :meth:`Store.load` ``signals`` selection keeps, in stored order."""
+    """The stored columns a :meth:`Store.load` ``signals`` selection keeps, in stored order.
+
+    Parameters
+    ----------
+    columns : sequence of str
+        The recording's stored HF columns (``CODE|AXIS``).
+    signals : iterable of str or None
+        Signal codes or full column names; None keeps every column.
+
+    Returns
+    -------
+    list of str
+        The kept columns.
+    """
     if signals is None:
         return list(columns)
     wanted = set(signals)
