@@ -94,6 +94,21 @@ def test_breakage_in_the_first_hole_of_a_condition() -> None:
     assert j.references == {}  # a broken hole is no reference
 
 
+def test_a_tap_breaking_in_the_first_hole_of_its_condition() -> None:
+    """A tap is fully engaged at the end of its infeed as a drill is (healthy taps of the
+    soak, bench_soak.py draw 106: last/mean 1.13-1.16; broken half-way: 0.24): the same
+    first-hole rule, said as a tap; it was found only a hole later (no_load) before."""
+    tap = {"cycle": "CYCLE84", "tool": 2, "depth_mm": 12.0, "speed_rpm": 500.0,
+           "feed_mm_min": 500.0}
+    j = HoleLoadJudge()
+    assert j.judge(_row(2, 17.96, last=20.88, **tap)) is None  # healthy: taught
+    j = HoleLoadJudge()
+    v = j.judge(_row(2, 8.87, last=2.10, **tap))
+    assert v is not None and v.kind == "breakage" and "tap broke" in v.message
+    nxt = j.judge(_row(3, 1.84, last=2.11, **tap))  # the stub rubs on: still broken
+    assert nxt is not None and nxt.kind == "no_load"
+
+
 def test_a_loose_tap_is_its_extraction_fluctuation() -> None:
     """Thesis Fig. 5.10: a loose tap stick-slips while it is extracted; the healthy taps of
     one condition scatter by ~5 % (draw 106: 0.102-0.103 A at 500 rpm), a loose one 1.7x

@@ -33,9 +33,9 @@ and the feed within 2 % + 2 mm/min of the first hole's (measured values scatter:
 depth reads 11.7 or 11.8 mm): a change beyond that is a new cut and is taught anew.
 The first hole of a condition is never judged against a reference (there is none), except:
 
-* a drilling-cycle hole whose torque at the end of the cut (the drill fully engaged, where it
-  is at least the cut's mean: the entry cone lowers the mean) falls below ``breakage_ratio``
-  of the cut's own mean broke in that hole;
+* a drilling or tapping-cycle hole whose torque at the end of the cut (the drill or tap
+  fully engaged, where it is at least the cut's mean: the entry cone or the tap's chamfer
+  lowers the mean) falls below ``breakage_ratio`` of the cut's own mean broke in that hole;
 * a drilling-cycle hole whose cutting torque stays below ``min_load_nm`` over the whole cut
   cut nothing;
 * after a breakage of tool T, the rubbing of its stub is known (the torque of the holes after
@@ -171,8 +171,9 @@ class HoleLoadJudge:
         fluct = _finite(row.get("reverse_current_fluct_a"))
         if mean is None:
             return None  # no torque estimate (flagged samples only): nothing to judge
-        drilling = str(row.get("cycle", "")).upper().startswith("CYCLE8") and \
-            str(row.get("cycle", "")).upper() != "CYCLE84"
+        cyc_name = str(row.get("cycle", "")).upper()
+        cutting = cyc_name.startswith("CYCLE8")  # drilling and tapping cycles
+        drilling = cutting and cyc_name != "CYCLE84"
         key = self._key(row)
         refs = self.references.get(key, [])
         tool = row.get("tool")
@@ -187,16 +188,19 @@ class HoleLoadJudge:
                     f"({stub:.2f} Nm since its breakage): still no cutting load")
             del self.broken[tool]  # it cuts: the tool was replaced
         if len(refs) < self.teach_holes:
-            if drilling and last is not None and mean >= self.min_load_nm and \
+            if cutting and last is not None and mean >= self.min_load_nm and \
                     last < self.breakage_ratio * mean:
-                # no reference yet, but a drill is fully engaged at the end of its cut: its
-                # torque there is at least the cut's mean (the entry ramp lowers the mean)
+                # no reference yet, but a drill or a tap is fully engaged at the end of its
+                # infeed: its torque there is at least the cut's mean (the entry cone or the
+                # tap's chamfer lowers the mean; healthy taps of the soak: last/mean
+                # 1.13-1.16, a tap broken half-way: 0.24)
                 self.broken[tool] = last
+                what = "tap" if not drilling else "drill"
                 return HoleLoadVerdict(
                     "breakage", hole, last / mean, mean,
                     f"hole {hole}: the torque fell to {last:.2f} Nm at the end of the cut, "
                     f"{100 * last / mean:.0f} % of the cut's mean {mean:.2f} Nm (first hole "
-                    "of its cut condition): the drill broke in this hole")
+                    f"of its cut condition): the {what} broke in this hole")
             if drilling and mean < self.min_load_nm:
                 return HoleLoadVerdict(
                     "no_load", hole, math.nan, math.nan,
