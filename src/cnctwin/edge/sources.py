@@ -346,7 +346,10 @@ class DatabusSource:
     def start(self) -> DatabusSource:
         """Connect, subscribe and wait for the metadata (bounded by ``ready_timeout_s``)."""
         if not self._started:
+            from cnctwin.iotools._databus_scan import warm_up
+
             self.recorder.start()
+            warm_up()  # while the metadata comes in
             self.recorder.wait_ready(timeout_s=self.ready_timeout_s)
             self._started = True
         return self

@@ -48,6 +48,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from cnctwin.exceptions import ConfigError, FormatError
+from cnctwin.iotools._databus_scan import BulkScan, id_table, scan_bulk
 from cnctwin.recording import Recording, RecordingMeta
 
 __all__ = ["QC_NAMES", "DatabusColumns", "DatabusDecoder", "DatabusValue"]
@@ -178,6 +179,22 @@ _PLAIN_UTC = re.compile(r"\d{4}-\d\d-\d\d(?:T\d\d(?::\d\d(?::\d\d(?:\.\d{1,9})?)
 """``YYYY-MM-DD[Thh[:mm[:ss[.f]]]][Z]``: a UTC time numpy reads as the general path does."""
 
 
+def _quality_issues(qc: NDArray[np.int64], col: NDArray[np.int64], names: list[str]
+                    ) -> list[str]:
+    """Issues counting the values of quality BAD and UNCERTAIN per column (as
+    :meth:`DatabusDecoder.recording` counts them)."""
+    issues = []
+    for q, label in ((0, "BAD"), (1, "UNCERTAIN")):
+        bad = np.flatnonzero(qc == q)
+        if bad.size:
+            per: dict[str, int] = {}
+            for j in bad.tolist():
+                c = names[int(col[j])]
+                per[c] = per.get(c, 0) + 1
+            issues.append(f"{bad.size} values with quality {label} (qc={q}) kept: {per}")
+    return issues
+
+
 def _load(message: str | bytes | dict[str, Any], label: str) -> dict[str, Any]:
     if isinstance(message, dict):
         return message
@@ -263,6 +280,8 @@ class DatabusDecoder:
         self._ids: dict[str, dict[str, str]] = {}
         self._topics: dict[str, dict[str, Any]] = {}
         self._last_seq: dict[str, int] = {}
+        self._lut: NDArray[np.int64] | None = None
+        self._lut_names: list[str] = []
         if metadata is not None:
             self.update_metadata(metadata)
 
@@ -345,6 +364,10 @@ class DatabusDecoder:
         self.metadata = doc
         self._ids = ids
         self._topics = topics
+        names = list(dict.fromkeys(v["column"] for v in ids.values()))
+        index = {c: j for j, c in enumerate(names)}
+        self._lut_names = names
+        self._lut = id_table({k: index[v["column"]] for k, v in ids.items()})
 
     # ------------------------------------------------------------------ data
     def decode(self, message: str | bytes | dict[str, Any], *, topic: str = "<data>",
@@ -401,6 +424,13 @@ class DatabusDecoder:
         """
         if self.metadata is None:
             return None
+        if self._lut is not None and isinstance(message, bytes):
+            # one numba pass over the bytes for the regular HF layout (no object per value)
+            scan = scan_bulk(message, self._lut)
+            if scan is not None:
+                got = self._scanned(scan, topic)
+                if got is not None:
+                    return got
         try:  # typed decode in C: every value an object with str id/ts, number val, int qc
             # (the UTF-8 check first: msgspec does not look inside the keys it skips)
             text = message.decode("utf-8") if isinstance(message, bytes) else message
@@ -465,17 +495,25 @@ class DatabusDecoder:
         cols = {c: grid[:, j].copy() for j, c in enumerate(names)}
         qc = [v.qc for v in vals]
         if min(qc) < 2:
-            qa = np.array(qc)
-            for q, label in ((0, "BAD"), (1, "UNCERTAIN")):
-                bad = np.flatnonzero(qa == q)
-                if bad.size:
-                    per: dict[str, int] = {}
-                    for j in bad.tolist():
-                        c = names[int(col[j])]
-                        per[c] = per.get(c, 0) + 1
-                    issues.append(f"{bad.size} values with quality {label} (qc={q}) kept: "
-                                  f"{per}")
+            issues += _quality_issues(np.array(qc), col, names)
         return DatabusColumns(cycles, cols, n, issues)
+
+    def _scanned(self, scan: BulkScan, topic: str) -> DatabusColumns | None:
+        """:class:`DatabusColumns` of a :func:`scan_bulk` result (None: rows not in cycle
+        order, which the scattering path sorts out)."""
+        step = round(self.cycle_time_s * 1e9)
+        cycles = scan.t_ns // step
+        if cycles.size > 1 and not bool((np.diff(cycles) > 0).all()):
+            return None
+        names = [self._lut_names[int(c)] for c in scan.cols]
+        grid = scan.values.reshape(cycles.size, scan.k)
+        self._seq({"seq": scan.seq}, topic)
+        cols = {c: grid[:, j].copy() for j, c in enumerate(names)}
+        issues: list[str] = []
+        if scan.qc.min() < 2:
+            col = np.tile(np.arange(scan.k, dtype=np.int64), cycles.size)
+            issues = _quality_issues(scan.qc, col, names)
+        return DatabusColumns(cycles, cols, int(scan.values.size), issues)
 
     def _decode(self, message: str | bytes | dict[str, Any], topic: str,
                 ) -> list[DatabusValue]:
