@@ -163,3 +163,35 @@ def test_hand_checked_message() -> None:
     d.decode_columns(msg.replace(b'"41"', b"43"), topic=TOPIC)
     assert d.issues[-1] == f"{TOPIC}: seq jumped from 41 to 43"
     assert time.gmtime(1795827723)[:6] == (2026, 11, 28, 1, 2, 3)
+
+
+def test_rows_written_otherwise_than_the_first_are_parsed_in_full() -> None:
+    """From the second row on, the scanner reads a value object as a byte copy of the first
+    row's at its place (but timestamp and number); a row written otherwise (other key order,
+    whitespace, timestamp precision, a qc given) is parsed in full, with the same result as
+    the typed path."""
+    rows = [
+        b'{"id":"1","qc":3,"ts":"2026-11-28T01:02:03.004Z","val":1.5},'
+        b'{"id":"7","qc":3,"ts":"2026-11-28T01:02:03.004Z","val":2}',
+        b'{"id":"1","qc":3,"ts":"2026-11-28T01:02:03.006Z","val":-1e-3},'
+        b'{"id":"7","qc":3,"ts":"2026-11-28T01:02:03.006Z","val":20.25}',
+        b'{"qc":3, "id":"1","val":3,"ts":"2026-11-28T01:02:03.008Z"},'
+        b'{ "id" : "7", "ts":"2026-11-28T01:02:03.008Z","val":4}',
+        b'{"id":"1","qc":1,"ts":"2026-11-28T01:02:03.01Z","val":5},'
+        b'{"id":"7","qc":3,"ts":"2026-11-28T01:02:03.01Z","val":6}',
+        b'{"id":"1","qc":3,"ts":"2026-11-28T01:02:03.012Z","val":7.0},'
+        b'{"id":"7","qc":3,"ts":"2026-11-28T01:02:03.012Z","val":8}',
+    ]
+    msg = b'{"seq":9,"vals":[' + b",".join(rows) + b"]}"
+    d = DatabusDecoder(META)
+    assert scan_bulk(msg, d._lut) is not None  # type: ignore[arg-type]
+    fast = d.decode_columns(msg, topic=TOPIC)
+    typed = _without_scan(DatabusDecoder(META)).decode_columns(msg, topic=TOPIC)
+    _same(fast, typed)
+    assert fast is not None and fast.columns["S1"].tolist() == [1.5, -1e-3, 3, 5, 7]
+    assert fast.columns["S7"].tolist() == [2, 20.25, 4, 6, 8]
+    assert fast.issues == ["1 values with quality UNCERTAIN (qc=1) kept: {'S1': 1}"]
+    # a later row whose id differs from the first row's at that place: not the layout
+    bad = msg.replace(b'{"id":"7","qc":3,"ts":"2026-11-28T01:02:03.012Z"',
+                      b'{"id":"12","qc":3,"ts":"2026-11-28T01:02:03.012Z"')
+    assert scan_bulk(bad, d._lut) is None  # type: ignore[arg-type]

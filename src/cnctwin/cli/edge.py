@@ -287,21 +287,32 @@ def _machine_args(plant_path: Path, m: Any) -> argparse.Namespace:
     return ns
 
 
-def _plant_worker(plant_path: str, names: list[str], report_queue: Any) -> None:
-    """Worker process of ``edge run --config``: run the named machines (one thread each)."""
+def _plant_worker(plant_path: str, names: list[str], report_queue: Any,
+                  session_key: str = "") -> None:
+    """Worker process of ``edge run --config``: run the named machines; the live ones on one
+    broker share one MQTT connection (client id from ``session_key``: the same across the
+    worker's restarts, so its persistent session resumes)."""
     import os
 
+    from cnctwin.edge import session_client_id
     from cnctwin.edge.plant import run_machines, worker_signals
+    from cnctwin.iotools.mqtt import MqttHubs
 
     stop = threading.Event()
     worker_signals(stop)
     report_queue.put(("", "ready", os.getpid()))  # a stop now drains instead of killing
     plant = read_plant_file(Path(plant_path))
+    hubs = MqttHubs(session_client_id(f"plant-{session_key or '+'.join(names)}", ""),
+                    machines=len(names))
     builders = []
     for name in names:
         ns = _machine_args(plant.path, plant.machine(name))
+        ns.mqtt_hubs = hubs
         builders.append((name, lambda ns=ns: _build(ns)))
-    run_machines(builders, report=lambda n, w, v: report_queue.put((n, w, v)), stop=stop)
+    try:
+        run_machines(builders, report=lambda n, w, v: report_queue.put((n, w, v)), stop=stop)
+    finally:
+        hubs.stop()
 
 
 def plant_table(plant: Any, results: dict[str, Any] | None = None,
@@ -508,11 +519,17 @@ def _build(args: argparse.Namespace) -> Any:
         if resume is not None:
             print(f"resuming after cycle {resume} (the last in {args.out / 'results.jsonl'})",
                   file=sys.stderr)
+        hubs = getattr(args, "mqtt_hubs", None)  # a plant worker: one connection per broker
+        hub = None if hubs is None else hubs.get(
+            u.host, u.port, username=u.username, password=u.password, security=security,
+            session_expiry_s=args.session_expiry_s)
+        if hub is not None:
+            client_id = hub.client_id
         src = DatabusSource(u.host, u.port, metadata_topic=u.topic, name_map=name_map,
                             username=u.username, password=u.password, machine=args.machine,
                             idle_timeout_s=args.idle_timeout_s, security=security,
                             client_id=client_id, session_expiry_s=args.session_expiry_s,
-                            resume_after_cycle=resume)
+                            resume_after_cycle=resume, hub=hub)
         print(f"connecting to {u.host}:{u.port}, waiting for the Databus metadata on "
               f"{u.topic} (up to {src.ready_timeout_s:.0f} s) ...", file=sys.stderr)
         try:

@@ -25,8 +25,10 @@ model or machine file, state directory (``seq``, status, results, outbox) and to
 :mod:`cnctwin.edge.runtime` guarantees for one machine (exactly once across restarts, counted
 losses) holds for each machine of the plant.
 
-:func:`run_machines` runs the runtimes of some machines in one process, one thread each (the
-CPU work of a machine is a few percent of a core; the threads wait on their sources);
+:func:`run_machines` runs the runtimes of some machines in one process: the live machines on
+one broker share one MQTT connection (:class:`~cnctwin.iotools.mqtt.MqttHub`) and are driven
+from one thread, each message routed to its machine; any other source runs in a thread of its
+own;
 :class:`PlantRunner` spreads the machines over worker processes (``spawn``), one per core, so
 the interpreter lock never limits a plant to one core, restarts a worker that dies and stops
 them all on SIGTERM or Ctrl-C.
@@ -223,27 +225,71 @@ Report = Callable[[str, str, Any], None]
 status) or ``"error"`` (value: the message)."""
 
 
+def _error_text(exc: BaseException) -> str:
+    if isinstance(exc, CnctwinError):
+        return str(exc)
+    if isinstance(exc, (OSError, ConnectionError, TimeoutError)):
+        return f"{type(exc).__name__}: {exc}"
+    return f"internal error: {type(exc).__name__}: {exc}"
+
+
+class _Pumped:
+    """A machine whose live source shares its worker's MQTT hub, driven from the worker's
+    thread: its runtime takes what the source has each time the hub routed messages to it,
+    and an idle tick every ``idle_s``."""
+
+    def __init__(self, name: str, rt: Any) -> None:
+        self.name = name
+        self.rt = rt
+        src = rt.source
+        self.idle_s = float(src.window_s)
+        src.window_s = 0.0  # chunks() never waits: it yields an idle chunk when empty
+        self.chunks = rt.begin()
+
+    def pump(self, *, idle: bool) -> bool:
+        """Process what arrived (and an idle tick if ``idle``); True when the run ended."""
+        for chunk in self.chunks:
+            if len(chunk):
+                self.rt.process(chunk)
+                if self.rt.stopping:
+                    return False  # the next pump ends the source and drains it
+                continue
+            if idle:
+                self.rt.idle()
+            return False
+        return True
+
+
 def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
-                 report: Report, stop: threading.Event) -> None:
-    """Build and run the runtime of each machine in its own thread, until all have ended.
+                 report: Report, stop: threading.Event, tick_s: float = 0.5) -> None:
+    """Build and run the runtimes of some machines in one process, until all have ended.
 
     Parameters
     ----------
     builders : sequence of (str, callable)
-        Machine name and a function that builds its runtime (called in the thread, so a slow
-        connection of one machine does not hold the others up).
+        Machine name and a function that builds its runtime (called in a thread of its own,
+        so a slow connection of one machine does not hold the others up).
     report : callable
         ``report(name, what, value)`` on start, end and error of each machine.
     stop : threading.Event
         Set it to stop every runtime (each drains what it received and closes its sinks).
+    tick_s : float, default 0.5
+        Idle tick of the machines driven from this thread [s].
 
     Notes
     -----
-    A machine whose build or run fails (a broker that refuses it, a missing file) is reported
-    and ends; the others go on.
+    A machine whose live source shares an MQTT hub (:class:`cnctwin.iotools.mqtt.MqttHub`: a
+    plant worker's machines on one broker) is driven from this function's thread once built:
+    the hub's network thread routes each message to its machine's queue, this thread runs
+    that machine's pipeline on it, and ticks every machine (status, sinks, idle timeout) once
+    per ``tick_s``: no thread per machine. Any other runtime (a replay, OPC UA) runs in its
+    build thread. A machine whose build or run fails (a broker that refuses it, a missing
+    file) is reported and ends; the others go on.
     """
     runtimes: dict[str, _Runtime] = {}
     lock = threading.Lock()
+    wake = threading.Event()
+    handed: list[tuple[str, Any]] = []  # built, to be driven from this thread
 
     def one(name: str, build: Callable[[], _Runtime]) -> None:
         try:
@@ -254,34 +300,78 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
             if stopping:
                 rt.stop()
             report(name, "started", None)
+            if getattr(getattr(rt, "source", None), "hub", None) is not None:
+                with lock:
+                    handed.append((name, rt))
+                wake.set()
+                return
             report(name, "done", rt.run())
-        except CnctwinError as exc:
-            report(name, "error", str(exc))
-        except (OSError, ConnectionError, TimeoutError) as exc:
-            report(name, "error", f"{type(exc).__name__}: {exc}")
         except Exception as exc:  # one machine's bug must not take the plant down
-            report(name, "error", f"internal error: {type(exc).__name__}: {exc}")
+            report(name, "error", _error_text(exc))
 
     threads = [threading.Thread(target=one, args=(n, b), name=f"edge-{n}", daemon=True)
                for n, b in builders]
     for th in threads:
         th.start()
+    pumped: dict[Any, _Pumped] = {}  # the source's hub port -> machine
+    hubs: set[Any] = set()
     stopped = False
-    while any(th.is_alive() for th in threads):
-        if stop.wait(0.2) and not stopped:
+    next_tick = time.monotonic() + tick_s
+    while True:
+        with lock:
+            new, handed[:] = list(handed), []
+        for name, rt in new:
+            try:
+                m = _Pumped(name, rt)
+            except Exception as exc:
+                report(name, "error", _error_text(exc))
+                continue
+            hub = rt.source.hub
+            hub.notify = wake
+            hubs.add(hub)
+            pumped[rt.source.recorder._client] = m
+        if not pumped and not new and not any(th.is_alive() for th in threads):
+            with lock:
+                if not handed:
+                    break
+        if stop.is_set() and not stopped:
             stopped = True
             with lock:
                 for rt in runtimes.values():
                     rt.stop()
+        touched: set[Any] = set()
+        for h in hubs:
+            touched |= h.take_touched()
+        now = time.monotonic()
+        tick = now >= next_tick or stopped
+        if tick:
+            next_tick = now + tick_s
+        for port, m in list(pumped.items()):
+            if not (tick or port in touched):
+                continue
+            try:
+                ended = m.pump(idle=tick)
+                if ended:
+                    del pumped[port]
+                    report(m.name, "done", m.rt.end())
+            except Exception as exc:
+                del pumped[port]
+                report(m.name, "error", _error_text(exc))
+                with contextlib.suppress(Exception):
+                    m.rt.end()
+        if not touched:
+            wake.wait(max(0.0, min(next_tick - time.monotonic(), 0.2)))
     for th in threads:
         th.join()
 
 
 # ---------------------------------------------------------------------- many processes
-Worker = Callable[[str, list[str], Any], None]
-"""``worker(plant_path, machine_names, report_queue)``: a top-level function (picklable by
-reference) that runs the named machines of the plant file in a worker process and puts
-``(name, what, value)`` tuples on the queue (:func:`run_machines` does the running); first
+Worker = Callable[[str, list[str], Any, str], None]
+"""``worker(plant_path, machine_names, report_queue, session_key)``: a top-level function
+(picklable by reference) that runs the named machines of the plant file in a worker process
+(``session_key``: the same for a worker slot across restarts, the key of its MQTT session)
+and puts ``(name, what, value)`` tuples on the queue (:func:`run_machines` does the
+running); first
 ``("", "ready", os.getpid())`` once its SIGTERM handler is installed
 (:func:`worker_signals`), so that a stop never kills it half-started."""
 
@@ -347,8 +437,12 @@ class PlantRunner:
     def _start(self, slot: _Slot) -> None:
         names = [n for n in slot.names if n not in slot.finished]
         slot.ready = slot.term_sent = False
+        import hashlib
+
+        # the worker's MQTT session key: its slot's machines, the same across its restarts
+        key = hashlib.sha1("+".join(slot.names).encode()).hexdigest()[:12]
         slot.proc = self._ctx.Process(target=self.worker,
-                                      args=(str(self.plant.path), names, self._queue),
+                                      args=(str(self.plant.path), names, self._queue, key),
                                       name=f"cnctwin-edge-{'+'.join(names)[:40]}", daemon=False)
         slot.proc.start()
 

@@ -17,7 +17,7 @@ import os
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
@@ -490,6 +490,31 @@ class EdgeRuntime:
         -------
         dict
             The final status.
+
+        See Also
+        --------
+        begin, handle, end : the same run driven from outside, a chunk at a time (a plant
+            worker drives all its live machines so, from one thread).
+        """
+        chunks = self.begin(on_status=on_status)
+        try:
+            for chunk in chunks:
+                self.handle(chunk)
+                if self._stop.is_set() or (max_cycles is not None
+                                           and self.c.cycles >= max_cycles):
+                    break
+        finally:
+            self.end(close=close)
+        return self.final_status if self.final_status is not None else self.status()
+
+    def begin(self, *, on_status: Callable[[dict[str, Any]], None] | None = None
+              ) -> Iterator[Chunk]:
+        """Start a run driven from outside: the ``run`` message, then the source's chunks.
+
+        Returns
+        -------
+        iterator of Chunk
+            The source's :meth:`chunks`; give each to :meth:`handle`, then call :meth:`end`.
         """
         self._on_status = on_status
         self.state = "running"
@@ -503,15 +528,24 @@ class EdgeRuntime:
             "live": bool(getattr(src, "live", False)),
             "resume_after_cycle": getattr(src, "resume_after_cycle", None),
             "resumed": self.resumed})], None)
+        return iter(self.source.chunks())
+
+    def handle(self, chunk: Chunk) -> None:
+        """One chunk of :meth:`begin`'s iterator: processed, or an idle tick when empty."""
+        if len(chunk):
+            self.process(chunk)
+        else:  # a live source with nothing new: status and sinks keep going
+            self.idle()
+
+    @property
+    def stopping(self) -> bool:
+        """:meth:`stop` was called."""
+        return self._stop.is_set()
+
+    def end(self, *, close: bool = True) -> dict[str, Any]:
+        """End a run: after a stop, a live source's drain is processed; then :meth:`finish`
+        (when ``close``). Returns the final status."""
         try:
-            for chunk in self.source.chunks():
-                if len(chunk):
-                    self.process(chunk)
-                else:  # a live source with nothing new: status and sinks keep going
-                    self.idle()
-                if self._stop.is_set() or (max_cycles is not None
-                                           and self.c.cycles >= max_cycles):
-                    break
             if self._stop.is_set():
                 # a live source disconnects first, then hands over what it already received
                 # (and acknowledged): processed, not lost

@@ -22,7 +22,7 @@ import pandas as pd
 
 from cnctwin.edge.pipeline import Chunk, no_events
 from cnctwin.exceptions import ConfigError
-from cnctwin.iotools.mqtt import MqttSecurity
+from cnctwin.iotools.mqtt import MqttHub, MqttSecurity
 from cnctwin.recording import CYCLE_COUNTER_MODULUS, Recording
 
 __all__ = ["DatabusSource", "MqttUrl", "ReplaySource", "parse_mqtt_url", "session_client_id"]
@@ -308,6 +308,11 @@ class DatabusSource:
         With acknowledgements held until checkpoints (:meth:`hold_acks_until_checkpoint`):
         ask the runtime for a checkpoint once this many messages wait (a broker sends only
         so many unacknowledged QoS 1 messages: mosquitto's default is 20).
+    hub : MqttHub, optional
+        The connection of a plant worker, shared by its machines (``host``, ``port``, the
+        user, ``client_id`` and the session are then the hub's). A plant worker drives such
+        sources from one thread (:func:`cnctwin.edge.plant.run_machines`): ``window_s`` 0, so
+        :meth:`chunks` never waits.
     """
 
     def __init__(self, host: str, port: int = 1883, *, metadata_topic: str,
@@ -317,14 +322,15 @@ class DatabusSource:
                  machine: str = "", ready_timeout_s: float = 30.0,
                  security: MqttSecurity | None = None, client_id: str = "",
                  session_expiry_s: int = 0, resume_after_cycle: int | None = None,
-                 ack_batch: int = 10) -> None:
+                 ack_batch: int = 10, hub: MqttHub | None = None) -> None:
         from cnctwin.iotools.mqtt import MqttRecorder
 
         self.recorder = MqttRecorder(host, port, metadata_topic=metadata_topic,
                                      name_map=name_map, cycle_time_s=cycle_time_s,
                                      username=username, password=password, security=security,
                                      client_id=client_id, session_expiry_s=session_expiry_s,
-                                     qos=1, columnar=True, manual_ack=True)
+                                     qos=1, columnar=True, manual_ack=True, hub=hub)
+        self.hub = hub
         self.window_s = window_s
         self.idle_timeout_s = idle_timeout_s
         self.cycle_time_s = cycle_time_s
@@ -443,8 +449,11 @@ class DatabusSource:
 
     def hold_acks_until_checkpoint(self, on: bool = True) -> None:
         """Acknowledge messages only when :meth:`checkpointed` says a checkpoint of the
-        runtime covers them (the runtime turns this on when it writes checkpoints)."""
-        self._hold_acks = bool(on)
+        runtime covers them (the runtime turns this on when it writes checkpoints).
+
+        Only with a persistent session: a clean session's broker delivers nothing again
+        after a crash, so holding would only keep the broker's in-flight window full."""
+        self._hold_acks = bool(on) and self.recorder._client.session_expiry_s > 0
 
     def checkpointed(self) -> None:
         """The runtime wrote a checkpoint after the last chunk yielded: acknowledge its

@@ -9,8 +9,13 @@ an HF message repeats one per cycle), the quality code, and the number's text, c
 parser of the project reads them). Anything outside that strict subset (escapes, quoted or
 64-bit numbers, text values, other keys, a timestamp with an offset, ids that are not plain
 decimals, an irregular layout) is declined: the caller then uses the general decoder, which
-handles and names every shape. A plain HF message: about 4x faster than a typed ``msgspec``
-decode into objects (BENCHMARKS.md, "Many machines live").
+handles and names every shape.
+
+From the second row on, a value object is first compared byte for byte with the first row's
+object at its place (the template: the same id, qc and keys, written the same way), so only
+its timestamp (compared with its row's) and its number are read; an object written otherwise
+is parsed in full. A 500-cycle HF message of 11 datapoints: 0.8 ms against 1.4 ms for a typed
+``msgspec`` decode into objects (BENCHMARKS.md, "Many machines live").
 """
 
 from __future__ import annotations
@@ -252,6 +257,216 @@ def _number(buf, i, n):  # type: ignore[no-untyped-def]
     return k
 
 
+def _obj(buf, i, n, lut):  # type: ignore[no-untyped-def]
+    """A value object at buf[i] (``{"id", "qc", "ts", "val"}`` in any order; ``qc`` may be
+    left out): (ok, end, column, qc, ts start, ts end, number start, number end)."""
+    bad = (False, 0, 0, 0, 0, 0, 0, 0)
+    if i >= n or buf[i] != 123:
+        return bad
+    i += 1
+    got = 0
+    c = -1
+    q = 3
+    ts_s = -1
+    ts_e = -1
+    v_s = -1
+    v_e = -1
+    while True:
+        i = _ws(buf, i, n)
+        if i >= n or buf[i] != 34:
+            return bad
+        key, i = _key(buf, i, n)
+        if key < _K_ID:
+            return bad
+        bit = 1 << (key - _K_ID)
+        if got & bit:
+            return bad
+        got |= bit
+        i = _colon(buf, i, n)
+        if i < 0 or i >= n:
+            return bad
+        if key == _K_ID:
+            if buf[i] != 34:
+                return bad
+            v, e = _int_token(buf, i + 1, n, False)
+            if e < 0 or e >= n or buf[e] != 34 or v >= lut.size:
+                return bad
+            c = lut[v]
+            if c < 0:
+                return bad
+            i = e + 1
+        elif key == _K_QC:
+            v, e = _int_token(buf, i, n, True)
+            if e < 0:
+                return bad
+            q = v
+            i = e
+        elif key == _K_TS:
+            if buf[i] != 34:
+                return bad
+            e = i + 1
+            while e < n and buf[e] != 34:
+                e += 1
+            if e >= n:
+                return bad
+            ts_s = i + 1
+            ts_e = e
+            i = e + 1
+        else:  # val
+            e = _number(buf, i, n)
+            if e < 0:
+                return bad
+            v_s = i
+            v_e = e
+            i = e
+        more, i = _sep(buf, i, n, 125)
+        if more == 0:
+            return bad
+        if more == 2:
+            break
+    if (got & 13) != 13:  # id, ts and val are required (qc defaults to 3)
+        return bad
+    return True, i, c, q, ts_s, ts_e, v_s, v_e
+
+
+def _same_bytes(buf, a, b, m):  # type: ignore[no-untyped-def]
+    for x in range(m):  # noqa: SIM110 (numba compiles no generator in all())
+        if buf[a + x] != buf[b + x]:
+            return False
+    return True
+
+
+def _like(buf, p, n, t0, a, ln, b, vl, e, row_ts, new_row):  # type: ignore[no-untyped-def]
+    """The object at p written as the template object at t0 (its timestamp at offset a,
+    ``ln`` long; its number at offset b, ``vl`` long; its end at offset e), byte for byte but
+    for the timestamp (the row's, or for a new row one of the same length that differs) and
+    the number: (ok, end, number start, number end). The same bytes mean the same id, qc and
+    keys as the template, which the full parse validated."""
+    bad = (False, 0, 0, 0)
+    if p + b > n or not _same_bytes(buf, p, t0, a):
+        return bad
+    ts = p + a
+    if new_row:
+        if _same_bytes(buf, ts, row_ts, ln):
+            return bad
+    elif not _same_bytes(buf, ts, row_ts, ln):
+        return bad
+    if not _same_bytes(buf, p + a + ln, t0 + a + ln, b - a - ln):
+        return bad
+    vs = p + b
+    ve = _number(buf, vs, n)
+    if ve < 0:
+        return bad
+    fl = e - b - vl  # what follows the number, the closing brace included
+    if ve + fl > n or not _same_bytes(buf, ve, t0 + b + vl, fl):
+        return bad
+    return True, ve + fl, vs, ve
+
+
+_TEMPLATES = 256  # row positions with a template (a row of more values parses the rest fully)
+
+
+def _vals(buf, i, n, lut, tok, nt, col, t_row, qc):  # type: ignore[no-untyped-def]
+    """The ``vals`` array after its '[': (ok, end, values, values per row, tokens)."""
+    bad = (False, 0, 0, 0, 0)
+    i = _ws(buf, i, n)
+    if i < n and buf[i] == 93:
+        return bad  # no values: nothing to decode fast
+    tpl = np.zeros((_TEMPLATES, 7), dtype=np.int64)  # usable, t0, a, ln, b, vl, e
+    nv = 0
+    k = 0
+    n_rows = 0
+    row_ts = -1
+    prev_s = -1
+    prev_e = -1
+    while True:
+        i = _ws(buf, i, n)
+        j = nv % k if k > 0 else 0
+        ok = False
+        c = 0
+        q = 0
+        ts_s = 0
+        ts_e = 0
+        vs = 0
+        ve = 0
+        end = 0
+        same = False
+        if k > 0 and j < _TEMPLATES and tpl[j, 0] == 1:
+            ok, end, vs, ve = _like(buf, i, n, tpl[j, 1], tpl[j, 2], tpl[j, 3], tpl[j, 4],
+                                    tpl[j, 5], tpl[j, 6], row_ts, j == 0)
+            if ok:
+                c = col[j]
+                q = qc[j]
+                ts_s = i + tpl[j, 2]
+                ts_e = ts_s + tpl[j, 3]
+                same = j != 0
+        if not ok:
+            ok, end, c, q, ts_s, ts_e, vs, ve = _obj(buf, i, n, lut)
+            if not ok:
+                return bad
+            same = prev_s >= 0 and ts_e - ts_s == prev_e - prev_s and \
+                _same_bytes(buf, ts_s, prev_s, ts_e - ts_s)
+        if nv >= qc.size or nt + (ve - vs) + 2 > tok.size:
+            return bad
+        # the regular layout: the first row's k ids, then the same ids in the same order for
+        # each timestamp in turn
+        if nv == 0:
+            good, t = _timestamp(buf, ts_s, ts_e)
+            if not good:
+                return bad
+            t_row[0] = t
+            n_rows = 1
+            row_ts = ts_s
+        elif same:
+            if k != 0 and nv % k == 0:
+                return bad  # more values in this row than in the first
+        else:
+            if k == 0:
+                k = nv
+            if nv % k != 0:
+                return bad  # a row ended early
+            good, t = _timestamp(buf, ts_s, ts_e)
+            if not good:
+                return bad
+            t_row[n_rows] = t
+            n_rows += 1
+            row_ts = ts_s
+        if k != 0 and nv >= k and col[nv % k] != c:
+            return bad
+        if k == 0 or nv < k:
+            for p in range(nv):
+                if col[p] == c:
+                    return bad  # a column twice in one row
+            col[nv] = c
+            if nv < _TEMPLATES and ts_e <= vs:  # this object is the template of its place
+                tpl[nv, 0] = 1
+                tpl[nv, 1] = i
+                tpl[nv, 2] = ts_s - i
+                tpl[nv, 3] = ts_e - ts_s
+                tpl[nv, 4] = vs - i
+                tpl[nv, 5] = ve - vs
+                tpl[nv, 6] = end - i
+        qc[nv] = q
+        for p in range(vs, ve):
+            tok[nt] = buf[p]
+            nt += 1
+        tok[nt] = 44  # ,
+        nt += 1
+        nv += 1
+        prev_s = ts_s
+        prev_e = ts_e
+        more, i = _sep(buf, end, n, 93)
+        if more == 0:
+            return bad
+        if more == 2:
+            break
+    if k == 0:
+        k = nv
+    if nv % k != 0:
+        return bad
+    return True, i, nv, k, nt
+
+
 def _scan_py(buf, lut, tok, col, t_row, qc):  # type: ignore[no-untyped-def]
     """Returns (status, n_values, k, n_tok, has_seq, seq)."""
     n = buf.size
@@ -265,7 +480,6 @@ def _scan_py(buf, lut, tok, col, t_row, qc):  # type: ignore[no-untyped-def]
     nv = 0
     nt = 0
     k = 0
-    n_rows = 0
     tok[nt] = 91  # [
     nt += 1
     first = True
@@ -307,130 +521,9 @@ def _scan_py(buf, lut, tok, col, t_row, qc):  # type: ignore[no-untyped-def]
             if seen_vals or buf[i] != 91:
                 return DECLINED, 0, 0, 0, 0, 0
             seen_vals = True
-            i = _ws(buf, i + 1, n)
-            if i < n and buf[i] == 93:
-                return DECLINED, 0, 0, 0, 0, 0  # no values: nothing to decode fast
-            prev_s = -1
-            while True:
-                i = _ws(buf, i, n)
-                if i >= n or buf[i] != 123:
-                    return DECLINED, 0, 0, 0, 0, 0
-                i += 1
-                got = 0
-                c = -1
-                q = 3
-                ts_s = -1
-                ts_e = -1
-                same = False
-                while True:
-                    i = _ws(buf, i, n)
-                    if i >= n or buf[i] != 34:
-                        return DECLINED, 0, 0, 0, 0, 0
-                    key, i = _key(buf, i, n)
-                    if key < _K_ID:
-                        return DECLINED, 0, 0, 0, 0, 0
-                    bit = 1 << (key - _K_ID)
-                    if got & bit:
-                        return DECLINED, 0, 0, 0, 0, 0
-                    got |= bit
-                    i = _colon(buf, i, n)
-                    if i < 0 or i >= n:
-                        return DECLINED, 0, 0, 0, 0, 0
-                    if key == _K_ID:
-                        if buf[i] != 34:
-                            return DECLINED, 0, 0, 0, 0, 0
-                        v, e = _int_token(buf, i + 1, n, False)
-                        if e < 0 or e >= n or buf[e] != 34 or v >= lut.size:
-                            return DECLINED, 0, 0, 0, 0, 0
-                        c = lut[v]
-                        if c < 0:
-                            return DECLINED, 0, 0, 0, 0, 0
-                        i = e + 1
-                    elif key == _K_QC:
-                        v, e = _int_token(buf, i, n, True)
-                        if e < 0:
-                            return DECLINED, 0, 0, 0, 0, 0
-                        q = v
-                        i = e
-                    elif key == _K_TS:
-                        if buf[i] != 34:
-                            return DECLINED, 0, 0, 0, 0, 0
-                        # the end quote, comparing with the previous value's timestamp on
-                        # the way (an HF message repeats one per cycle)
-                        ts_s = i + 1
-                        e = ts_s
-                        same = prev_s >= 0
-                        if same:
-                            d = prev_s - ts_s
-                            while e < n and buf[e] != 34:
-                                if buf[e] != buf[e + d]:
-                                    same = False
-                                    break
-                                e += 1
-                            same = same and buf[e + d] == 34
-                        while e < n and buf[e] != 34:
-                            e += 1
-                        if e >= n:
-                            return DECLINED, 0, 0, 0, 0, 0
-                        ts_e = e
-                        i = e + 1
-                    else:  # val
-                        e = _number(buf, i, n)
-                        if e < 0:
-                            return DECLINED, 0, 0, 0, 0, 0
-                        if nt + (e - i) + 2 > tok.size:
-                            return DECLINED, 0, 0, 0, 0, 0
-                        for p in range(i, e):
-                            tok[nt] = buf[p]
-                            nt += 1
-                        tok[nt] = 44  # ,
-                        nt += 1
-                        i = e
-                    more, i = _sep(buf, i, n, 125)
-                    if more == 0:
-                        return DECLINED, 0, 0, 0, 0, 0
-                    if more == 2:
-                        break
-                if (got & 13) != 13:  # id, ts and val are required (qc defaults to 3)
-                    return DECLINED, 0, 0, 0, 0, 0
-                if nv >= qc.size:
-                    return DECLINED, 0, 0, 0, 0, 0
-                # the regular layout: the first row's k ids, then the same ids in the same
-                # order for each timestamp in turn
-                if nv == 0:
-                    good, t = _timestamp(buf, ts_s, ts_e)
-                    if not good:
-                        return DECLINED, 0, 0, 0, 0, 0
-                    t_row[0] = t
-                    n_rows = 1
-                elif same:
-                    if k != 0 and nv % k == 0:
-                        return DECLINED, 0, 0, 0, 0, 0  # more values in this row than the first
-                else:
-                    if k == 0:
-                        k = nv
-                    if nv % k != 0:
-                        return DECLINED, 0, 0, 0, 0, 0  # a row ended early
-                    good, t = _timestamp(buf, ts_s, ts_e)
-                    if not good:
-                        return DECLINED, 0, 0, 0, 0, 0
-                    t_row[n_rows] = t
-                    n_rows += 1
-                if k != 0 and nv >= k and col[nv % k] != c:
-                    return DECLINED, 0, 0, 0, 0, 0
-                if k == 0 or nv < k:
-                    for p in range(nv):
-                        if col[p] == c:
-                            return DECLINED, 0, 0, 0, 0, 0  # a column twice in one row
-                    col[nv] = c
-                qc[nv] = q
-                nv += 1
-                prev_s = ts_s
-                more, i = _sep(buf, i, n, 93)
-                if more == 0:
-                    return DECLINED, 0, 0, 0, 0, 0
-                if more == 2:
-                    break
+            ok, i, nv, k, nt = _vals(buf, i + 1, n, lut, tok, nt, col, t_row, qc)
+            if not ok:
+                return DECLINED, 0, 0, 0, 0, 0
         else:
             return DECLINED, 0, 0, 0, 0, 0
         first = False
@@ -441,10 +534,6 @@ def _scan_py(buf, lut, tok, col, t_row, qc):  # type: ignore[no-untyped-def]
             break
     i = _ws(buf, i, n)
     if i != n or not seen_vals:
-        return DECLINED, 0, 0, 0, 0, 0
-    if k == 0:
-        k = nv
-    if nv % k != 0:
         return DECLINED, 0, 0, 0, 0, 0
     tok[nt - 1] = 93  # the last comma becomes ]
     return OK, nv, k, nt, has_seq, seq
@@ -464,8 +553,9 @@ def _scanner() -> Any:
             jit_inline = numba.njit(cache=True, nogil=True, inline="always")
             g = globals()
             for name in ("_ws", "_key", "_colon", "_sep", "_digits", "_int_token", "_num",
-                         "_days", "_timestamp", "_number"):
+                         "_days", "_timestamp", "_number", "_same_bytes", "_like", "_obj"):
                 g[name] = jit_inline(g[name])
+            g["_vals"] = jit(g["_vals"])
             _compiled = jit(_scan_py)
     return _compiled
 

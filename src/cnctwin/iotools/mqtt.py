@@ -33,6 +33,8 @@ from cnctwin.iotools.databus import DatabusColumns, DatabusDecoder, merge_column
 from cnctwin.recording import Recording
 
 __all__ = [
+    "MqttHub",
+    "MqttHubs",
     "MqttRecorder",
     "MqttSecurity",
     "parse_data_recorder_message",
@@ -145,12 +147,16 @@ class _Client:
     def __init__(self, host: str, port: int, *, client_id: str, username: str | None,
                  password: str | None, keepalive_s: int, max_queue: int,
                  security: MqttSecurity | None = None, session_expiry_s: int = 0,
-                 manual_ack: bool = False) -> None:
+                 manual_ack: bool = False, receive_maximum: int = 0) -> None:
         mqtt = _paho()
         if session_expiry_s > 0 and not client_id:
             raise ConfigError("a persistent MQTT session needs a stable client_id")
         self.host, self.port, self.keepalive_s = host, port, keepalive_s
         self.session_expiry_s = int(session_expiry_s)
+        # MQTT 5 Receive Maximum: unacknowledged QoS 1 messages the broker may send (without
+        # it mosquitto allows max_inflight_messages, 20 by default)
+        self.receive_maximum = int(receive_maximum)
+        self.v5 = self.session_expiry_s > 0 or self.receive_maximum > 0
         self.session_present = False
         self.topics: dict[str, int] = {}  # subscriptions, renewed after a session loss
         self.resubscribes = 0
@@ -168,7 +174,7 @@ class _Client:
         # messages for this client id while it is away (up to the expiry interval)
         self.client = mqtt.Client(
             callback_api_version=mqtt.CallbackAPIVersion.VERSION2, client_id=client_id,
-            protocol=mqtt.MQTTv5 if self.session_expiry_s > 0 else mqtt.MQTTv311,
+            protocol=mqtt.MQTTv5 if self.v5 else mqtt.MQTTv311,
             manual_ack=manual_ack)
         if username is not None:
             self.client.username_pw_set(username, password)
@@ -212,14 +218,16 @@ class _Client:
 
     def start(self, timeout_s: float) -> None:
         try:
-            if self.session_expiry_s > 0:
+            if self.v5:
                 from paho.mqtt.packettypes import PacketTypes
                 from paho.mqtt.properties import Properties
 
                 props = Properties(PacketTypes.CONNECT)
                 props.SessionExpiryInterval = self.session_expiry_s
+                if self.receive_maximum:
+                    props.ReceiveMaximum = min(self.receive_maximum, 65535)
                 self.client.connect(self.host, self.port, keepalive=self.keepalive_s,
-                                    clean_start=False, properties=props)
+                                    clean_start=self.session_expiry_s == 0, properties=props)
             else:
                 self.client.connect(self.host, self.port, keepalive=self.keepalive_s)
         except OSError as exc:
@@ -246,6 +254,247 @@ class _Client:
             self.client.disconnect()
         with contextlib.suppress(Exception):
             self.client.loop_stop()
+
+
+class _HubPort:
+    """One recorder's view of a :class:`MqttHub`: what :class:`MqttRecorder` uses of its own
+    client (``queue``, ``subscribe``, ``acked``, ``ack``, ``start``, ``stop``), fed by the hub's
+    routing instead of a connection of its own."""
+
+    def __init__(self, hub: MqttHub, max_queue: int) -> None:
+        self.hub = hub
+        self.queue: queue.Queue[tuple[str, bytes, int, tuple[int, int] | None]] = \
+            queue.Queue(maxsize=max_queue)
+        self.dropped = 0
+        self.manual_ack = True
+
+    def put(self, item: tuple[str, bytes, int, tuple[int, int] | None]) -> None:
+        try:
+            self.queue.put_nowait(item)
+        except queue.Full:  # not acknowledged: the broker sends it again after a reconnect
+            self.dropped += 1
+
+    @property
+    def session_present(self) -> bool:
+        return bool(self.hub.client.session_present)
+
+    @property
+    def session_expiry_s(self) -> int:
+        return self.hub.client.session_expiry_s
+
+    def start(self, timeout_s: float) -> None:
+        self.hub.start(timeout_s)
+
+    def subscribe(self, topic: str, qos: int) -> int:
+        return self.hub.subscribe(topic, qos, self)
+
+    def acked(self, mid: int) -> bool:
+        return self.hub.client.acked(mid)
+
+    def ack(self, acks: list[tuple[int, int]]) -> None:
+        self.hub.client.ack(acks)
+
+    def stop(self) -> None:
+        self.hub.detach(self)
+
+
+class MqttHub:
+    """One MQTT connection for the Databus sources of many machines (a plant worker's).
+
+    Each :class:`MqttRecorder` given ``hub=`` subscribes through it; the hub's network thread
+    routes every message by its topic into that recorder's queue (a dictionary lookup; no
+    decoding there) and notes the recorder in :attr:`touched`, so one thread can serve all
+    machines: wait on :attr:`notify`, then poll the recorders that have messages. QoS 1
+    messages are acknowledged by the recorders (manual acknowledgement, as with a connection
+    of their own), so exactly-once across crashes holds per machine; with a ``client_id`` and
+    ``session_expiry_s`` the broker keeps one persistent session for all of them.
+
+    Messages for a topic no recorder has claimed yet (a resumed session delivers its queue
+    before the machines have subscribed, or before their metadata told them the data topics)
+    are held, in order, and handed over when a recorder subscribes to the topic; at most
+    ``max_pending`` of them (more are left unacknowledged, so the broker delivers them again
+    on the next connection, and counted in :attr:`unrouted_dropped`).
+
+    Parameters
+    ----------
+    host, port : str, int
+        Broker.
+    client_id : str, optional
+        Stable client id (the key of the persistent session).
+    username, password : str, optional
+        Broker credentials.
+    security : MqttSecurity, optional
+        TLS and user.
+    session_expiry_s : int, default 0
+        MQTT 5 session expiry [s] (0: a clean session).
+    max_pending : int, default 100000
+        Unclaimed messages held.
+    notify : threading.Event, optional
+        Set whenever a routed message arrives (several hubs may share one).
+    receive_maximum : int, default 1000
+        Unacknowledged QoS 1 messages the broker may send (MQTT 5 Receive Maximum, at most
+        65535): the machines together hold up to their checkpoints' worth (10 messages each
+        by default), which one connection must be allowed; the broker's own per-client
+        limit (mosquitto ``max_inflight_messages``, 20) applies only without it.
+
+    Notes
+    -----
+    Acknowledgements go out per machine when its checkpoint covers the messages, so across
+    machines they are not in the order the messages came in (MQTT 5 asks a receiver to
+    acknowledge QoS 1 messages in order, [MQTT-4.6.0-2]); brokers match a PUBACK by its packet
+    id (mosquitto does; tested in tests/edge/test_plant_hub.py).
+    """
+
+    def __init__(self, host: str, port: int = 1883, *, client_id: str = "",
+                 username: str | None = None, password: str | None = None,
+                 security: MqttSecurity | None = None, session_expiry_s: int = 0,
+                 max_pending: int = 100_000, notify: threading.Event | None = None,
+                 receive_maximum: int = 1000) -> None:
+        self.client = _Client(host, port, client_id=client_id, username=username,
+                              password=password, keepalive_s=30, max_queue=1,
+                              security=security, session_expiry_s=session_expiry_s,
+                              manual_ack=True, receive_maximum=receive_maximum)
+        self.client.client.on_message = self._on_message
+        self.client_id = client_id
+        self.notify = notify if notify is not None else threading.Event()
+        self.max_pending = max_pending
+        self.unrouted_dropped = 0
+        self._routes: dict[str, _HubPort] = {}
+        self._wild: dict[str, _HubPort] = {}  # filter prefix (before '#') -> port
+        self._pending: list[tuple[str, bytes, int, tuple[int, int] | None]] = []
+        self._touched: set[_HubPort] = set()
+        self._ports: set[_HubPort] = set()
+        self._lock = threading.Lock()
+        self._start_lock = threading.Lock()
+        self._started = False
+
+    def port(self, max_queue: int = 100_000) -> _HubPort:
+        """A recorder's view of the hub (:class:`MqttRecorder` calls it)."""
+        p = _HubPort(self, max_queue)
+        with self._lock:
+            self._ports.add(p)
+        return p
+
+    def start(self, timeout_s: float = 10.0) -> None:
+        """Connect (once; every recorder's start calls it)."""
+        with self._start_lock:
+            if not self._started:
+                self.client.start(timeout_s)
+                self._started = True
+
+    def _route(self, topic: str) -> _HubPort | None:
+        p = self._routes.get(topic)
+        if p is None and self._wild:
+            for prefix, wp in self._wild.items():
+                if topic.startswith(prefix):
+                    return wp
+        return p
+
+    def _on_message(self, client: Any, userdata: Any, msg: Any) -> None:
+        item = (msg.topic, bytes(msg.payload), time.time_ns(),
+                (msg.mid, msg.qos) if msg.qos else None)
+        with self._lock:
+            p = self._route(msg.topic)
+            if p is None:
+                if len(self._pending) < self.max_pending:
+                    self._pending.append(item)
+                else:
+                    self.unrouted_dropped += 1
+                return
+            p.put(item)
+            self._touched.add(p)
+        self.notify.set()
+
+    def subscribe(self, topic: str, qos: int, port: _HubPort) -> int:
+        """Route ``topic`` (an exact topic or a filter ending in ``#``) to ``port``, hand it
+        the held messages of that topic, and subscribe. Returns the SUBSCRIBE's message id."""
+        with self._lock:
+            if topic.endswith("#"):
+                self._wild[topic[:-1]] = port
+            else:
+                self._routes[topic] = port
+            keep = []
+            for item in self._pending:
+                if self._route(item[0]) is port:
+                    port.put(item)
+                    self._touched.add(port)
+                else:
+                    keep.append(item)
+            moved = len(keep) != len(self._pending)
+            self._pending = keep
+        if moved:
+            self.notify.set()
+        return self.client.subscribe(topic, qos)
+
+    def take_touched(self) -> set[_HubPort]:
+        """The ports that received messages since the last call (and clear :attr:`notify`)."""
+        with self._lock:
+            self.notify.clear()
+            got, self._touched = self._touched, set()
+        return got
+
+    def detach(self, port: _HubPort) -> None:
+        """A recorder stops: its topics are no longer routed (their messages are held,
+        unacknowledged: after a restart the persistent session delivers them again); the
+        connection closes with the last recorder."""
+        with self._lock:
+            self._routes = {t: p for t, p in self._routes.items() if p is not port}
+            self._wild = {t: p for t, p in self._wild.items() if p is not port}
+            self._ports.discard(port)
+            self._touched.discard(port)
+            last = not self._ports
+        if last:
+            self.stop()
+
+    def stop(self) -> None:
+        """Disconnect (the persistent session stays with the broker)."""
+        with self._start_lock:
+            if self._started:
+                self.client.stop()
+                self._started = False
+
+
+class MqttHubs:
+    """The hubs of one plant worker: one per broker, user and session setting, made on first
+    use (thread-safe: the machines are built in parallel).
+
+    Parameters
+    ----------
+    client_id : str
+        Client id of the worker's persistent sessions (the second hub gets ``-2``, ...).
+    machines : int, default 1
+        Machines of the worker: each may hold 10 messages unacknowledged until its
+        checkpoint, so a hub allows 20 per machine in flight (at least 100).
+    """
+
+    def __init__(self, client_id: str, *, machines: int = 1) -> None:
+        self.client_id = client_id
+        self.machines = machines
+        self._hubs: dict[tuple[Any, ...], MqttHub] = {}
+        self._lock = threading.Lock()
+
+    def get(self, host: str, port: int, *, username: str | None = None,
+            password: str | None = None, security: MqttSecurity | None = None,
+            session_expiry_s: int = 0) -> MqttHub:
+        """The hub of this broker connection (made now if it is the first)."""
+        key = (host, int(port), username, password, security, int(session_expiry_s))
+        with self._lock:
+            hub = self._hubs.get(key)
+            if hub is None:
+                k = len(self._hubs) + 1
+                cid = self.client_id if k == 1 else f"{self.client_id}-{k}"
+                hub = self._hubs[key] = MqttHub(
+                    host, port, client_id=cid, username=username, password=password,
+                    security=security, session_expiry_s=session_expiry_s,
+                    receive_maximum=max(100, 20 * self.machines))
+            return hub
+
+    def stop(self) -> None:
+        """Disconnect every hub."""
+        with self._lock:
+            hubs = list(self._hubs.values())
+        for h in hubs:
+            h.stop()
 
 
 class MqttRecorder:
@@ -291,6 +540,10 @@ class MqttRecorder:
         QoS 1 messages are acknowledged to the broker only by :meth:`ack` (the live edge
         source does it after their results are written), not when they arrive; with a
         persistent session a crash in between makes the broker deliver them again.
+    hub : MqttHub, optional
+        Share this connection with other recorders (a plant worker's machines): ``host``,
+        ``port``, the user, ``client_id`` and the session are the hub's; acknowledgement is
+        manual.
 
     Examples
     --------
@@ -321,16 +574,21 @@ class MqttRecorder:
         session_expiry_s: int = 0,
         columnar: bool = False,
         manual_ack: bool = False,
+        hub: MqttHub | None = None,
     ) -> None:
         self.metadata_topic = metadata_topic
         self.fixed_topics = list(data_topics) if data_topics else None
         self.qos = qos
         self.decoder = DatabusDecoder(name_map=name_map, cycle_time_s=cycle_time_s,
                                       salvage=salvage)
-        self._client = _Client(host, port, client_id=client_id, username=username,
-                               password=password, keepalive_s=30, max_queue=max_queue,
-                               security=security, session_expiry_s=session_expiry_s,
-                               manual_ack=manual_ack)
+        self._client: _Client | _HubPort
+        if hub is not None:  # the hub's connection (its host, user, session)
+            self._client = hub.port(max_queue)
+        else:
+            self._client = _Client(host, port, client_id=client_id, username=username,
+                                   password=password, keepalive_s=30, max_queue=max_queue,
+                                   security=security, session_expiry_s=session_expiry_s,
+                                   manual_ack=manual_ack)
         self._max_pending = max_queue
         self._pending: list[tuple[str, bytes, int, tuple[int, int] | None]] = []
         self._unacked: list[tuple[int, int]] = []
