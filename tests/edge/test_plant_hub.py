@@ -1,0 +1,260 @@
+"""A plant worker's live machines on one MQTT connection, driven from one thread (issue 28,
+point 1).
+
+Truth: each machine's results from a replay of the same signals (``ReplaySource``, same
+processors, uninterrupted); a live machine of a plant must give exactly those torque values,
+holes and alarms, with the others sharing its connection and thread, and across a ``kill -9``
+of the worker (persistent session, acknowledgements held until checkpoints: the broker
+delivers again what no checkpoint covered, each machine skips what its results hold).
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import orjson
+import pandas as pd
+import pytest
+
+from cnctwin.edge import (
+    AnomalyProcessor,
+    DatabusSource,
+    EdgeRuntime,
+    HoleProcessor,
+    JsonLinesSink,
+    ReplaySource,
+    TorqueProcessor,
+    save_spindle_model,
+)
+from cnctwin.edge.plant import run_machines
+from cnctwin.iotools.mqtt import MqttHub
+from cnctwin.recording import Recording, RecordingMeta
+from cnctwin.spindle import SpindleModel
+from tests._services import Broker
+from tests.edge.conftest import publisher
+
+pytestmark = pytest.mark.mqtt
+COLUMNS = ["CURRENT|SP1", "CMD_SPEED|SP1", "DES_POS|Z1", "ENC_POS|Z1"]
+PER_MSG = 100
+MODEL = SpindleModel(1.01, 8.3e-5, 0.34, j_kgm2=0.0045)
+
+
+def _topics(k: int) -> tuple[str, str]:
+    return f"ie/m/j/simatic/v1/nck{k}/dp", f"ie/d/j/simatic/v1/nck{k}/dp/r/NCK/hf"
+
+
+def _metadata(k: int) -> bytes:
+    defs = [{"name": "CYCLE", "id": "1", "dataType": "DInt"}] + [
+        {"name": c, "id": str(i + 2), "dataType": "LReal"} for i, c in enumerate(COLUMNS)]
+    return json.dumps({"seq": 1, "hashVersion": 1, "applicationName": f"mill-{k}",
+                       "connections": [{"name": "NCK", "type": "sinumerik", "dataPoints": [
+                           {"name": "hf", "topic": _topics(k)[1], "publishType": "bulk",
+                            "dataPointDefinitions": defs}]}]}).encode()
+
+
+@pytest.fixture(scope="module")
+def signals(wear_recording: Recording) -> Recording:
+    """The 3-hole drilling run's drive signals as the Databus carries them (no NC events)."""
+    hf = wear_recording.hf[["time", *COLUMNS]].copy()
+    return Recording(hf, meta=RecordingMeta(machine="mill", cycle_time_s=0.002,
+                                            source_format="databus"))
+
+
+def _messages(rec: Recording) -> list[bytes]:
+    t_ms = rec.hf["time"].astype("int64").to_numpy() // 1_000_000
+    data = {c: rec.hf[c].to_numpy(dtype=np.float64) for c in COLUMNS}
+    cyc = rec.cycles
+    out = []
+    for j, k in enumerate(range(0, cyc.size, PER_MSG)):
+        vals: list[dict[str, Any]] = []
+        for r in range(k, min(k + PER_MSG, cyc.size)):
+            ts = pd.Timestamp(int(t_ms[r]), unit="ms").strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
+            vals.append({"id": "1", "qc": 3, "ts": ts, "val": int(cyc[r])})
+            vals += [{"id": str(i + 2), "qc": 3, "ts": ts, "val": float(data[c][r])}
+                     for i, c in enumerate(COLUMNS)]
+        out.append(orjson.dumps({"seq": j + 1, "vals": vals}))
+    return out
+
+
+def _processors() -> list[Any]:
+    return [TorqueProcessor(MODEL), HoleProcessor(MODEL),
+            AnomalyProcessor(model=MODEL, learn_s=3.0)]
+
+
+def _read(path: Path) -> list[dict[str, Any]]:
+    out = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:  # the line a SIGKILL cut short
+            continue
+    return out
+
+
+def _torque(msgs: list[dict[str, Any]]) -> tuple[np.ndarray, np.ndarray]:
+    t = [m for m in msgs if m["kind"] == "torque"]
+    return (np.concatenate([np.arange(m["first_cycle"], m["first_cycle"] + m["n"]) for m in t]),
+            np.concatenate([np.asarray(m["torque_nm"], dtype=float) for m in t]))
+
+
+@pytest.fixture(scope="module")
+def reference(signals: Recording, tmp_path_factory: pytest.TempPathFactory
+              ) -> list[dict[str, Any]]:
+    d = tmp_path_factory.mktemp("reference")
+    EdgeRuntime(ReplaySource(signals, chunk_cycles=PER_MSG), _processors(),
+                [JsonLinesSink(d / "results.jsonl")], state_dir=d).run()
+    ref = _read(d / "results.jsonl")
+    assert sum(m["kind"] == "hole" for m in ref) == 3
+    return ref
+
+
+def _same_as_reference(msgs: list[dict[str, Any]], ref: list[dict[str, Any]]) -> None:
+    seqs = [m["seq"] for m in msgs]
+    assert len(seqs) == len(set(seqs)), "a seq was given to two messages"
+    cyc, tau = _torque(msgs)
+    rcyc, rtau = _torque(ref)
+    np.testing.assert_array_equal(cyc, rcyc)  # every cycle once, in order
+    np.testing.assert_allclose(tau, rtau, rtol=1e-12, atol=1e-12)
+    holes = [m["row"] for m in msgs if m["kind"] == "hole"]
+    ref_holes = [m["row"] for m in ref if m["kind"] == "hole"]
+    assert [(h["hole"], h["start_cycle"], h["end_cycle"]) for h in holes] == \
+        [(h["hole"], h["start_cycle"], h["end_cycle"]) for h in ref_holes]
+    for h, r in zip(holes, ref_holes, strict=True):
+        assert h["torque_mean_nm"] == pytest.approx(r["torque_mean_nm"], rel=1e-9)
+    assert [m["cycle"] for m in msgs if m["kind"] == "alarm"] == \
+        [m["cycle"] for m in ref if m["kind"] == "alarm"]
+
+
+def test_six_machines_share_one_connection_and_one_thread(
+        broker: Broker, signals: Recording, reference: list[dict[str, Any]],
+        tmp_path: Path) -> None:
+    """Six live machines in one process (as a plant worker runs them): one MQTT connection,
+    no thread per machine while they run (the hub's network thread and the driving thread
+    only), each machine's results those of its own replay."""
+    machines = range(1, 7)
+    pub = publisher(broker.port)
+    for k in machines:
+        pub.publish(_topics(k)[0], _metadata(k), qos=1, retain=True).wait_for_publish(5)
+    hub = MqttHub("127.0.0.1", broker.port)
+    baseline = threading.active_count()
+    peak = [0]
+    stop = threading.Event()
+    reports: list[tuple[str, str, Any]] = []
+
+    def build(k: int) -> Any:
+        def make() -> EdgeRuntime:
+            src = DatabusSource("127.0.0.1", broker.port, metadata_topic=_topics(k)[0],
+                                machine=f"mill-{k}", idle_timeout_s=2.0, hub=hub)
+            src.start()
+            d = tmp_path / f"mill-{k}"
+            return EdgeRuntime(src, _processors(), [JsonLinesSink(d / "results.jsonl")],
+                               state_dir=d)
+        return make
+
+    runner = threading.Thread(target=run_machines, args=([(f"mill-{k}", build(k))
+                                                          for k in machines],),
+                              kwargs={"report": lambda *r: reports.append(r), "stop": stop})
+    runner.start()
+    deadline = time.monotonic() + 60
+    while sum(r[1] == "started" for r in reports) < len(machines):
+        assert time.monotonic() < deadline, reports
+        time.sleep(0.05)
+    payloads = _messages(signals)
+    for p in payloads:
+        for k in machines:
+            pub.publish(_topics(k)[1], p, qos=1)
+        peak[0] = max(peak[0], threading.active_count())
+        time.sleep(PER_MSG * 0.002 / 8)  # 8x real time
+    runner.join(timeout=120)
+    assert not runner.is_alive()
+    pub.loop_stop()
+    pub.disconnect()
+    # the runner's own thread, the hub's network thread, the publisher's: never one per
+    # machine (the build threads end when their machine is handed to the runner)
+    assert peak[0] <= baseline + 3, (baseline, peak[0])
+    assert sorted(r[0] for r in reports if r[1] == "done") == [f"mill-{k}" for k in machines]
+    for k in machines:
+        _same_as_reference(_read(tmp_path / f"mill-{k}" / "results.jsonl"), reference)
+
+
+def test_a_plant_worker_killed_twice_gives_every_machine_its_results_exactly_once(
+        persistent_broker: Broker, signals: Recording, reference: list[dict[str, Any]],
+        tmp_path: Path) -> None:
+    """Three live machines in one worker process on one persistent session; the worker is
+    killed (SIGKILL) twice while the controls publish and restarted by the supervisor: every
+    machine's torque of every cycle once, its holes and alarms those of its replay."""
+    broker = persistent_broker
+    machines = range(1, 4)
+    model = save_spindle_model(MODEL, tmp_path / "spindle.json")
+    lines = ["workers = 1", 'out = "state"', "", "[defaults]", f'model = "{model}"',
+             "learn-s = 3", "no-twin = true", "session-expiry-s = 600",
+             "idle-timeout-s = 4", ""]
+    for k in machines:
+        lines += ["[[machine]]", f'name = "mill-{k}"',
+                  f'source = "mqtt://127.0.0.1:{broker.port}/{_topics(k)[0]}"', ""]
+    plant = tmp_path / "plant.toml"
+    plant.write_text("\n".join(lines), encoding="utf-8")
+    pub = publisher(broker.port)
+    for k in machines:
+        pub.publish(_topics(k)[0], _metadata(k), qos=1, retain=True).wait_for_publish(5)
+    proc = subprocess.Popen([sys.executable, "-m", "cnctwin", "edge", "run", "--config",
+                             str(plant), "--quiet"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, cwd=tmp_path)
+    status = [tmp_path / "state" / f"mill-{k}" / "status.json" for k in machines]
+
+    def worker() -> int:
+        pids = subprocess.run(["pgrep", "-P", str(proc.pid), "-f", "spawn_main"],
+                              capture_output=True, text=True).stdout.split()
+        return int(pids[0]) if pids else 0
+
+    def cycles() -> int:  # processed by every machine, over the worker's restarts
+        got = []
+        for k in machines:
+            res = tmp_path / "state" / f"mill-{k}" / "results.jsonl"
+            msgs = _read(res) if res.exists() else []
+            got.append(sum(m["n"] for m in msgs if m["kind"] == "torque"))
+        return min(got)
+
+    payloads = _messages(signals)
+    try:
+        deadline = time.monotonic() + 120
+        while not all(s.exists() for s in status):  # connected and subscribed
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "the plant did not start"
+            time.sleep(0.1)
+        kills = [len(payloads) // 3, 2 * len(payloads) // 3]
+        for j, p in enumerate(payloads):
+            if j in kills:  # the worker dies mid-stream; the controls go on publishing
+                while cycles() < (j - 8) * PER_MSG:
+                    assert time.monotonic() < deadline + 120, "the plant fell behind"
+                    time.sleep(0.02)
+                pid = worker()
+                assert pid
+                subprocess.run(["kill", "-9", str(pid)], check=True)
+            for k in machines:
+                pub.publish(_topics(k)[1], p, qos=1).wait_for_publish(10)
+            time.sleep(PER_MSG * 0.002 / 4)  # 4x real time
+        out, err = proc.communicate(timeout=240)  # the machines end 4 s after the last data
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+            proc.communicate(timeout=60)
+        pub.loop_stop()
+        pub.disconnect()
+    assert proc.returncode == 0, err.decode()[-3000:]
+    summary = json.loads(out.decode().strip().splitlines()[-1])
+    assert sorted(summary) == [f"mill-{k}" for k in machines]
+    assert not any("error" in v for v in summary.values()), summary
+    for k in machines:
+        msgs = _read(tmp_path / "state" / f"mill-{k}" / "results.jsonl")
+        _same_as_reference(msgs, reference)
+        runs = [m["resumed"] for m in msgs if m["kind"] == "run"]
+        assert [r["from_checkpoint"] for r in runs] == [False, True, True], k
