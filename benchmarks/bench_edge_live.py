@@ -31,7 +31,8 @@ Reported, in one run:
   machine) and the bare estimator floor measured in the same run.
 
 Run: ``.venv/bin/python benchmarks/bench_edge_live.py [--machines 100] [--seconds 30]
-[--cycles-per-message 500] [--status-s 1]``
+[--cycles-per-message 500] [--status-s 1] [--baseline-rev COMMIT]`` (``--baseline-rev``: the
+same run also with the plant of an earlier commit, ``git archive``, side by side).
 """
 
 from __future__ import annotations
@@ -115,40 +116,13 @@ def _metadata(k: int) -> tuple[str, str, bytes]:
     return meta, data, orjson.dumps(doc)
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--machines", type=int, default=100)
-    ap.add_argument("--seconds", type=float, default=30.0, help="machine time published")
-    ap.add_argument("--cycles-per-message", type=int, default=500)
-    ap.add_argument("--workers", type=int, default=0, help="plant workers (0: the cores)")
-    ap.add_argument("--status-s", type=float, default=1.0,
-                    help="the machines' status interval (edge run --status-s) [s]")
-    ap.add_argument("--keep", action="store_true", help="keep the temporary folder")
-    args = ap.parse_args()
+def _measure(args: argparse.Namespace, tmp: Path, payloads: list[bytes], n_cyc: int,
+             env: dict[str, str] | None) -> dict[str, Any]:
+    """One run: a private broker, the plant (with ``env``: another code's PYTHONPATH), the
+    publisher; the figures of the table."""
     import paho.mqtt.client as mqtt
 
-    from cnctwin.edge import save_spindle_model
-    from cnctwin.sim import scenarios as sc
-    from cnctwin.spindle import SpindleModel, StreamingTorqueEstimator
-
-    tmp = Path(tempfile.mkdtemp(prefix="bench_live_"))
-    n_cyc = int(args.seconds * NEED)
-    holes = max(1, int(args.seconds / 4.4) + 1)
-    rec = sc.tool_wear_run(n_holes=holes, holes_per_set=6, dynamometer=False,
-                           seed=0).recording
-    n_cyc = min(n_cyc, rec.n_cycles)
-    data = {c: rec.hf[c].to_numpy(dtype=np.float64)[:n_cyc] for c in COLUMNS}
-    model = SpindleModel(1.04, 8.42e-5, 0.35, j_kgm2=0.0045)
-    save_spindle_model(model, tmp / "spindle.json")
-
-    # floor, same run: the bare estimator over the same chunks
-    est = StreamingTorqueEstimator(model)
-    c0 = time.process_time()
     cpm = args.cycles_per_message
-    for k in range(0, n_cyc, cpm):
-        est.update(data["CURRENT|SP1"][k:k + cpm], data["CMD_SPEED|SP1"][k:k + cpm])
-    floor = n_cyc / (time.process_time() - c0)
-
     port = _free_port()
     broker = _mosquitto(port, tmp)
     topics = [_metadata(k) for k in range(args.machines)]
@@ -168,6 +142,7 @@ def main() -> None:
     for k, (meta, _, _) in enumerate(topics):
         lines += ["[[machine]]", f'name = "mill-{k:03d}"',
                   f'source = "mqtt://127.0.0.1:{port}/{meta}"', ""]
+    shutil.rmtree(tmp / "state", ignore_errors=True)
     (tmp / "plant.toml").write_text("\n".join(lines), encoding="utf-8")
 
     # a consumer of the results: arrival time of every torque message
@@ -192,7 +167,7 @@ def main() -> None:
     sub.loop_start()
 
     plant = subprocess.Popen([sys.executable, "-m", "cnctwin", "edge", "run", "--config",
-                              str(tmp / "plant.toml"), "--quiet"], cwd=tmp,
+                              str(tmp / "plant.toml"), "--quiet"], cwd=tmp, env=env,
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 180
     while len(runs) < args.machines:
@@ -203,21 +178,7 @@ def main() -> None:
         time.sleep(0.2)
     time.sleep(1.0)  # every data subscription in place
 
-    # every machine replays the same data: each message is encoded once, before the clock
-    # starts, and sent to every machine's topic (the publisher stands for the controls; its
-    # JSON encoding is not the plant's work and would only take CPU from it here)
     base = 10_000_000
-    t_ms0 = int(time.time() * 1000) + 2000
-    payloads: list[bytes] = []
-    for j, k in enumerate(range(0, n_cyc, cpm)):
-        vals: list[dict[str, Any]] = []
-        for c in range(k, min(k + cpm, n_cyc)):
-            sec, ms = divmod(t_ms0 + 2 * c, 1000)
-            ts = time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(sec)) + f".{ms:03d}Z"
-            vals.append({"id": "1", "qc": 3, "ts": ts, "val": base + c})
-            vals += [{"id": str(i + 2), "qc": 3, "ts": ts, "val": float(data[col][c])}
-                     for i, col in enumerate(COLUMNS)]
-        payloads.append(orjson.dumps({"seq": j + 1, "vals": vals}))
     cpu_start = _tree_cpu_s(plant.pid)  # start-up (imports, connects) not counted
     # real time: message j of machine m at t0 + (j + 1 + m / M) * period; the machines are
     # not synchronised (their messages spread over the period, as independent controls')
@@ -270,32 +231,101 @@ def main() -> None:
         if 0 <= j < sent_ns.shape[1]:
             ext.append((t_rx - sent_ns[m, j]) / 1e6)
     e = np.asarray(ext)
+    return {"lag_end_ms": lag_end * 1e3, "errors": len(errors), "cycles": cycles,
+            "lost": lost, "p50": float(np.median(lat_p50)), "p99_median": float(
+                np.median(lat_p99)), "p99_worst": max(lat_p99), "max": max(lat_max),
+            "e2e_p50": float(np.percentile(e, 50)), "e2e_p99": float(np.percentile(e, 99)),
+            "cpu_s": cpu_s, "pipe_cpu_s": pipe_cpu_s,
+            "per_core": cycles / cpu_s / NEED}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--machines", type=int, default=100)
+    ap.add_argument("--seconds", type=float, default=30.0, help="machine time published")
+    ap.add_argument("--cycles-per-message", type=int, default=500)
+    ap.add_argument("--workers", type=int, default=0, help="plant workers (0: the cores)")
+    ap.add_argument("--status-s", type=float, default=1.0,
+                    help="the machines' status interval (edge run --status-s) [s]")
+    ap.add_argument("--baseline-rev", metavar="COMMIT",
+                    help="also run the plant with the code of this commit (git archive), in "
+                    "the same run, and show both side by side")
+    ap.add_argument("--keep", action="store_true", help="keep the temporary folder")
+    args = ap.parse_args()
+    from cnctwin.edge import save_spindle_model
+    from cnctwin.sim import scenarios as sc
+    from cnctwin.spindle import SpindleModel, StreamingTorqueEstimator
+
+    tmp = Path(tempfile.mkdtemp(prefix="bench_live_"))
+    n_cyc = int(args.seconds * NEED)
+    holes = max(1, int(args.seconds / 4.4) + 1)
+    rec = sc.tool_wear_run(n_holes=holes, holes_per_set=6, dynamometer=False,
+                           seed=0).recording
+    n_cyc = min(n_cyc, rec.n_cycles)
+    data = {c: rec.hf[c].to_numpy(dtype=np.float64)[:n_cyc] for c in COLUMNS}
+    model = SpindleModel(1.04, 8.42e-5, 0.35, j_kgm2=0.0045)
+    save_spindle_model(model, tmp / "spindle.json")
+
+    # floor, same run: the bare estimator over the same chunks
+    est = StreamingTorqueEstimator(model)
+    c0 = time.process_time()
+    cpm = args.cycles_per_message
+    for k in range(0, n_cyc, cpm):
+        est.update(data["CURRENT|SP1"][k:k + cpm], data["CMD_SPEED|SP1"][k:k + cpm])
+    floor = n_cyc / (time.process_time() - c0)
+
+    # every machine replays the same data: each message is encoded once, before the clock
+    # starts, and sent to every machine's topic (the publisher stands for the controls; its
+    # JSON encoding is not the plant's work and would only take CPU from it here)
+    base = 10_000_000
+    t_ms0 = int(time.time() * 1000) + 2000
+    payloads: list[bytes] = []
+    for j, k in enumerate(range(0, n_cyc, cpm)):
+        vals: list[dict[str, Any]] = []
+        for c in range(k, min(k + cpm, n_cyc)):
+            sec, ms = divmod(t_ms0 + 2 * c, 1000)
+            ts = time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(sec)) + f".{ms:03d}Z"
+            vals.append({"id": "1", "qc": 3, "ts": ts, "val": base + c})
+            vals += [{"id": str(i + 2), "qc": 3, "ts": ts, "val": float(data[col][c])}
+                     for i, col in enumerate(COLUMNS)]
+        payloads.append(orjson.dumps({"seq": j + 1, "vals": vals}))
+
+    codes: list[tuple[str, dict[str, str] | None]] = [("this code", None)]
+    if args.baseline_rev:
+        from _common import export_rev
+
+        old = export_rev(args.baseline_rev, Path(tempfile.mkdtemp(dir=tmp)))
+        codes.append((f"code of {args.baseline_rev}", {**os.environ, "PYTHONPATH": str(old)}))
+    res = [(label, _measure(args, tmp, payloads, n_cyc, env)) for label, env in codes]
     load = os.getloadavg()
     print(f"machine: {cpu_model()}, {os.cpu_count()} vCPU; load average "
           f"{load[0]:.1f}/{load[1]:.1f}/{load[2]:.1f}; python {platform.python_version()}")
-    print(f"{args.machines} machines x {n_cyc} cycles ({n_cyc / NEED:.0f} s, "
-          f"{cpm} cycles per message, {1 + len(COLUMNS)} datapoints, status every "
-          f"{args.status_s:g} s); publisher behind "
-          f"schedule at the end by {lag_end * 1e3:.0f} ms; errors {len(errors)}; "
-          f"cycles processed {cycles} of {args.machines * n_cyc}; counted losses {lost}")
+    for label, r in res:
+        print(f"{label}: {args.machines} machines x {n_cyc} cycles ({n_cyc / NEED:.0f} s, "
+              f"{cpm} cycles per message, {1 + len(COLUMNS)} datapoints, status every "
+              f"{args.status_s:g} s); publisher behind schedule at the end by "
+              f"{r['lag_end_ms']:.0f} ms; errors {r['errors']}; cycles processed "
+              f"{r['cycles']} of {args.machines * n_cyc}; counted losses {r['lost']}")
     print()
-    print("| figure | value |")
-    print("|---|---|")
-    print(f"| latency arrival -> publish, p50 of the machines' p50 [ms] | "
-          f"{np.median(lat_p50):.1f} |")
-    print(f"| latency arrival -> publish, median of the machines' p99 [ms] | "
-          f"{np.median(lat_p99):.1f} |")
-    print(f"| latency arrival -> publish, worst machine's p99 [ms] | {max(lat_p99):.1f} |")
-    print(f"| latency arrival -> publish, max [ms] | {max(lat_max):.1f} |")
-    print(f"| end to end (send -> result at a subscriber), p50 / p99 [ms] | "
-          f"{np.percentile(e, 50):.1f} / {np.percentile(e, 99):.1f} |")
-    print(f"| plant CPU [s] for {n_cyc / NEED * args.machines:.0f} machine-seconds | "
-          f"{cpu_s:.1f} |")
-    print(f"| of which the machines' pipelines (`cpu_s` in status.json: chunk -> results in "
-          f"the sinks, checkpoints) [s] | {pipe_cpu_s:.1f} |")
-    print(f"| machines at 500 Hz per core, live (Databus + full path + MQTT) | "
-          f"{cycles / cpu_s / NEED:.0f} |")
-    print(f"| floor: bare estimator, same chunks, machines per core | {floor / NEED:,.0f} |")
+    print("| figure | " + " | ".join(label for label, _ in res) + " |")
+    print("|---|" + "---|" * len(res))
+    rows = [("latency arrival -> publish, p50 of the machines' p50 [ms]", "p50", ".1f"),
+            ("latency arrival -> publish, median of the machines' p99 [ms]", "p99_median",
+             ".1f"),
+            ("latency arrival -> publish, worst machine's p99 [ms]", "p99_worst", ".1f"),
+            ("latency arrival -> publish, max [ms]", "max", ".1f"),
+            ("end to end (send -> result at a subscriber), p50 [ms]", "e2e_p50", ".1f"),
+            ("end to end, p99 [ms]", "e2e_p99", ".1f"),
+            (f"plant CPU [s] for {n_cyc / NEED * args.machines:.0f} machine-seconds",
+             "cpu_s", ".1f"),
+            ("of which the machines' pipelines (`cpu_s` in status.json: chunk -> results in "
+             "the sinks, checkpoints) [s]", "pipe_cpu_s", ".1f"),
+            ("**machines at 500 Hz per core, live, whole plant process** (Databus + full "
+             "path + MQTT)", "per_core", ".0f")]
+    for title, key, fmt in rows:
+        print(f"| {title} | " + " | ".join(format(r[key], fmt) for _, r in res) + " |")
+    print(f"| floor: bare estimator, same chunks, machines per core | {floor / NEED:,.0f} |"
+          + " |" * (len(res) - 1))
     if args.keep:
         print(f"kept: {tmp}")
     else:

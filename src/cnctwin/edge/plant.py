@@ -245,6 +245,7 @@ class _Pumped:
         self.idle_s = float(src.window_s)
         src.window_s = 0.0  # chunks() never waits: it yields an idle chunk when empty
         self.chunks = rt.begin()
+        self.next_tick = 0.0
 
     def pump(self, *, idle: bool) -> bool:
         """Process what arrived (and an idle tick if ``idle``); True when the run ended."""
@@ -316,7 +317,6 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
     pumped: dict[Any, _Pumped] = {}  # the source's hub port -> machine
     hubs: set[Any] = set()
     stopped = False
-    next_tick = time.monotonic() + tick_s
     while True:
         with lock:
             new, handed[:] = list(handed), []
@@ -329,6 +329,9 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
             hub = rt.source.hub
             hub.notify = wake
             hubs.add(hub)
+            # the machines' idle ticks (status files, sinks) spread over the tick, so that
+            # no arrival waits behind all of them
+            m.next_tick = time.monotonic() + tick_s * (len(pumped) % 16 + 1) / 16
             pumped[rt.source.recorder._client] = m
         if not pumped and not new and not any(th.is_alive() for th in threads):
             with lock:
@@ -343,12 +346,12 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
         for h in hubs:
             touched |= h.take_touched()
         now = time.monotonic()
-        tick = now >= next_tick or stopped
-        if tick:
-            next_tick = now + tick_s
         for port, m in list(pumped.items()):
+            tick = stopped or now >= m.next_tick
             if not (tick or port in touched):
                 continue
+            if tick:
+                m.next_tick = now + tick_s
             try:
                 ended = m.pump(idle=tick)
                 if ended:
@@ -360,7 +363,8 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
                 with contextlib.suppress(Exception):
                     m.rt.end()
         if not touched:
-            wake.wait(max(0.0, min(next_tick - time.monotonic(), 0.2)))
+            first = min((m.next_tick for m in pumped.values()), default=now + tick_s)
+            wake.wait(max(0.0, min(first - time.monotonic(), 0.2)))
     for th in threads:
         th.join()
 
