@@ -138,7 +138,8 @@ def _measure(args: argparse.Namespace, tmp: Path, payloads: list[bytes], n_cyc: 
              "[defaults]", f'model = "{tmp / "spindle.json"}"',
              f'publish = "mqtt://127.0.0.1:{port}/results"', "learn-s = 5",
              "idle-timeout-s = 5", "session-expiry-s = 0", "no-twin = true",
-             f"status-s = {args.status_s}", ""]
+             f"status-s = {args.status_s}", f"batch-s = {args.batch_s}" if env is None
+             else "", ""]
     for k, (meta, _, _) in enumerate(topics):
         lines += ["[[machine]]", f'name = "mill-{k:03d}"',
                   f'source = "mqtt://127.0.0.1:{port}/{meta}"', ""]
@@ -247,6 +248,9 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=0, help="plant workers (0: the cores)")
     ap.add_argument("--status-s", type=float, default=1.0,
                     help="the machines' status interval (edge run --status-s) [s]")
+    ap.add_argument("--batch-s", type=float, default=0.0,
+                    help="the machines' batch interval (edge run --batch-s; this code only) "
+                    "[s]")
     ap.add_argument("--baseline-rev", metavar="COMMIT",
                     help="also run the plant with the code of this commit (git archive), in "
                     "the same run, and show both side by side")
@@ -303,7 +307,8 @@ def main() -> None:
     for label, r in res:
         print(f"{label}: {args.machines} machines x {n_cyc} cycles ({n_cyc / NEED:.0f} s, "
               f"{cpm} cycles per message, {1 + len(COLUMNS)} datapoints, status every "
-              f"{args.status_s:g} s); publisher behind schedule at the end by "
+              f"{args.status_s:g} s, batches of {args.batch_s if label == 'this code' else 0:g}"
+              " s); publisher behind schedule at the end by "
               f"{r['lag_end_ms']:.0f} ms; errors {r['errors']}; cycles processed "
               f"{r['cycles']} of {args.machines * n_cyc}; counted losses {r['lost']}")
     print()

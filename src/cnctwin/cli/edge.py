@@ -218,6 +218,10 @@ def _add_run_options(r: argparse.ArgumentParser) -> None:
                    help="store-and-forward bound [messages]")
     r.add_argument("--idle-timeout-s", type=float, default=None,
                    help="live source: stop after this long without data [s]")
+    r.add_argument("--batch-s", type=float, default=0.0, metavar="S",
+                   help="live Databus machine of a plant (edge run --config): process its "
+                   "messages at most every S seconds, what arrived meanwhile as one chunk "
+                   "(small messages then cost what large ones do; up to S more latency; 0)")
 
 
 class _OptionParser(argparse.ArgumentParser):
@@ -496,6 +500,11 @@ def _build(args: argparse.Namespace) -> Any:
         raise ConfigError(f"--status-s {args.status_s}: give a number of seconds above 0 and "
                           "at most 5 (the dashboard calls a machine stale after 10 s without "
                           "a status)")
+    batch_s = getattr(args, "batch_s", 0.0)
+    if batch_s < 0 or (batch_s > 0 and (getattr(args, "mqtt_hubs", None) is None or not
+                                        args.source.startswith(("mqtt://", "tcp://")))):
+        raise ConfigError(f"--batch-s {batch_s}: give 0, or a positive number of seconds for "
+                          "a live Databus machine of a plant (edge run --config plant.toml)")
     machine_name, model, machine_file = _machine_and_model(args)
     args.machine = machine_name
     from cnctwin.iotools.mqtt import MqttSecurity
@@ -529,7 +538,7 @@ def _build(args: argparse.Namespace) -> Any:
                             username=u.username, password=u.password, machine=args.machine,
                             idle_timeout_s=args.idle_timeout_s, security=security,
                             client_id=client_id, session_expiry_s=args.session_expiry_s,
-                            resume_after_cycle=resume, hub=hub)
+                            resume_after_cycle=resume, hub=hub, batch_s=batch_s)
         print(f"connecting to {u.host}:{u.port}, waiting for the Databus metadata on "
               f"{u.topic} (up to {src.ready_timeout_s:.0f} s) ...", file=sys.stderr)
         try:

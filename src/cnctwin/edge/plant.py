@@ -235,22 +235,27 @@ def _error_text(exc: BaseException) -> str:
 
 class _Pumped:
     """A machine whose live source shares its worker's MQTT hub, driven from the worker's
-    thread: its runtime takes what the source has each time the hub routed messages to it,
-    and an idle tick every ``idle_s``."""
+    thread: its runtime takes what the source has each time the hub routed messages to it
+    (at most once per the source's ``batch_s``: what arrived meanwhile is one chunk), and an
+    idle tick every ``tick_s``."""
 
     def __init__(self, name: str, rt: Any) -> None:
         self.name = name
         self.rt = rt
         src = rt.source
-        self.idle_s = float(src.window_s)
         src.window_s = 0.0  # chunks() never waits: it yields an idle chunk when empty
+        self.batch_s = float(getattr(src, "batch_s", 0.0) or 0.0)
         self.chunks = rt.begin()
         self.next_tick = 0.0
+        self.last_data = -1e9
+        self.due = 0.0  # messages wait until then (batch_s); 0: none waiting
 
     def pump(self, *, idle: bool) -> bool:
         """Process what arrived (and an idle tick if ``idle``); True when the run ended."""
+        self.due = 0.0
         for chunk in self.chunks:
             if len(chunk):
+                self.last_data = time.monotonic()
                 self.rt.process(chunk)
                 if self.rt.stopping:
                     return False  # the next pump ends the source and drains it
@@ -259,6 +264,62 @@ class _Pumped:
                 self.rt.idle()
             return False
         return True
+
+
+class _PumpLoop:
+    """The machines of one process that share MQTT hubs, driven from one thread."""
+
+    def __init__(self, report: Report, wake: threading.Event, tick_s: float) -> None:
+        self.report = report
+        self.wake = wake
+        self.tick_s = tick_s
+        self.machines: dict[Any, _Pumped] = {}  # the source's hub port -> machine
+        self.hubs: set[Any] = set()
+
+    def add(self, name: str, rt: Any) -> None:
+        try:
+            m = _Pumped(name, rt)
+        except Exception as exc:
+            self.report(name, "error", _error_text(exc))
+            return
+        hub = rt.source.hub
+        hub.notify = self.wake
+        self.hubs.add(hub)
+        # the machines' idle ticks (status files, sinks) spread over the tick, so that no
+        # arrival waits behind all of them
+        m.next_tick = time.monotonic() + self.tick_s * (len(self.machines) % 16 + 1) / 16
+        self.machines[rt.source.recorder._client] = m
+
+    def step(self, *, stopping: bool) -> float:
+        """Pump the machines with new messages (or whose batch or tick is due); returns how
+        long to wait for the next [s] (0: go on at once)."""
+        touched: set[Any] = set()
+        for h in self.hubs:
+            touched |= h.take_touched()
+        now = time.monotonic()
+        for port, m in list(self.machines.items()):
+            tick = stopping or now >= m.next_tick
+            if port in touched and not m.due:
+                m.due = max(m.last_data + m.batch_s, now)
+            if not (tick or (m.due and now >= m.due)):
+                continue
+            if tick:
+                m.next_tick = now + self.tick_s
+            try:
+                ended = m.pump(idle=tick)
+                if ended:
+                    del self.machines[port]
+                    self.report(m.name, "done", m.rt.end())
+            except Exception as exc:
+                del self.machines[port]
+                self.report(m.name, "error", _error_text(exc))
+                with contextlib.suppress(Exception):
+                    m.rt.end()
+        if touched:
+            return 0.0
+        nxt = [m.next_tick for m in self.machines.values()] + \
+            [m.due for m in self.machines.values() if m.due]
+        return max(0.0, min(min(nxt, default=now + self.tick_s) - time.monotonic(), 0.2))
 
 
 def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
@@ -282,10 +343,11 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
     A machine whose live source shares an MQTT hub (:class:`cnctwin.iotools.mqtt.MqttHub`: a
     plant worker's machines on one broker) is driven from this function's thread once built:
     the hub's network thread routes each message to its machine's queue, this thread runs
-    that machine's pipeline on it, and ticks every machine (status, sinks, idle timeout) once
-    per ``tick_s``: no thread per machine. Any other runtime (a replay, OPC UA) runs in its
-    build thread. A machine whose build or run fails (a broker that refuses it, a missing
-    file) is reported and ends; the others go on.
+    that machine's pipeline on it (what arrived within the source's ``batch_s`` as one
+    chunk), and ticks every machine (status, sinks, idle timeout) once per ``tick_s``, the
+    machines' ticks spread over it: no thread per machine. Any other runtime (a replay, OPC
+    UA) runs in its build thread. A machine whose build or run fails (a broker that refuses
+    it, a missing file) is reported and ends; the others go on.
     """
     runtimes: dict[str, _Runtime] = {}
     lock = threading.Lock()
@@ -314,26 +376,14 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
                for n, b in builders]
     for th in threads:
         th.start()
-    pumped: dict[Any, _Pumped] = {}  # the source's hub port -> machine
-    hubs: set[Any] = set()
+    loop = _PumpLoop(report, wake, tick_s)
     stopped = False
     while True:
         with lock:
             new, handed[:] = list(handed), []
         for name, rt in new:
-            try:
-                m = _Pumped(name, rt)
-            except Exception as exc:
-                report(name, "error", _error_text(exc))
-                continue
-            hub = rt.source.hub
-            hub.notify = wake
-            hubs.add(hub)
-            # the machines' idle ticks (status files, sinks) spread over the tick, so that
-            # no arrival waits behind all of them
-            m.next_tick = time.monotonic() + tick_s * (len(pumped) % 16 + 1) / 16
-            pumped[rt.source.recorder._client] = m
-        if not pumped and not new and not any(th.is_alive() for th in threads):
+            loop.add(name, rt)
+        if not loop.machines and not new and not any(th.is_alive() for th in threads):
             with lock:
                 if not handed:
                     break
@@ -342,29 +392,9 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
             with lock:
                 for rt in runtimes.values():
                     rt.stop()
-        touched: set[Any] = set()
-        for h in hubs:
-            touched |= h.take_touched()
-        now = time.monotonic()
-        for port, m in list(pumped.items()):
-            tick = stopped or now >= m.next_tick
-            if not (tick or port in touched):
-                continue
-            if tick:
-                m.next_tick = now + tick_s
-            try:
-                ended = m.pump(idle=tick)
-                if ended:
-                    del pumped[port]
-                    report(m.name, "done", m.rt.end())
-            except Exception as exc:
-                del pumped[port]
-                report(m.name, "error", _error_text(exc))
-                with contextlib.suppress(Exception):
-                    m.rt.end()
-        if not touched:
-            first = min((m.next_tick for m in pumped.values()), default=now + tick_s)
-            wake.wait(max(0.0, min(first - time.monotonic(), 0.2)))
+        wait_s = loop.step(stopping=stopped)
+        if wait_s > 0:
+            wake.wait(wait_s)
     for th in threads:
         th.join()
 

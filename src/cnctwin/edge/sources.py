@@ -313,6 +313,11 @@ class DatabusSource:
         user, ``client_id`` and the session are then the hub's). A plant worker drives such
         sources from one thread (:func:`cnctwin.edge.plant.run_machines`): ``window_s`` 0, so
         :meth:`chunks` never waits.
+    batch_s : float, default 0
+        With a hub: the machine's messages are processed at most once per ``batch_s`` [s],
+        what arrived meanwhile as one chunk (0: each as it arrives). The work per chunk
+        (processors, results, outbox, publish) is then paid once per batch: 100 ms messages
+        in 0.5 s batches cost about what 1 s messages do, for up to ``batch_s`` more latency.
     """
 
     def __init__(self, host: str, port: int = 1883, *, metadata_topic: str,
@@ -322,7 +327,8 @@ class DatabusSource:
                  machine: str = "", ready_timeout_s: float = 30.0,
                  security: MqttSecurity | None = None, client_id: str = "",
                  session_expiry_s: int = 0, resume_after_cycle: int | None = None,
-                 ack_batch: int = 10, hub: MqttHub | None = None) -> None:
+                 ack_batch: int = 10, hub: MqttHub | None = None,
+                 batch_s: float = 0.0) -> None:
         from cnctwin.iotools.mqtt import MqttRecorder
 
         self.recorder = MqttRecorder(host, port, metadata_topic=metadata_topic,
@@ -330,7 +336,11 @@ class DatabusSource:
                                      username=username, password=password, security=security,
                                      client_id=client_id, session_expiry_s=session_expiry_s,
                                      qos=1, columnar=True, manual_ack=True, hub=hub)
+        if batch_s < 0 or (batch_s > 0 and hub is None):
+            raise ConfigError(f"batch_s = {batch_s}: give 0, or a positive number of seconds "
+                              "for a source on a plant worker's hub")
         self.hub = hub
+        self.batch_s = float(batch_s)
         self.window_s = window_s
         self.idle_timeout_s = idle_timeout_s
         self.cycle_time_s = cycle_time_s
