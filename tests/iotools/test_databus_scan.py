@@ -195,3 +195,38 @@ def test_rows_written_otherwise_than_the_first_are_parsed_in_full() -> None:
     bad = msg.replace(b'{"id":"7","qc":3,"ts":"2026-11-28T01:02:03.012Z"',
                       b'{"id":"12","qc":3,"ts":"2026-11-28T01:02:03.012Z"')
     assert scan_bulk(bad, d._lut) is None  # type: ignore[arg-type]
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 6), st.integers(1, 4), st.booleans()), min_size=2,
+                max_size=5))
+def test_merging_messages_equals_a_table_of_their_values(
+        parts: list[tuple[int, int, bool]]) -> None:
+    """Several messages' columns merged (the live source takes what arrived since its last
+    chunk): one row per cycle, a later message's value replacing an earlier one of the same
+    cycle and column, NaN where no message had a value; consecutive messages of the same
+    datapoints (a live connector's) take a shortcut that must give the same."""
+    from cnctwin.iotools.databus import DatabusColumns, merge_columns
+
+    batches, rows = [], []
+    start = 0
+    for k, (gap, n, other) in enumerate(parts):
+        start = start + gap - 3  # may overlap the previous message
+        cyc = np.arange(start, start + n, dtype=np.int64)
+        start += n
+        names = ["A", "B"] if not other else ["B"]
+        cols = {c: np.arange(n, dtype=np.float64) + 10 * k + (c == "B") for c in names}
+        if np.unique(cyc).size == cyc.size:
+            batches.append(DatabusColumns(cyc, cols, n * len(names), []))
+            rows += [(int(cc), c, float(cols[c][j])) for j, cc in enumerate(cyc) for c in names]
+    if len(batches) < 2:
+        return
+    got = merge_columns(batches)
+    want: dict[int, dict[str, float]] = {}
+    for cc, c, v in rows:  # in message order: the last wins
+        want.setdefault(cc, {})[c] = v
+    assert got.cycles.tolist() == sorted(want)
+    for c in got.columns:
+        exp = [want[cc].get(c, np.nan) for cc in sorted(want)]
+        np.testing.assert_array_equal(got.columns[c], exp)
+    assert set(got.columns) == {c for r in want.values() for c in r}

@@ -39,7 +39,7 @@ import json
 import math
 import re
 from dataclasses import dataclass
-from itertools import chain, repeat
+from itertools import chain, pairwise, repeat
 from typing import Any
 
 import msgspec
@@ -121,6 +121,16 @@ def merge_columns(batches: list[DatabusColumns]) -> DatabusColumns:
     """
     if len(batches) == 1:
         return batches[0]
+    keys = list(batches[0].columns)
+    if all(list(b.columns) == keys and b.cycles.size for b in batches) and all(
+            int(a.cycles[-1]) < int(b.cycles[0]) for a, b in pairwise(batches)):
+        # messages in cycle order with the same datapoints (a live connector's): one after
+        # the other
+        return DatabusColumns(np.concatenate([b.cycles for b in batches]),
+                              {c: np.concatenate([b.columns[c] for b in batches])
+                               for c in keys},
+                              sum(b.n_values for b in batches),
+                              [i for b in batches for i in b.issues])
     cyc = np.unique(np.concatenate([b.cycles for b in batches]))
     cols: dict[str, NDArray[np.float64]] = {}
     issues: list[str] = []
