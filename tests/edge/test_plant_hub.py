@@ -138,7 +138,8 @@ def test_six_machines_share_one_connection_and_one_thread(
         tmp_path: Path) -> None:
     """Six live machines in one process (as a plant worker runs them): one MQTT connection,
     no thread per machine while they run (the hub's network thread and the driving thread
-    only), each machine's results those of its own replay."""
+    only), each machine's results those of its own replay; three of them in batches of
+    0.25 s (``batch_s``: several messages as one chunk), with the same results."""
     machines = range(1, 7)
     pub = publisher(broker.port)
     for k in machines:
@@ -152,7 +153,8 @@ def test_six_machines_share_one_connection_and_one_thread(
     def build(k: int) -> Any:
         def make() -> EdgeRuntime:
             src = DatabusSource("127.0.0.1", broker.port, metadata_topic=_topics(k)[0],
-                                machine=f"mill-{k}", idle_timeout_s=2.0, hub=hub)
+                                machine=f"mill-{k}", idle_timeout_s=2.0, hub=hub,
+                                batch_s=0.25 if k > 3 else 0.0)
             src.start()
             d = tmp_path / f"mill-{k}"
             return EdgeRuntime(src, _processors(), [JsonLinesSink(d / "results.jsonl")],
@@ -183,6 +185,22 @@ def test_six_machines_share_one_connection_and_one_thread(
     assert sorted(r[0] for r in reports if r[1] == "done") == [f"mill-{k}" for k in machines]
     for k in machines:
         _same_as_reference(_read(tmp_path / f"mill-{k}" / "results.jsonl"), reference)
+        chunks = json.loads((tmp_path / f"mill-{k}" / "status.json").read_text())["chunks"]
+        # a chunk per message (two may merge when the thread is late: a loaded machine), or
+        # per 0.25 s batch of ~10 messages sent at 8x real time
+        assert chunks > len(payloads) / 2 if k <= 3 else chunks < len(payloads) / 3, \
+            (k, chunks)
+
+
+def test_batch_s_is_refused_outside_a_plant(tmp_path: Path, wear_run: dict[str, Any],
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    from cnctwin.cli import main
+
+    model = save_spindle_model(MODEL, tmp_path / "spindle.json")
+    assert main(["edge", "run", "--source", str(wear_run["path"]), "--model", str(model),
+                 "--out", str(tmp_path / "o"), "--batch-s", "0.5", "--quiet"]) == 2
+    assert "--batch-s 0.5: give 0, or a positive number of seconds for a live Databus " \
+        "machine of a plant" in capsys.readouterr().err
 
 
 def test_a_plant_worker_killed_twice_gives_every_machine_its_results_exactly_once(
