@@ -276,3 +276,44 @@ def test_a_plant_worker_killed_twice_gives_every_machine_its_results_exactly_onc
         _same_as_reference(msgs, reference)
         runs = [m["resumed"] for m in msgs if m["kind"] == "run"]
         assert [r["from_checkpoint"] for r in runs] == [False, True, True], k
+
+
+def test_the_hub_holds_unclaimed_messages_refuses_a_shared_topic_and_unsubscribes_an_ended_machine(
+        broker: Broker) -> None:
+    """What a resumed session delivers before its machine subscribed is handed over in order
+    when it does; a topic claimed by two machines is refused (naming it); a machine that
+    ends while others go on unsubscribes (nothing of it is held any more), while a stop of
+    the whole process keeps the subscriptions (its session keeps them for the restart)."""
+    from cnctwin.exceptions import ConfigError
+
+    hub = MqttHub("127.0.0.1", broker.port)
+    a, b = hub.port(), hub.port()
+    hub.start(10)
+    mid = hub.client.subscribe("t/early", 1)  # as a resumed session has it already
+    deadline = time.monotonic() + 10
+    while not hub.client.acked(mid):
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    pub = publisher(broker.port)
+    for j in range(3):
+        pub.publish("t/early", f"{j}".encode(), qos=1).wait_for_publish(5)
+    while len(hub._pending) < 3:
+        assert time.monotonic() < deadline, hub._pending
+        time.sleep(0.02)
+    a.subscribe("t/early", 1)
+    assert [a.queue.get(timeout=5)[1] for _ in range(3)] == [b"0", b"1", b"2"]
+    assert a in hub.take_touched()
+    with pytest.raises(ConfigError, match="'t/early' belongs to two machines"):
+        b.subscribe("t/early", 1)
+    b.subscribe("t/b", 1)
+    a.stop()  # b goes on: a's topic is unsubscribed
+    time.sleep(0.5)
+    pub.publish("t/early", b"late", qos=1).wait_for_publish(5)
+    time.sleep(0.5)
+    assert not hub._pending and a.queue.empty()
+    assert "t/early" not in hub.client.topics
+    hub.closing = True  # the whole process stops: b's subscription stays with the session
+    b.stop()
+    assert "t/b" in hub.client.topics
+    pub.loop_stop()
+    pub.disconnect()

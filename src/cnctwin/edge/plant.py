@@ -322,6 +322,14 @@ class _PumpLoop:
         return max(0.0, min(min(nxt, default=now + self.tick_s) - time.monotonic(), 0.2))
 
 
+def _closing(rt: Any) -> None:
+    """The whole process stops: a shared MQTT connection keeps its session's subscriptions
+    (the broker keeps the machines' messages for the restart)."""
+    hub = getattr(getattr(rt, "source", None), "hub", None)
+    if hub is not None:
+        hub.closing = True
+
+
 def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
                  report: Report, stop: threading.Event, tick_s: float = 0.5) -> None:
     """Build and run the runtimes of some machines in one process, until all have ended.
@@ -361,6 +369,7 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
                 runtimes[name] = rt
                 stopping = stop.is_set()
             if stopping:
+                _closing(rt)
                 rt.stop()
             report(name, "started", None)
             if getattr(getattr(rt, "source", None), "hub", None) is not None:
@@ -390,6 +399,8 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
         if stop.is_set() and not stopped:
             stopped = True
             with lock:
+                for rt in runtimes.values():
+                    _closing(rt)
                 for rt in runtimes.values():
                     rt.stop()
         wait_s = loop.step(stopping=stopped)

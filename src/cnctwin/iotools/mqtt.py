@@ -249,6 +249,13 @@ class _Client:
         with self._sub_lock:
             return mid in self.subacks
 
+    def unsubscribe(self, topics: list[str]) -> None:
+        for t in topics:
+            self.topics.pop(t, None)
+        if topics:
+            with contextlib.suppress(Exception):  # a lost connection: nothing to undo
+                self.client.unsubscribe(topics)
+
     def stop(self) -> None:
         with contextlib.suppress(Exception):
             self.client.disconnect()
@@ -312,8 +319,10 @@ class MqttHub:
     Messages for a topic no recorder has claimed yet (a resumed session delivers its queue
     before the machines have subscribed, or before their metadata told them the data topics)
     are held, in order, and handed over when a recorder subscribes to the topic; at most
-    ``max_pending`` of them (more are left unacknowledged, so the broker delivers them again
-    on the next connection, and counted in :attr:`unrouted_dropped`).
+    ``max_pending_bytes`` of them (more are left unacknowledged, so the broker delivers them
+    again on the next connection, and counted in :attr:`unrouted_dropped`). A recorder that
+    stops while others go on unsubscribes its topics (the broker then keeps nothing more for
+    it; a recorder with a connection of its own leaves that to its session's expiry).
 
     Parameters
     ----------
@@ -327,8 +336,8 @@ class MqttHub:
         TLS and user.
     session_expiry_s : int, default 0
         MQTT 5 session expiry [s] (0: a clean session).
-    max_pending : int, default 100000
-        Unclaimed messages held.
+    max_pending_bytes : int, default 256 MiB
+        Unclaimed messages held [bytes of payload].
     notify : threading.Event, optional
         Set whenever a routed message arrives (several hubs may share one).
     receive_maximum : int, default 1000
@@ -348,7 +357,7 @@ class MqttHub:
     def __init__(self, host: str, port: int = 1883, *, client_id: str = "",
                  username: str | None = None, password: str | None = None,
                  security: MqttSecurity | None = None, session_expiry_s: int = 0,
-                 max_pending: int = 100_000, notify: threading.Event | None = None,
+                 max_pending_bytes: int = 256 << 20, notify: threading.Event | None = None,
                  receive_maximum: int = 1000) -> None:
         self.client = _Client(host, port, client_id=client_id, username=username,
                               password=password, keepalive_s=30, max_queue=1,
@@ -357,7 +366,8 @@ class MqttHub:
         self.client.client.on_message = self._on_message
         self.client_id = client_id
         self.notify = notify if notify is not None else threading.Event()
-        self.max_pending = max_pending
+        self.max_pending_bytes = max_pending_bytes
+        self._pending_bytes = 0
         self.unrouted_dropped = 0
         self._routes: dict[str, _HubPort] = {}
         self._wild: dict[str, _HubPort] = {}  # filter prefix (before '#') -> port
@@ -367,6 +377,7 @@ class MqttHub:
         self._lock = threading.Lock()
         self._start_lock = threading.Lock()
         self._started = False
+        self.closing = False  # every recorder is stopping: keep the session's subscriptions
 
     def port(self, max_queue: int = 100_000) -> _HubPort:
         """A recorder's view of the hub (:class:`MqttRecorder` calls it)."""
@@ -396,8 +407,9 @@ class MqttHub:
         with self._lock:
             p = self._route(msg.topic)
             if p is None:
-                if len(self._pending) < self.max_pending:
+                if self._pending_bytes + len(item[1]) <= self.max_pending_bytes:
                     self._pending.append(item)
+                    self._pending_bytes += len(item[1])
                 else:
                     self.unrouted_dropped += 1
                 return
@@ -407,17 +419,28 @@ class MqttHub:
 
     def subscribe(self, topic: str, qos: int, port: _HubPort) -> int:
         """Route ``topic`` (an exact topic or a filter ending in ``#``) to ``port``, hand it
-        the held messages of that topic, and subscribe. Returns the SUBSCRIBE's message id."""
+        the held messages of that topic, and subscribe. Returns the SUBSCRIBE's message id.
+
+        Raises
+        ------
+        ConfigError
+            Another recorder of this connection has the topic (two machines of a plant
+            configured with one connector's topics).
+        """
         with self._lock:
-            if topic.endswith("#"):
-                self._wild[topic[:-1]] = port
-            else:
-                self._routes[topic] = port
+            table, key = (self._wild, topic[:-1]) if topic.endswith("#") else \
+                (self._routes, topic)
+            other = table.get(key)
+            if other is not None and other is not port:
+                raise ConfigError(f"MQTT topic {topic!r} belongs to two machines on the "
+                                  "same broker: give each machine its own connector topics")
+            table[key] = port
             keep = []
             for item in self._pending:
                 if self._route(item[0]) is port:
                     port.put(item)
                     self._touched.add(port)
+                    self._pending_bytes -= len(item[1])
                 else:
                     keep.append(item)
             moved = len(keep) != len(self._pending)
@@ -434,10 +457,13 @@ class MqttHub:
         return got
 
     def detach(self, port: _HubPort) -> None:
-        """A recorder stops: its topics are no longer routed (their messages are held,
-        unacknowledged: after a restart the persistent session delivers them again); the
-        connection closes with the last recorder."""
+        """A recorder stops: its topics are no longer routed; while other recorders go on
+        they are unsubscribed (else their messages would fill the broker's in-flight window
+        unacknowledged); the connection closes with the last recorder (its session keeps
+        every subscription)."""
         with self._lock:
+            gone = [t for t, p in self._routes.items() if p is port] + \
+                [t + "#" for t, p in self._wild.items() if p is port]
             self._routes = {t: p for t, p in self._routes.items() if p is not port}
             self._wild = {t: p for t, p in self._wild.items() if p is not port}
             self._ports.discard(port)
@@ -445,6 +471,8 @@ class MqttHub:
             last = not self._ports
         if last:
             self.stop()
+        elif self._started and not self.closing:  # the others go on: nothing more for it
+            self.client.unsubscribe(gone)
 
     def stop(self) -> None:
         """Disconnect (the persistent session stays with the broker)."""
