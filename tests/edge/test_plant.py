@@ -207,3 +207,61 @@ def test_a_killed_worker_is_restarted_and_sigterm_stops_the_plant(
         assert len(seqs) == len(set(seqs))  # never a repeated number, also across the kill
     seq_after = json.loads((tmp_path / "state/mill-1/seq.json").read_text())["next_seq"]
     assert seq_after > seq_before
+
+
+def test_a_machine_that_fails_in_the_shared_thread_ends_alone() -> None:
+    """Live machines on one connection run in one thread (``run_machines``' pump loop): a
+    machine whose pipeline raises is reported with its error and ended; the others are
+    served to their end (stand-in runtimes: the loop only needs ``begin``/``process``/
+    ``idle``/``end`` and a source with a hub)."""
+    import threading
+    from types import SimpleNamespace
+
+    from cnctwin.edge.plant import run_machines
+
+    class Hub:
+        notify: Any = None
+
+        def take_touched(self) -> set[Any]:
+            return set()
+
+    hub = Hub()
+
+    class Runtime:
+        def __init__(self, fail: bool) -> None:
+            self.source = SimpleNamespace(hub=hub, window_s=0.5, batch_s=0.0,
+                                          recorder=SimpleNamespace(_client=object()))
+            self.fail = fail
+            self.stopping = False
+            self.cycles = 0
+
+        def begin(self) -> Any:
+            def chunks() -> Any:
+                for _ in range(3):
+                    yield [0] * 10  # a chunk of 10 cycles
+                    yield []  # nothing more for now: an idle chunk
+            return chunks()
+
+        def process(self, chunk: list[int]) -> None:
+            if self.fail and self.cycles >= 10:
+                raise RuntimeError("boom")
+            self.cycles += len(chunk)
+
+        def idle(self) -> None:
+            pass
+
+        def end(self) -> dict[str, Any]:
+            return {"cycles": self.cycles}
+
+        def stop(self) -> None:
+            self.stopping = True
+
+        def run(self) -> dict[str, Any]:
+            raise AssertionError("a machine on a hub is not run in its own thread")
+
+    reports: list[tuple[str, str, Any]] = []
+    run_machines([(n, lambda f=(n == "bad"): Runtime(f)) for n in ("a", "bad", "b")],
+                 report=lambda *r: reports.append(r), stop=threading.Event(), tick_s=0.01)
+    ends = {r[0]: (r[1], r[2]) for r in reports if r[1] != "started"}
+    assert ends == {"a": ("done", {"cycles": 30}), "b": ("done", {"cycles": 30}),
+                    "bad": ("error", "internal error: RuntimeError: boom")}

@@ -307,14 +307,18 @@ class _PumpLoop:
                 m.next_tick = now + self.tick_s
             try:
                 ended = m.pump(idle=tick)
-                if ended:
-                    del self.machines[port]
-                    self.report(m.name, "done", m.rt.end())
-            except Exception as exc:
+            except Exception as exc:  # one machine's failure must not stop the others
                 del self.machines[port]
                 self.report(m.name, "error", _error_text(exc))
                 with contextlib.suppress(Exception):
                     m.rt.end()
+                continue
+            if ended:
+                del self.machines[port]
+                try:
+                    self.report(m.name, "done", m.rt.end())
+                except Exception as exc:
+                    self.report(m.name, "error", _error_text(exc))
         if touched:
             return 0.0
         nxt = [m.next_tick for m in self.machines.values()] + \
