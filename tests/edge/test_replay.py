@@ -202,3 +202,34 @@ def test_a_parquet_replay_reads_only_the_columns_the_pipeline_needs(
     src2 = ReplaySource(path, chunk_cycles=50)
     src2.select_columns(None)
     assert src2.recording.columns == rec.columns
+
+
+def test_a_stop_ends_a_paced_replay_during_a_recorded_pause(
+        wear_recording: Recording, spindle_model: SpindleModel) -> None:
+    """A real-time replay of a recording with a 10 min pause in its cycles (a machine left
+    idle) waits for the pause; a stop (SIGTERM, Ctrl-C) ends it at once, not 10 min later."""
+    import threading
+    import time
+
+    rec = wear_recording.select(cycles=(None, int(wear_recording.cycles[999])))
+    hf = rec.hf.copy()
+    late = hf.iloc[500:].copy()
+    late.index = late.index + 300_000  # 600 s later
+    late["time"] = late["time"] + pd.Timedelta(seconds=600)
+    paused = Recording(pd.concat([hf.iloc[:500], late]), meta=rec.meta)
+    sink = MemorySink()
+    rt = EdgeRuntime(ReplaySource(paused, chunk_cycles=100, speed=1.0),
+                     [TorqueProcessor(spindle_model)], [sink])
+    th = threading.Thread(target=rt.run)
+    th.start()
+    deadline = time.monotonic() + 30
+    while sum(m["n"] for m in sink.messages if m["kind"] == "torque") < 400:
+        assert time.monotonic() < deadline, "the first second was not replayed"
+        time.sleep(0.05)
+    time.sleep(1.0)  # now in the pause
+    t0 = time.monotonic()
+    rt.stop()
+    th.join(timeout=10)
+    assert not th.is_alive(), "the stop waited for the pace"
+    assert time.monotonic() - t0 < 2.0
+    assert rt.final_status is not None and rt.final_status["state"] == "finished"

@@ -9,6 +9,7 @@ for a counter that is already unwrapped, like a Recording's index).
 
 from __future__ import annotations
 
+import threading
 import time
 import urllib.parse
 from collections.abc import Iterator
@@ -185,6 +186,7 @@ class ReplaySource:
                                                           if recording.has(c)]
         self._cols = cols
         self.scheduled_ns = 0
+        self._interrupted = threading.Event()
 
     def select_columns(self, columns: list[str] | None) -> None:
         """Replay only these HF columns (None: every column of the recording).
@@ -248,8 +250,8 @@ class ReplaySource:
             elif self.speed:
                 due = start_wall + int((int(cyc[hi - 1]) + 1 - first) * step_ns / self.speed)
                 wait = due - time.perf_counter_ns()
-                if wait > 0:
-                    time.sleep(wait / 1e9)
+                if wait > 0 and self._interrupted.wait(wait / 1e9):
+                    return  # a stop does not wait for the pace (a long recorded pause)
                 self.scheduled_ns = time.time_ns() - max(time.perf_counter_ns() - due, 0)
             else:
                 self.scheduled_ns = time.time_ns()
@@ -257,6 +259,11 @@ class ReplaySource:
                         events=_events_between(ev, int(cyc[lo]), int(cyc[hi - 1]), ev_cycles),
                         cycle_time_s=self.cycle_time_s, machine=self.machine,
                         received_ns=self.scheduled_ns)
+
+    def interrupt(self) -> None:
+        """End :meth:`chunks` now, also in the middle of a paced wait (thread-safe;
+        :meth:`~cnctwin.edge.EdgeRuntime.stop` calls it)."""
+        self._interrupted.set()
 
     def close(self) -> None:
         """Nothing to release."""
@@ -362,10 +369,10 @@ class DatabusSource:
     def start(self) -> DatabusSource:
         """Connect, subscribe and wait for the metadata (bounded by ``ready_timeout_s``)."""
         if not self._started:
-            from cnctwin.iotools._databus_scan import warm_up
+            from cnctwin.iotools._databus_scan import prepare_scanner
 
             self.recorder.start()
-            warm_up()  # while the metadata comes in
+            prepare_scanner()  # while the metadata comes in
             self.recorder.wait_ready(timeout_s=self.ready_timeout_s)
             self._started = True
         return self

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["BulkScan", "id_table", "scan_bulk", "warm_up"]
+__all__ = ["BulkScan", "id_table", "prepare_scanner", "scan_bulk"]
 
 OK = 0
 DECLINED = 1
@@ -560,7 +560,7 @@ def _scanner() -> Any:
     return _compiled
 
 
-def warm_up() -> None:
+def prepare_scanner() -> None:
     """Compile (or load from numba's cache) and run the scanner once, so the first message
     of a live source does not wait for it (~0.4 s)."""
     lut = np.zeros(2, dtype=np.int64)
