@@ -284,14 +284,15 @@ def test_a_resumed_replay_catches_up_at_full_speed(wear_recording: Any, tmp_path
     """Issue 24, pt 6: a replay at ``--speed`` resumed from a checkpoint repeats the cycles
     between the checkpoint and the crash without waiting (it was there already); the pace
     holds after them. The source's waits are recorded instead of slept."""
-    import cnctwin.edge.sources as sources
 
     waits: list[tuple[int, float]] = []  # (index of the chunk the wait precedes, s)
     ends: list[int] = []  # last cycle of each chunk
-    monkeypatch.setattr(sources.time, "sleep", lambda s: waits.append((len(ends), s)))
     out = tmp_path / "state"
     _crash_at(wear_recording, out, 2000, checkpoint_s=2.0)  # checkpoints every 1000 cycles
     src = ReplaySource(wear_recording, chunk_cycles=50, speed=1.0)
+    # the pace waits on the source's stop event (a stop ends them at once): recorded here
+    monkeypatch.setattr(src._interrupted, "wait",
+                        lambda s: waits.append((len(ends), s)) or False)
     rt = EdgeRuntime(src, [TorqueProcessor(MODEL)], [JsonLinesSink(out / "results.jsonl")],
                      state_dir=out, checkpoint_every_s=2.0, status_every_s=0.0)
     info = rt.resume()
