@@ -265,3 +265,30 @@ def test_a_machine_that_fails_in_the_shared_thread_ends_alone() -> None:
     ends = {r[0]: (r[1], r[2]) for r in reports if r[1] != "started"}
     assert ends == {"a": ("done", {"cycles": 30}), "b": ("done", {"cycles": 30}),
                     "bad": ("error", "internal error: RuntimeError: boom")}
+
+
+def _env_worker(plant_path: str, names: list[str], report_queue: Any, key: str) -> None:
+    """A stand-in worker (top level: spawn imports it): reports its BLAS thread setting."""
+    report_queue.put(("", "ready", os.getpid()))
+    for n in names:
+        report_queue.put((n, "done", {"blas": os.environ.get("OPENBLAS_NUM_THREADS"),
+                                      "key": key}))
+
+
+def test_workers_start_with_one_blas_thread(tmp_path: Path, wear_run: dict[str, Any],
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    """One worker per core: each starts with OPENBLAS_NUM_THREADS=1 (its BLAS threads would
+    only compete for the cores), unless the user set it; the supervisor's own environment
+    is left as it was; each worker gets its slot's stable session key."""
+    from cnctwin.cli.edge import read_plant_file
+    from cnctwin.edge.plant import PlantRunner
+
+    plant = read_plant_file(_plant(tmp_path, wear_run["path"], PLANT))
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    res = PlantRunner(plant, _env_worker, workers=2).run()
+    assert {v["blas"] for _, v in res.values()} == {"1"}
+    assert len({v["key"] for _, v in res.values()}) == 2  # a key per worker slot
+    assert "OPENBLAS_NUM_THREADS" not in os.environ
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "3")  # the user's choice wins
+    res = PlantRunner(plant, _env_worker, workers=2).run()
+    assert {v["blas"] for _, v in res.values()} == {"3"}

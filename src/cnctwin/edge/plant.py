@@ -44,7 +44,7 @@ import signal
 import threading
 import time
 import tomllib
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
@@ -415,6 +415,28 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
 
 
 # ---------------------------------------------------------------------- many processes
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+"""Read by the BLAS libraries when NumPy loads them; a plant's workers start with 1 (unless
+the user set them): one worker per core, so BLAS threads in a worker would only compete for
+the cores (and OpenBLAS's idle threads spin)."""
+
+
+@contextlib.contextmanager
+def _one_blas_thread() -> Iterator[None]:
+    """The environment a worker process is spawned with: one BLAS thread (restored after)."""
+    saved = {k: os.environ.get(k) for k in BLAS_THREAD_VARIABLES}
+    for k in BLAS_THREAD_VARIABLES:
+        os.environ.setdefault(k, "1")
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
 Worker = Callable[[str, list[str], Any, str], None]
 """``worker(plant_path, machine_names, report_queue, session_key)``: a top-level function
 (picklable by reference) that runs the named machines of the plant file in a worker process
@@ -493,7 +515,8 @@ class PlantRunner:
         slot.proc = self._ctx.Process(target=self.worker,
                                       args=(str(self.plant.path), names, self._queue, key),
                                       name=f"cnctwin-edge-{'+'.join(names)[:40]}", daemon=False)
-        slot.proc.start()
+        with _one_blas_thread():  # a worker per core: BLAS threads would only compete
+            slot.proc.start()
 
     def _drain_reports(self, timeout_s: float) -> None:
         try:
