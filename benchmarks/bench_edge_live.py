@@ -300,7 +300,16 @@ def main() -> None:
 
         old = export_rev(args.baseline_rev, Path(tempfile.mkdtemp(dir=tmp)))
         codes.append((f"code of {args.baseline_rev}", {**os.environ, "PYTHONPATH": str(old)}))
-    res = [(label, _measure(args, tmp, payloads, n_cyc, env)) for label, env in codes]
+    # with a baseline: each code twice, in the order A B B A, the better run reported (the
+    # first plant of a run can cost ~30 % more CPU per cycle than the same code after it:
+    # BENCHMARKS.md, "Replay plant, re-measured")
+    order = codes + codes[::-1] if len(codes) > 1 else codes
+    best: dict[str, dict[str, Any]] = {}
+    for label, env in order:
+        r = _measure(args, tmp, payloads, n_cyc, env)
+        if label not in best or r["per_core"] > best[label]["per_core"]:
+            best[label] = r
+    res = [(label, best[label]) for label, _ in codes]
     load = os.getloadavg()
     print(f"machine: {cpu_model()}, {os.cpu_count()} vCPU; load average "
           f"{load[0]:.1f}/{load[1]:.1f}/{load[2]:.1f}; python {platform.python_version()}")
