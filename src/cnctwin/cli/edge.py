@@ -221,7 +221,7 @@ def _add_run_options(r: argparse.ArgumentParser) -> None:
     r.add_argument("--batch-s", type=float, default=0.0, metavar="S",
                    help="live Databus machine of a plant (edge run --config): process its "
                    "messages at most every S seconds, what arrived meanwhile as one chunk "
-                   "(small messages then cost what large ones do; up to S more latency; 0)")
+                   "(the work per chunk is paid once per batch; up to S more latency; 0)")
 
 
 class _OptionParser(argparse.ArgumentParser):
