@@ -20,8 +20,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import orjson
-import pandas as pd
 import pytest
 
 from cnctwin.edge import (
@@ -39,6 +37,7 @@ from cnctwin.iotools.mqtt import MqttHub
 from cnctwin.recording import Recording, RecordingMeta
 from cnctwin.spindle import SpindleModel
 from tests._services import Broker
+from tests.edge._databus import bulk_messages, read_results, torque_of
 from tests.edge.conftest import publisher
 
 pytestmark = pytest.mark.mqtt
@@ -69,19 +68,7 @@ def signals(wear_recording: Recording) -> Recording:
 
 
 def _messages(rec: Recording) -> list[bytes]:
-    t_ms = rec.hf["time"].astype("int64").to_numpy() // 1_000_000
-    data = {c: rec.hf[c].to_numpy(dtype=np.float64) for c in COLUMNS}
-    cyc = rec.cycles
-    out = []
-    for j, k in enumerate(range(0, cyc.size, PER_MSG)):
-        vals: list[dict[str, Any]] = []
-        for r in range(k, min(k + PER_MSG, cyc.size)):
-            ts = pd.Timestamp(int(t_ms[r]), unit="ms").strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
-            vals.append({"id": "1", "qc": 3, "ts": ts, "val": int(cyc[r])})
-            vals += [{"id": str(i + 2), "qc": 3, "ts": ts, "val": float(data[c][r])}
-                     for i, c in enumerate(COLUMNS)]
-        out.append(orjson.dumps({"seq": j + 1, "vals": vals}))
-    return out
+    return bulk_messages(rec, COLUMNS, PER_MSG)
 
 
 def _processors() -> list[Any]:
@@ -89,20 +76,10 @@ def _processors() -> list[Any]:
             AnomalyProcessor(model=MODEL, learn_s=3.0)]
 
 
-def _read(path: Path) -> list[dict[str, Any]]:
-    out = []
-    for line in path.read_text(encoding="utf-8").splitlines():
-        try:
-            out.append(json.loads(line))
-        except json.JSONDecodeError:  # the line a SIGKILL cut short
-            continue
-    return out
+_read = read_results
 
 
-def _torque(msgs: list[dict[str, Any]]) -> tuple[np.ndarray, np.ndarray]:
-    t = [m for m in msgs if m["kind"] == "torque"]
-    return (np.concatenate([np.arange(m["first_cycle"], m["first_cycle"] + m["n"]) for m in t]),
-            np.concatenate([np.asarray(m["torque_nm"], dtype=float) for m in t]))
+_torque = torque_of
 
 
 @pytest.fixture(scope="module")
