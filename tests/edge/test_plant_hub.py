@@ -294,3 +294,22 @@ def test_the_hub_holds_unclaimed_messages_refuses_a_shared_topic_and_unsubscribe
     assert "t/b" in hub.client.topics
     pub.loop_stop()
     pub.disconnect()
+
+
+def test_a_machines_own_client_id_is_refused_in_a_plant(broker: Broker, tmp_path: Path) -> None:
+    """A plant's live machines share their worker's connection and session: a machine's own
+    ``mqtt-client-id`` would be ignored, so it is refused, naming the worker's id."""
+    model = save_spindle_model(MODEL, tmp_path / "spindle.json")
+    plant = tmp_path / "plant.toml"
+    plant.write_text("\n".join([
+        'out = "state"', "[defaults]", f'model = "{model}"', "no-twin = true", "",
+        "[[machine]]", 'name = "mill-1"', 'mqtt-client-id = "mine"',
+        f'source = "mqtt://127.0.0.1:{broker.port}/{_topics(1)[0]}"', ""]), encoding="utf-8")
+    proc = subprocess.run([sys.executable, "-m", "cnctwin", "edge", "run", "--config",
+                           str(plant), "--quiet"], capture_output=True, text=True,
+                          cwd=tmp_path, timeout=120)
+    assert proc.returncode == 1, proc.stderr
+    assert "machine mill-1: mqtt-client-id = 'mine': the live machines of a plant share " \
+        "their worker's MQTT connection and session (client id cnctwin-edge-plant-" \
+        in proc.stderr
+    assert "Traceback" not in proc.stderr

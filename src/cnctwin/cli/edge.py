@@ -529,6 +529,10 @@ def _build(args: argparse.Namespace) -> Any:
             print(f"resuming after cycle {resume} (the last in {args.out / 'results.jsonl'})",
                   file=sys.stderr)
         hubs = getattr(args, "mqtt_hubs", None)  # a plant worker: one connection per broker
+        if hubs is not None and args.mqtt_client_id:
+            raise ConfigError(f"mqtt-client-id = {args.mqtt_client_id!r}: the live machines of "
+                              "a plant share their worker's MQTT connection and session (client "
+                              f"id {hubs.client_id}); leave mqtt-client-id out of the plant file")
         hub = None if hubs is None else hubs.get(
             u.host, u.port, username=u.username, password=u.password, security=security,
             session_expiry_s=args.session_expiry_s)
