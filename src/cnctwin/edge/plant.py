@@ -37,6 +37,7 @@ them all on SIGTERM or Ctrl-C.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import multiprocessing as mp
 import os
 import queue as queue_mod
@@ -244,7 +245,7 @@ class _Pumped:
         self.rt = rt
         src = rt.source
         src.window_s = 0.0  # chunks() never waits: it yields an idle chunk when empty
-        self.batch_s = float(getattr(src, "batch_s", 0.0) or 0.0)
+        self.batch_s = float(src.batch_s)
         self.chunks = rt.begin()
         self.next_tick = 0.0
         self.last_data = -1e9
@@ -442,8 +443,7 @@ Worker = Callable[[str, list[str], Any, str], None]
 (picklable by reference) that runs the named machines of the plant file in a worker process
 (``session_key``: the same for a worker slot across restarts, the key of its MQTT session)
 and puts ``(name, what, value)`` tuples on the queue (:func:`run_machines` does the
-running); first
-``("", "ready", os.getpid())`` once its SIGTERM handler is installed
+running); first ``("", "ready", os.getpid())`` once its SIGTERM handler is installed
 (:func:`worker_signals`), so that a stop never kills it half-started."""
 
 
@@ -508,8 +508,6 @@ class PlantRunner:
     def _start(self, slot: _Slot) -> None:
         names = [n for n in slot.names if n not in slot.finished]
         slot.ready = slot.term_sent = False
-        import hashlib
-
         # the worker's MQTT session key: its slot's machines, the same across its restarts
         key = hashlib.sha1("+".join(slot.names).encode()).hexdigest()[:12]
         slot.proc = self._ctx.Process(target=self.worker,

@@ -484,7 +484,7 @@ class DatabusSource:
     def redelivers_after_checkpoint(self) -> bool:
         """After a crash the broker delivers again everything after the last checkpoint
         (persistent session, acknowledgements held until checkpoints)."""
-        return self._hold_acks and self.recorder._client.session_expiry_s > 0
+        return self._hold_acks  # held only with a persistent session
 
     def interrupt(self) -> None:
         """End :meth:`chunks` after the current poll window, also when no data arrives

@@ -141,6 +141,26 @@ def refusal(rc: Any, host: str, port: int) -> str:
             "password (--password-file or CNCTWIN_MQTT_PASSWORD)")
 
 
+Received = tuple[str, bytes, int, tuple[int, int] | None]
+"""A message as the network thread hands it over: topic, payload, arrival time [ns since the
+epoch], and ``(mid, qos)`` to acknowledge (None: QoS 0, or paho acknowledged it already)."""
+
+
+def _received(msg: Any, manual_ack: bool) -> Received:
+    return (msg.topic, bytes(msg.payload), time.time_ns(),
+            (msg.mid, msg.qos) if manual_ack and msg.qos else None)
+
+
+def _offer(q: queue.Queue[Received], item: Received) -> bool:
+    """Put without waiting; False when the queue is full (the caller counts the drop: with
+    manual acknowledgement the broker sends the message again after a reconnect)."""
+    try:
+        q.put_nowait(item)
+    except queue.Full:
+        return False
+    return True
+
+
 class _Client:
     """A paho client whose callbacks feed a bounded queue."""
 
@@ -160,10 +180,7 @@ class _Client:
         self.session_present = False
         self.topics: dict[str, int] = {}  # subscriptions, renewed after a session loss
         self.resubscribes = 0
-        # (topic, payload, arrival time [ns since the epoch], (mid, qos) to acknowledge or
-        # None: QoS 0, or paho acknowledged it already)
-        self.queue: queue.Queue[tuple[str, bytes, int, tuple[int, int] | None]] = \
-            queue.Queue(maxsize=max_queue)
+        self.queue: queue.Queue[Received] = queue.Queue(maxsize=max_queue)
         self.manual_ack = manual_ack
         self.dropped = 0
         self.connected = threading.Event()
@@ -204,11 +221,7 @@ class _Client:
             self.subacks.add(mid)
 
     def _on_message(self, client: Any, userdata: Any, msg: Any) -> None:
-        try:
-            self.queue.put_nowait((msg.topic, bytes(msg.payload), time.time_ns(),
-                                   (msg.mid, msg.qos) if self.manual_ack and msg.qos else None))
-        except queue.Full:
-            # not acknowledged with manual_ack: the broker sends it again after a reconnect
+        if not _offer(self.queue, _received(msg, self.manual_ack)):
             self.dropped += 1
 
     def ack(self, acks: list[tuple[int, int]]) -> None:
@@ -270,15 +283,12 @@ class _HubPort:
 
     def __init__(self, hub: MqttHub, max_queue: int) -> None:
         self.hub = hub
-        self.queue: queue.Queue[tuple[str, bytes, int, tuple[int, int] | None]] = \
-            queue.Queue(maxsize=max_queue)
+        self.queue: queue.Queue[Received] = queue.Queue(maxsize=max_queue)
         self.dropped = 0
         self.manual_ack = True
 
-    def put(self, item: tuple[str, bytes, int, tuple[int, int] | None]) -> None:
-        try:
-            self.queue.put_nowait(item)
-        except queue.Full:  # not acknowledged: the broker sends it again after a reconnect
+    def put(self, item: Received) -> None:
+        if not _offer(self.queue, item):
             self.dropped += 1
 
     @property
@@ -371,7 +381,7 @@ class MqttHub:
         self.unrouted_dropped = 0
         self._routes: dict[str, _HubPort] = {}
         self._wild: dict[str, _HubPort] = {}  # filter prefix (before '#') -> port
-        self._pending: list[tuple[str, bytes, int, tuple[int, int] | None]] = []
+        self._pending: list[Received] = []
         self._touched: set[_HubPort] = set()
         self._ports: set[_HubPort] = set()
         self._lock = threading.Lock()
@@ -402,8 +412,7 @@ class MqttHub:
         return p
 
     def _on_message(self, client: Any, userdata: Any, msg: Any) -> None:
-        item = (msg.topic, bytes(msg.payload), time.time_ns(),
-                (msg.mid, msg.qos) if msg.qos else None)
+        item = _received(msg, True)
         with self._lock:
             p = self._route(msg.topic)
             if p is None:
@@ -618,7 +627,7 @@ class MqttRecorder:
                                    security=security, session_expiry_s=session_expiry_s,
                                    manual_ack=manual_ack)
         self._max_pending = max_queue
-        self._pending: list[tuple[str, bytes, int, tuple[int, int] | None]] = []
+        self._pending: list[Received] = []
         self._unacked: list[tuple[int, int]] = []
         self.columnar = columnar
         self.batches: list[DatabusColumns] = []
