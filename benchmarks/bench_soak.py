@@ -88,6 +88,16 @@ diameter_mm = 8.5
 STOCK = "0,0,-40,210,210,0"
 
 
+def milling_options(d: Path, milling: bool) -> tuple[list[object], list[object]]:
+    """The simulator's and the edge's extra options of a draw with real milling (the tool
+    table, and the stock for the simulator); none without."""
+    if not milling:
+        return [], []
+    tools = d / "tools.toml"
+    tools.write_text(TOOLS, encoding="utf-8")
+    return ["--tools", tools, "--stock", STOCK], ["--tools", tools]
+
+
 def draw(d: Path, machine: Path, sets: list[str], seed: int, operations: int,
          milling: bool = False) -> SoakTally:
     """One production draw: simulate, replay through edge run, tally. ``milling``: the
@@ -96,13 +106,7 @@ def draw(d: Path, machine: Path, sets: list[str], seed: int, operations: int,
     part = d / f"part{seed}.mpf"
     part.write_text(prog.text, encoding="utf-8")
     sim = d / f"sim{seed}"
-    extra: list[object] = []
-    edge_extra: list[object] = []
-    if milling:
-        tools = d / "tools.toml"
-        tools.write_text(TOOLS, encoding="utf-8")
-        extra = ["--tools", tools, "--stock", STOCK]
-        edge_extra = ["--tools", tools]
+    extra, edge_extra = milling_options(d, milling)
     cli("simulate", "--program", part, "--machine", machine, "--material", "aisi1045",
         "--seed", seed, *sets, *extra, "--out", sim)
     st = d / f"edge{seed}"
@@ -117,13 +121,14 @@ FAULT_KINDS = ("breakage", "load_rise", "friction_rise", "loose_tap")
 
 
 def draw_fault(d: Path, machine: Path, sets: list[str], seed: int, operations: int,
-               kind: str) -> dict[str, object]:
+               kind: str, milling: bool = False) -> dict[str, object]:
     """One production draw with one fault: simulate, replay through edge run, judge."""
     import json
 
     import numpy as np
 
-    prog = production_program(seed, operations=operations)
+    prog = production_program(seed, operations=operations, end_mill=3 if milling else None)
+    extra, edge_extra = milling_options(d, milling)
     rng = np.random.default_rng([seed, 24])
     part = d / f"fpart{seed}.mpf"
     part.write_text(prog.text, encoding="utf-8")
@@ -146,9 +151,9 @@ def draw_fault(d: Path, machine: Path, sets: list[str], seed: int, operations: i
         # entries too) is which hole of the edge, so the fault goes on a real hole
         hsim, hedge = d / f"hsim{seed}", d / f"hedge{seed}"
         cli("simulate", "--program", part, "--machine", machine, "--material", "aisi1045",
-            "--seed", seed, *sets, "--out", hsim)
+            "--seed", seed, *sets, *extra, "--out", hsim)
         cli("edge", "run", "--source", hsim / f"fpart{seed}.json", "--machine", machine,
-            "--out", hedge, "--no-twin")
+            "--out", hedge, "--no-twin", *edge_extra)
         truth = json.loads((hsim / "truth.json").read_text())["holes"]
         rows = [m["row"] for m in map(json.loads, (hedge / "results.jsonl").read_text()
                                       .splitlines()) if m["kind"] == "hole"]
@@ -196,10 +201,10 @@ def draw_fault(d: Path, machine: Path, sets: list[str], seed: int, operations: i
             detail = f"x {factor:.2f} from hole {hole}"
         opts = ["--option", f"faults={json.dumps([fault])}"]
     cli("simulate", "--program", part, "--machine", machine, "--material", "aisi1045",
-        "--seed", seed, *sets, *opts, "--out", sim)
+        "--seed", seed, *sets, *extra, *opts, "--out", sim)
     st = d / f"fedge{seed}"
     cli("edge", "run", "--source", sim / f"fpart{seed}.json", "--machine", machine,
-        "--out", st, "--no-twin")
+        "--out", st, "--no-twin", *edge_extra)
     alarms = [m for m in map(json.loads, (st / "results.jsonl").read_text().splitlines())
               if m["kind"] == "alarm"]
     later = False
@@ -217,14 +222,15 @@ def draw_fault(d: Path, machine: Path, sets: list[str], seed: int, operations: i
 
 
 def run_faults(draws: int, operations: int, machine_seed: int, first_seed: int,
-               kinds: tuple[str, ...] = FAULT_KINDS) -> list[dict[str, object]]:
+               kinds: tuple[str, ...] = FAULT_KINDS,
+               milling: bool = False) -> list[dict[str, object]]:
     out: list[dict[str, object]] = []
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         machine, sets = calibrated_machine(d, machine_seed)
         for k in range(draws):
             kind = kinds[k % len(kinds)]
-            r = draw_fault(d, machine, sets, first_seed + k, operations, kind)
+            r = draw_fault(d, machine, sets, first_seed + k, operations, kind, milling)
             out.append(r)
             print(f"{r['seed']:>5} {kind:<14} {r['detail']!s:<22} "
                   f"{'' if r['judgeable'] else '(first of its condition) '}"
@@ -297,6 +303,6 @@ if __name__ == "__main__":
     a = ap.parse_args()
     if a.faults:
         run_faults(a.draws, a.operations, a.machine_seed, a.first_seed,
-                   tuple(k.strip() for k in a.kinds.split(",") if k.strip()))
+                   tuple(k.strip() for k in a.kinds.split(",") if k.strip()), a.milling)
     else:
         print(summary(run(a.draws, a.operations, a.machine_seed, a.first_seed, a.milling)))

@@ -238,6 +238,36 @@ def test_a_friction_rise_is_found_against_the_calibration(machine: dict[str, Any
     assert "friction rose" in alarms[0]["message"]
 
 
+def test_a_friction_rise_is_found_in_a_job_without_standstill(machine: dict[str, Any]) -> None:
+    """Issue 24, the friction-rise misses of the faulted soak (BENCHMARKS.md, 6/8): draw 105
+    never holds every axis still with the spindle at a steady speed (the spindle changes speed
+    while the axes reposition), so the standstill ``air`` alone judged nothing. Its rapid
+    traverses outside the drilling cycles (``G0`` in the NC events, several seconds) carry the
+    friction: Coulomb x 1.63 (+0.24 A at 1800-3200 rpm against a tolerance of 0.16 A) is
+    found; the same job on the healthy machine gives no alarm."""
+    d: Path = machine["dir"]
+    prog = production_program(105, operations=8)
+    part = d / "friction105.mpf"
+    part.write_text(prog.text, encoding="utf-8")
+    found = {}
+    for name, factor in (("healthy", 1.0), ("worn", 1.63)):
+        values = dict(x.split("=", 1) for x in list(machine["sets"])[1::2])
+        key = "spindle.coulomb_friction_nm"
+        values[key] = str(factor * float(values[key]))
+        assert cli("simulate", "--program", part, "--machine", machine["machine"],
+                   "--material", "aisi1045", "--seed", 105,
+                   *[x for k, v in values.items() for x in ("--set", f"{k}={v}")],
+                   "--out", d / f"sim_f105_{name}") == 0
+        out = d / f"edge_f105_{name}"
+        assert cli("edge", "run", "--source", d / f"sim_f105_{name}" / "friction105.json",
+                   "--machine", machine["machine"], "--out", out, "--no-twin") == 0
+        found[name] = [(m["detector"], m["fault"]) for m in map(
+            json.loads, (out / "results.jsonl").read_text().splitlines())
+            if m["kind"] == "alarm"]
+    assert found["healthy"] == []
+    assert found["worn"] == [("AirFrictionCheck", "friction_rise")]
+
+
 def test_a_loose_tap_is_found_on_its_hole(machine: dict[str, Any]) -> None:
     """Issue 24, the loose-tap fault (thesis §5.4): draw 100 taps three holes (5-7, CYCLE84);
     the tap works loose from hole 6 (the simulator's LooseTool: stick-slip on reversal). The

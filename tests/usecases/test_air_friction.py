@@ -1,13 +1,15 @@
 """AirFrictionCheck: the spindle's air current against the calibrated twin (issue 24, the
-friction-rise fault), on synthetic streams with a known offset, both sides of the tolerance."""
+friction-rise fault), on synthetic streams with a known offset, both sides of the tolerance;
+RapidAir: which samples the NC events show as rapid traverse outside a machining cycle."""
 
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from cnctwin.exceptions import ConfigError
-from cnctwin.usecases.air_friction import AirFrictionCheck
+from cnctwin.usecases.air_friction import AirFrictionCheck, RapidAir
 
 CT = 0.002
 
@@ -61,3 +63,49 @@ def test_a_departure_that_returns_is_reported_again() -> None:
 def test_bad_options() -> None:
     with pytest.raises(ConfigError):
         AirFrictionCheck(window_s=0)
+
+
+def _events(rows: list[tuple[int, str, str | None, str | None, str | None]]) -> pd.DataFrame:
+    return pd.DataFrame(rows, columns=["cycle", "kind", "gcode", "ipo_gcode", "path"])
+
+
+def _marks(tracker: RapidAir, events: pd.DataFrame, n: int, chunk: int) -> np.ndarray:
+    cyc = np.arange(n, dtype=np.int64)
+    return np.concatenate([
+        tracker.update(cyc[k:k + chunk], events[(events.cycle >= k) & (events.cycle < k + chunk)],
+                       cycle_time_s=CT) for k in range(0, n, chunk)])
+
+
+def test_rapid_air_marks_g0_outside_cycles_after_settling() -> None:
+    """A job as the simulator and the control report it (IpoGC with each block, a call event
+    into the cycle and back): G0 repositioning is marked from 0.1 s (50 cycles) after it starts;
+    G1 feed, the positions of a modal MCALL and a called cycle are not; chunking does not
+    change the marks."""
+    ev = _events([
+        (0, "block", "G0 X10 Y10 Z10", "G0", None),        # 0..199 rapid
+        (200, "block", "G1 Z-2 F100", "G1", None),          # 200..399 feed
+        (400, "block", "G0 Z10", "G0", None),               # 400..599 rapid
+        (600, "block", "MCALL CYCLE81(10, 0, 2, -8)", "G0", None),
+        (600, "block", "X12 Y180", "G0", None),             # 600..799 modal cycle call
+        (610, "call", None, None, "/_CYCLES_DIR/_CYCLE81"),
+        (790, "call", None, None, "/_N_MPF_DIR/_N_PROGRAM_MPF"),
+        (800, "block", "MCALL", "G0", None),                # 800..899 rapid again
+        (900, "call", None, None, "/_CYCLES_DIR/_CYCLE83"),  # 900..999 a cycle called once
+    ])
+    expect = np.zeros(1000, dtype=bool)
+    expect[50:200] = True
+    expect[450:600] = True
+    expect[850:900] = True
+    for chunk in (1000, 37, 1):
+        got = _marks(RapidAir(), ev, 1000, chunk)
+        assert np.array_equal(got, expect), (chunk, np.flatnonzero(got != expect)[:5])
+
+
+def test_rapid_air_knows_nothing_before_a_block_or_without_ipo_gcode() -> None:
+    # a stream that starts mid-program (a restart without state): no block yet, nothing marked
+    assert not _marks(RapidAir(), _events([]), 500, 100).any()
+    # a source that does not report the interpolator's motion group: never rapid
+    ev = _events([(0, "block", "G0 X10", None, None)])
+    assert not _marks(RapidAir(), ev, 500, 100).any()
+    with pytest.raises(ConfigError):
+        RapidAir(settle_s=-1.0)

@@ -30,7 +30,7 @@ from cnctwin.exceptions import ConfigError
 from cnctwin.machine import MachineFile
 from cnctwin.recording import CounterGap, Recording, RecordingMeta
 from cnctwin.spindle import SpeedChangeFlags, SpindleModel, StreamingTorqueEstimator
-from cnctwin.usecases.air_friction import AirFrictionCheck
+from cnctwin.usecases.air_friction import AirFrictionCheck, RapidAir
 from cnctwin.usecases.anomaly import Detector, PhysicsResidualDetector
 from cnctwin.usecases.hole_load import HoleLoadJudge
 from cnctwin.usecases.holes import HOLE_COLUMNS, HoleEvents, holes_from_arrays
@@ -602,7 +602,10 @@ class AnomalyProcessor:
         Also judge the mean air current against ``model`` itself (not learned: a friction
         that is high from the start shows; :mod:`cnctwin.usecases.air_friction`): an alarm
         with ``detector`` ``AirFrictionCheck``, ``fault`` ``friction_rise``/``friction_drop``.
-        ``cnctwin edge run`` turns it on with the calibrated machine file's spindle.
+        ``cnctwin edge run`` turns it on with the calibrated machine file's spindle. Besides
+        the ``air`` samples it judges the rapid traverses the NC events show
+        (:class:`cnctwin.usecases.air_friction.RapidAir`: ``G0`` outside a machining cycle),
+        where production spends most of its air time.
     air_still_s, air_after_plunge_s : float, default 0.3, 1.0
         ``air`` (given when the detector asks for it): 1 where every feed axis has stood
         still for ``air_still_s`` and Z has not gone down for ``air_after_plunge_s`` (a tool
@@ -635,6 +638,7 @@ class AnomalyProcessor:
         from cnctwin.usecases.monitoring import KIENZLE_PARAMETERS
 
         self.friction_check = friction_check
+        self._rapid = RapidAir()
         self.detector = detector if detector is not None else PhysicsResidualDetector()
         self.name = f"anomaly:{type(self.detector).__name__}"
         self.model = model if model is not None else SpindleModel.from_parameters(
@@ -761,7 +765,10 @@ class AnomalyProcessor:
             self._alarms(chunk.cycles[n_learn:m], sc, x, n_learn, refr, out)
         chunk.derived[f"ANOMALY_SCORE|{self.spindle}"] = scores
         if self.friction_check is not None:
-            for f in self.friction_check.update(chunk.cycles, i, pred, n, cols["air"],
+            rapid = self._rapid.update(chunk.cycles, chunk.events,
+                                       cycle_time_s=chunk.cycle_time_s)
+            for f in self.friction_check.update(chunk.cycles, i, pred, n,
+                                                np.maximum(cols["air"], rapid),
                                                 cycle_time_s=chunk.cycle_time_s):
                 self.alarms += 1
                 out.append(Result("alarm", f.cycle, {
@@ -857,6 +864,7 @@ class AnomalyProcessor:
     def gap(self, gap: CounterGap) -> list[Result]:
         out = self._release()
         self._above = False
+        self._rapid = RapidAir(settle_s=self._rapid.settle_s)  # the NC state of the gap: unknown
         return out
 
     def finish(self) -> list[Result]:

@@ -11,20 +11,31 @@ check compares with the machine file, so it sees it in the first air seconds.
 
 Below ``min_speed_rpm`` the friction law of the calibration is not used: there the Stribeck
 friction the model leaves out adds up to ~0.2 A (BENCHMARKS.md, "Soak").
+
+Production leaves little time with every axis still and the spindle turning (none at all in
+some drawn jobs: the spindle changes speed while the axes reposition). The NC program says
+where the tool cannot cut while the axes move: a rapid traverse (``G0``, the interpolator's
+motion group as the control reports it with each block, ``IpoGC``) outside a machining cycle
+(a cycle's own feed moves do not show as blocks; a modal ``MCALL`` calls a cycle at every
+position). :class:`RapidAir` marks those samples from the NC events; a cut in ``G0`` would be a
+collision.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 from numpy.typing import NDArray
 
+from cnctwin.analysis.segments import samples_since
 from cnctwin.exceptions import ConfigError
 from cnctwin.spindle import SpeedChangeFlags
 
-__all__ = ["AirFrictionCheck", "FrictionFinding"]
+__all__ = ["AirFrictionCheck", "FrictionFinding", "RapidAir"]
 
 
 @dataclass(frozen=True)
@@ -131,3 +142,94 @@ class AirFrictionCheck:
                                            float(tol), float(spd)))
             self.departed = bad
         return out
+
+
+_MCALL_CYCLE = re.compile(r"^\s*(N\d+\s+)?MCALL\s+\S", re.IGNORECASE)
+_MCALL_OFF = re.compile(r"^\s*(N\d+\s+)?MCALL\s*(;.*)?$", re.IGNORECASE)
+
+
+class RapidAir:
+    """Samples where the NC moves the tool in rapid traverse outside a machining cycle.
+
+    Parameters
+    ----------
+    settle_s : float, default 0.1
+        Samples after the end of a feed move, a cycle or an unknown state that are not marked
+        [s] (the current loop and the chip leaving the tool).
+
+    Notes
+    -----
+    State per NC event, in cycle order: a ``block`` event sets the motion from its ``ipo_gcode``
+    (``G0``: rapid; any other or none: not) and the modal cycle call (``MCALL CYCLE..`` on,
+    bare ``MCALL`` off); a ``call`` event into a path naming a cycle (``CYCLE``) marks a cycle
+    active until the next call event (the return into the caller). Before the first block event
+    of a stream (or after a restart without the state) nothing is marked.
+    """
+
+    def __init__(self, *, settle_s: float = 0.1) -> None:
+        if settle_s < 0:
+            raise ConfigError(f"settle_s must be >= 0, not {settle_s}")
+        self.settle_s = settle_s
+        self._g0 = False
+        self._mcall = False
+        self._in_cycle = False
+        self._since = 0  # samples since the state last was not rapid air
+
+    @property
+    def rapid(self) -> bool:
+        """The state after the events seen so far: rapid traverse outside a cycle."""
+        return self._g0 and not self._mcall and not self._in_cycle
+
+    def _event(self, kind: object, gcode: object, ipo: object, path: object) -> None:
+        if kind == "block":
+            self._g0 = isinstance(ipo, str) and ipo.strip().upper() in ("G0", "G00")
+            text = gcode if isinstance(gcode, str) else ""
+            if _MCALL_OFF.match(text):
+                self._mcall = False
+            elif _MCALL_CYCLE.match(text):
+                self._mcall = True
+        elif kind == "call":
+            self._in_cycle = isinstance(path, str) and "CYCLE" in path.upper()
+
+    def update(self, cycles: NDArray[np.int64], events: pd.DataFrame,
+               *, cycle_time_s: float) -> NDArray[np.bool_]:
+        """Mark the next consecutive cycles.
+
+        Parameters
+        ----------
+        cycles : numpy.ndarray of int64
+            The chunk's cycles, increasing.
+        events : pandas.DataFrame
+            The chunk's NC events (``cycle``, ``kind``, ``gcode``, ``ipo_gcode``, ``path``;
+            missing columns count as no value).
+        cycle_time_s : float
+            Sample period [s].
+
+        Returns
+        -------
+        numpy.ndarray of bool
+            True where the tool is in rapid traverse outside a cycle and has been for
+            ``settle_s``.
+        """
+        n = int(np.asarray(cycles).size)
+        state = np.zeros(n, dtype=bool)
+        pos = 0
+        if len(events):
+            ev = events.sort_values("cycle", kind="stable")
+            col = {c: (ev[c].to_numpy(dtype=object, na_value=None)  # type: ignore[call-overload]
+                       if c in ev.columns else np.full(len(ev), None, dtype=object))
+                   for c in ("kind", "gcode", "ipo_gcode", "path")}
+            at = np.searchsorted(cycles, ev["cycle"].to_numpy(dtype=np.int64), side="left")
+            for j in range(len(ev)):
+                k = min(int(at[j]), n)
+                if k > pos:
+                    state[pos:k] = self.rapid
+                    pos = k
+                self._event(col["kind"][j], col["gcode"][j], col["ipo_gcode"][j],
+                            col["path"][j])
+        state[pos:] = self.rapid
+        need = round(self.settle_s / cycle_time_s)
+        since = samples_since(~state, before=self._since)
+        if n:
+            self._since = int(since[-1])
+        return state & (since > need)
