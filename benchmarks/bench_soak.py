@@ -190,9 +190,10 @@ def draw_fault(d: Path, machine: Path, sets: list[str], seed: int, operations: i
             detail = f"from hole {hole}"
         elif kind == "breakage":
             frac = float(rng.uniform(0.3, 0.8))
-            # the simulator's depth fraction is of a 20 mm hole in part programs (its drilling
-            # process has one hole depth): scaled to this hole's depth
-            scaled = frac * min(1.0, float(row["depth_mm"]) / 20.0)
+            # without a tool table the simulator's depth fraction is of a 20 mm hole (its one
+            # drilling process has one hole depth): scaled to this hole's depth; with the
+            # table (--milling) each tool's process knows its cycle's depth
+            scaled = frac if milling else frac * min(1.0, float(row["depth_mm"]) / 20.0)
             fault = {"type": "ToolBreakage", "hole": sim_hole, "depth_fraction": scaled}
             detail = f"hole {hole} at {frac:.2f}"
         else:

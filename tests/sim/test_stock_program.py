@@ -177,3 +177,75 @@ def test_limits_compare_ratings_with_what_they_rate(tmp_path: Path,
     err = capsys.readouterr().err
     assert "line 5 (G1 X250 F1200): spindle torque over 10 s" in err
     assert "exceeds the rated (S1) torque 25 Nm" in err
+
+
+TOOLS3 = """
+[tools.1]
+kind = "drill"
+diameter_mm = 8.5
+
+[tools.2]
+kind = "tap"
+diameter_mm = 8
+pitch_mm = 1.25
+
+[tools.4]
+kind = "drill"
+diameter_mm = 8.5
+"""
+
+DRILL_TAP_DRILL = """; two holes drilled, two tapped, one drilled with a second drill
+G90 G17 G94
+T1 M6
+S2400 M3
+F384
+MCALL CYCLE81(10, 0, 2, -10)
+X20 Y20
+X40 Y20
+MCALL
+G0 Z10
+T2 M6
+S400 M3
+MCALL CYCLE84(10, 0, 2, -10, , 0, 3, , 1.25, 0, 400, 400)
+X20 Y20
+X40 Y20
+MCALL
+G0 Z10
+T4 M6
+S2400 M3
+F384
+MCALL CYCLE81(10, 0, 2, -10)
+X60 Y20
+MCALL
+G0 Z50
+M30
+"""
+
+
+def test_a_tool_table_numbers_the_programs_holes_and_breaks_the_tool_that_cut(
+        tmp_path: Path) -> None:
+    """With a tool table the holes count on over every drill and tap in the program's order
+    (as the edge counts them and as ``faults`` name them); a breakage in hole 3 breaks the
+    tap that cut it, not the drill T4 of hole 4; a harder stock from hole 3 on acts on both
+    (the faulted soak with milling found the fault put on tool 1's hole 3 instead)."""
+    (tmp_path / "tools.toml").write_text(TOOLS3)
+    (tmp_path / "p.mpf").write_text(DRILL_TAP_DRILL)
+    tools = read_tool_table(tmp_path / "tools.toml")
+
+    def per_hole(faults: list[dict[str, object]]) -> tuple[list[tuple[int, int]], dict]:
+        res = part_program(None, program=tmp_path / "p.mpf", material="aisi1045", tools=tools,
+                           seed=3, faults=faults)
+        t = pd.concat(res.per_cycle)
+        mean = t[t["hole"] >= 0].groupby("hole")["cutting_torque_nm"].apply(
+            lambda v: float(np.abs(v).mean()))
+        return [(h["tool"], h["hole"]) for h in res.truth["holes"]], mean.to_dict()
+
+    order, healthy = per_hole([])
+    assert order == [(1, 0), (1, 1), (2, 2), (2, 3), (4, 4)]
+    _, broken = per_hole([{"type": "ToolBreakage", "hole": 3, "depth_fraction": 0.3}])
+    assert broken[2] == pytest.approx(healthy[2], rel=1e-9)  # the tap's first hole: as before
+    assert broken[3] < 0.6 * healthy[3]  # the tap broke in hole 3
+    assert broken[4] == pytest.approx(healthy[4], rel=0.05)  # T4 is another tool: it drills
+    _, hard = per_hole([{"type": "HardnessChange", "hole": 3, "factor": 1.5}])
+    assert hard[2] == pytest.approx(healthy[2], rel=1e-9)
+    assert hard[3] > 1.3 * healthy[3] and hard[4] > 1.3 * healthy[4]

@@ -32,6 +32,7 @@ from cnctwin.sim.gcode import Program, parse_program
 from cnctwin.sim.machine import Machine
 from cnctwin.sim.processes import (
     DrillingProcess,
+    HoleNumbers,
     MillingProcess,
     TappingProcess,
     _NoLoad,
@@ -345,7 +346,10 @@ def _tool_hooks(cfg: ScenarioConfig, prog: Program, tools: ToolTable, stock: Sto
     used = sorted({int(b.tool) for b in prog.blocks if b.tool is not None})
     hooks: dict[int, Any] = {}
     sweeps: dict[int, tuple[ZMap, float]] = {}
-    drill_faults = True
+    numbers = HoleNumbers(first_hole)  # the program's holes, over every drill and tap
+    depths = {i: float(b.cycle.z_ref_mm - b.cycle.z_bottom_mm) for i, b in enumerate(prog.blocks)
+              if b.kind in ("drill_cycle", "tap_cycle") and b.cycle is not None}
+    first_drill = True
     for t in used:
         if t not in tools:
             continue
@@ -356,15 +360,17 @@ def _tool_hooks(cfg: ScenarioConfig, prog: Program, tools: ToolTable, stock: Sto
             c = dataclasses.replace(cfg, drill=spec.drill(cfg.drill))
             feed, speed, depth = _drill_conditions(prog, t)
             hooks[t] = DrillingProcess(c, material=material, feed_mm_per_rev=feed,
-                                       speed_rpm=speed, hole_depth_mm=depth,
-                                       faults=faults if drill_faults else (),
-                                       first_hole=first_hole, **common)
-            drill_faults = False
+                                       speed_rpm=speed, hole_depth_mm=depth, faults=faults,
+                                       first_hole=first_hole if first_drill else 0,
+                                       hole_numbers=numbers, block_depths_mm=depths,
+                                       **common)
+            first_drill = False
             if zmap is not None:
                 sweeps[t] = (zmap, spec.diameter_mm)
         elif spec.kind == "tap":
             c = dataclasses.replace(cfg, tap=spec.tap(cfg.tap))
-            hooks[t] = TappingProcess(c, material=material, faults=(), **common)
+            hooks[t] = TappingProcess(c, material=material, faults=faults,
+                                      hole_numbers=numbers, block_depths_mm=depths, **common)
             if zmap is not None:
                 sweeps[t] = (zmap, spec.diameter_mm)
         elif material.milling is None:
@@ -377,9 +383,10 @@ def _tool_hooks(cfg: ScenarioConfig, prog: Program, tools: ToolTable, stock: Sto
         else:
             c = dataclasses.replace(cfg, end_mill=spec.end_mill())
             hooks[t] = MillingProcess(c, material=material, faults=(), **common)
-    if faults and drill_faults:
-        raise ConfigError("faults are simulated in drilling: the tool table has no drill this "
-                          "program uses")
+    if faults and not any(isinstance(h, DrillingProcess | TappingProcess)
+                          for h in hooks.values()):
+        raise ConfigError("faults are simulated in drilling and tapping: the tool table has no "
+                          "drill or tap this program uses")
     return ToolDispatch(hooks, sweeps=sweeps, progress=progress)
 
 
@@ -446,7 +453,11 @@ def part_program(
         :class:`~cnctwin.sim.faults.HardnessChange`, :class:`~cnctwin.sim.faults.Chatter`,
         :class:`~cnctwin.sim.faults.LooseTool`, or dicts with ``type``: ``--option
         faults='[{"type": "ToolBreakage", "hole": 3}]'``); hole numbers count the program's
-        holes from ``first_hole``. In ``truth.json`` under ``faults``.
+        holes from ``first_hole`` (with ``tools``: over every drill and tap, each tool's
+        holes in the program's order; a broken or loose tool is the one that cut the
+        fault's hole, a hardness change acts on every tool; a breakage's ``depth_fraction``
+        is of its cycle's programmed depth, without ``tools`` of 20 mm). In ``truth.json``
+        under ``faults``.
     fmt : str, default 'c4a'
         Recording format: ``'c4a'`` (Capture4Analysis JSON) or ``'parquet'`` (chunk directory).
     max_file_mb : float, optional
@@ -588,7 +599,7 @@ def part_program(
                 res.truth.setdefault("notes", []).append(
                     f"T{t}: {h.plunge_cycles} cycles plunging straight down into material "
                     "(end mill; no load model for a plunge: ramp or helix in, or drill first)")
-        res.truth["holes"] = rows
+        res.truth["holes"] = sorted(rows, key=lambda r: int(r["hole"]))  # the program's order
     res.truth["limits"] = drive_limits_check(rec, cfg.machine, text)
     if isinstance(hook, ToolDispatch):
         _chip_check(res.truth["limits"], hook, rec, tools, text)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
@@ -33,7 +33,7 @@ from cnctwin.sim.cutting import (
     rotating_force_n,
     tapping_load,
 )
-from cnctwin.sim.faults import Fault, apply_faults, hardness_factor
+from cnctwin.sim.faults import Fault, LooseTool, ToolBreakage, apply_faults, hardness_factor
 from cnctwin.sim.sensors import (
     DYNAMOMETER_CSV_HEADER,
     Dynamometer,
@@ -49,7 +49,7 @@ from cnctwin.sim.tool import (
     tool_temperatures,
 )
 
-__all__ = ["DrillingProcess", "MillingProcess", "TappingProcess"]
+__all__ = ["DrillingProcess", "HoleNumbers", "MillingProcess", "TappingProcess"]
 
 
 # ----------------------------------------------------------------------------- streaming helpers
@@ -205,13 +205,45 @@ class _Progress:
             self.fn(min(frac, 1.0), f"{self.label} {time_s:.0f}/{total_s:.0f} s")
 
 
+@dataclass
+class HoleNumbers:
+    """The program's hole numbers, shared by the cutting hooks of a tool table's tools.
+
+    Each hook numbers the holes it cuts from this one counter, so the drill's, the tap's and
+    the next drill's holes count on as the program's (and as the edge counts them), and a
+    fault names the program's hole.
+
+    Attributes
+    ----------
+    next : int
+        Number of the next hole.
+    """
+
+    next: int = 0
+
+    def take(self) -> int:
+        """The next hole's number (and count it)."""
+        self.next += 1
+        return self.next - 1
+
+
 class _Process:
-    """Shared bookkeeping of the cutting hooks (hole counting, truth, DAQ, progress)."""
+    """Shared bookkeeping of the cutting hooks (hole counting, truth, DAQ, progress).
+
+    ``hole_numbers``: the program's counter shared with the other tools' hooks (a tool
+    table); then a tool's own faults (:class:`ToolBreakage`, :class:`LooseTool` from a hole)
+    act only in the hook that cut their hole, and ``first_hole`` counts this tool's earlier
+    holes (its wear). Without it the hook numbers its own holes from ``first_hole``.
+    ``block_depths_mm``: the programmed depth of each cycle block (program block index ->
+    [mm]), the depth a :class:`ToolBreakage`'s fraction is of in that block's hole.
+    """
 
     def __init__(self, *, surface_z_mm: float, faults: Sequence[Fault],
                  rng: np.random.Generator, truth: _TruthParquet | None,
                  daq: _DynamometerDAQ | None, daq_off_blocks: Sequence[int] = (),
-                 progress: _Progress | None = None, first_hole: int = 0) -> None:
+                 progress: _Progress | None = None, first_hole: int = 0,
+                 hole_numbers: HoleNumbers | None = None,
+                 block_depths_mm: Mapping[int, float] | None = None) -> None:
         self.surface_z_mm = surface_z_mm
         self.faults = tuple(faults)
         self.rng = rng
@@ -222,7 +254,11 @@ class _Process:
         self.first_hole = first_hole
         self.onsets: list[float | None] = [None] * len(self.faults)
         self.holes: dict[int, dict[str, Any]] = {}
-        self._hole = -1
+        self._numbers = hole_numbers
+        self.block_depths_mm = dict(block_depths_mm or {})
+        self._count = 0  # holes this tool cut
+        self._own: dict[int, int] = {}  # hole number -> this tool's hole count (its wear)
+        self._hole = -1  # number of the current hole
         self._hole_xy: tuple[float, float] | None = None
         self._inside = False
         self._prev: dict[str, float] = {}
@@ -243,22 +279,62 @@ class _Process:
             xy = (float(x[e]), float(y[e]))
             if self._hole_xy is None or math.hypot(xy[0] - self._hole_xy[0],
                                                    xy[1] - self._hole_xy[1]) > 0.5:
-                self._hole += 1
+                own = self.first_hole + self._count
+                self._count += 1
+                self._hole = own if self._numbers is None else self._numbers.take()
+                self._own[self._hole] = own
                 self._hole_xy = xy
-                self.holes[self.first_hole + self._hole] = {
-                    "hole": self.first_hole + self._hole, "x_mm": xy[0], "y_mm": xy[1],
+                self.holes[self._hole] = {
+                    "hole": self._hole, "x_mm": xy[0], "y_mm": xy[1],
                     "cut_first_cycle": int(ci.cycle[e]), "cut_first_s": float(ci.time_s[e]),
                 }
                 out[e:] = self._hole
-        return np.where(out >= 0, out + self.first_hole, -1)
+        return out
+
+    def _hole_progress(self, depth: NDArray[np.float64], ci: CuttingInput,
+                       default_mm: float | None) -> NDArray[np.float64] | None:
+        """Tip depth over the executing cycle's programmed depth (``block_depths_mm``, else
+        ``default_mm``) [-], 0..1; None without either."""
+        d = np.full(depth.size, np.nan if default_mm is None else float(default_mm))
+        if self.block_depths_mm:
+            bi = np.asarray(ci.block_index)
+            for b in np.unique(bi):
+                if int(b) in self.block_depths_mm:
+                    d[bi == b] = self.block_depths_mm[int(b)]
+        if not np.isfinite(d).any():
+            return None
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.clip(np.nan_to_num(depth / d, nan=0.0), 0.0, 1.0)
+
+    def _tool_holes(self, hole: NDArray[np.int64]) -> NDArray[np.int64]:
+        """This tool's hole count per sample (its wear) from the hole numbers (-1: none)."""
+        if self._numbers is None:
+            return hole
+        out = np.full(hole.size, -1, dtype=np.int64)
+        for h in np.unique(hole[hole >= 0]):
+            out[hole == h] = self._own[int(h)]
+        return out
+
+    def _acts_here(self, fault: Fault) -> bool:
+        """Whether ``fault`` acts on this tool: a broken or loose tool is the one that cut the
+        fault's hole; the workpiece's hardness and time-based faults act on every tool."""
+        if self._numbers is None:
+            return True
+        if isinstance(fault, ToolBreakage):
+            return fault.hole in self.holes
+        if isinstance(fault, LooseTool) and fault.start_hole is not None:
+            return fault.start_hole in self.holes
+        return True
 
     def _faults(self, load: Any, ci: CuttingInput, hole: NDArray[np.int64],
                 speed: NDArray[np.float64], progress: NDArray[np.float64] | None) -> Any:
-        if not self.faults:
+        idx = [q for q, f in enumerate(self.faults) if self._acts_here(f)]
+        if not idx:
             return load
-        load, on = apply_faults(self.faults, load, time_s=ci.time_s, hole=hole,
-                                speed_rpm=speed, hole_progress=progress, rng=self.rng)
-        for q, o in enumerate(on):
+        load, on = apply_faults([self.faults[q] for q in idx], load, time_s=ci.time_s,
+                                hole=hole, speed_rpm=speed, hole_progress=progress,
+                                rng=self.rng)
+        for q, o in zip(idx, on, strict=True):
             if o is not None and self.onsets[q] is None:
                 self.onsets[q] = o
         return load
@@ -355,7 +431,8 @@ class DrillingProcess(_Process):
         feed = np.where(vz < -1e-9, -vz * 60.0 / np.maximum(np.abs(n), 1.0), 0.0)
         depth = self.surface_z_mm - z
         hole = self._hole_index(depth, ci)
-        wear = np.where(hole >= 0, flank_wear_um(np.maximum(hole, 0), curve=cfg.wear), 0.0)
+        own = self._tool_holes(hole)
+        wear = np.where(own >= 0, flank_wear_um(np.maximum(own, 0), curve=cfg.wear), 0.0)
         hard = hardness_factor(self.faults, hole)
         angle = np.deg2rad(ci.spindle_pos_deg)
         kw: dict[str, Any] = {"drill": cfg.drill, "material": self.material, "wear_um": wear,
@@ -383,8 +460,8 @@ class DrillingProcess(_Process):
         load = drilling_load(depth, n, feed, rng=self.rng, tool_temperature_c=temp,
                              walk_direction_rad=self.walk_direction_rad,
                              entry_direction_rad=self._entry_directions(hole), **kw)
-        prog = np.clip(depth / self.hole_depth_mm, 0.0, 1.0)
-        load = self._faults(load, ci, hole, n, prog)
+        load = self._faults(load, ci, hole, n,
+                            self._hole_progress(depth, ci, self.hole_depth_mm))
         self._holes_update(ci, hole, depth, feed, load, temp, wear, hard, holder)
         truth = {"hole": hole, "tip_depth_mm": depth, "cutting_torque_nm": load.torque_nm,
                  "thrust_n": load.thrust_n, "fx_n": load.fx_n, "fy_n": load.fy_n,
@@ -474,13 +551,18 @@ class TappingProcess(_Process):
 
     The spindle runs in position control coupled to Z (interpolator); the commanded speed is
     negative while the tap reverses out. Faults (e.g. :class:`~cnctwin.sim.faults.LooseTool`)
-    act on the torque and on the axial force, which is the Z disturbance force.
+    act on the torque and on the axial force, which is the Z disturbance force;
+    ``hole_depth_mm`` (the thread depth; or ``block_depths_mm``) places a
+    :class:`~cnctwin.sim.faults.ToolBreakage` at its depth fraction (without either the tap
+    breaks on entering the next hole).
     """
 
-    def __init__(self, cfg: ScenarioConfig, *, material: Material, **kw: Any) -> None:
+    def __init__(self, cfg: ScenarioConfig, *, material: Material,
+                 hole_depth_mm: float | None = None, **kw: Any) -> None:
         super().__init__(**kw)
         self.cfg = cfg
         self.material = material
+        self.hole_depth_mm = hole_depth_mm
 
     def __call__(self, ci: CuttingInput) -> CuttingOutput:
         z = ci.position["Z1"]
@@ -490,7 +572,8 @@ class TappingProcess(_Process):
         hard = hardness_factor(self.faults, hole)
         load = tapping_load(depth, n, tap=self.cfg.tap, material=self.material,
                             hardness_factor=hard)
-        load = self._faults(load, ci, hole, n, None)
+        load = self._faults(load, ci, hole, n,
+                            self._hole_progress(depth, ci, self.hole_depth_mm))
         for h in np.unique(hole[(hole >= 0) & (depth > 0.0)]):
             row = self.holes[int(h)]
             sel = (hole == h) & (depth > 0.0)
