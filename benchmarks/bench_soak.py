@@ -34,7 +34,7 @@ from pathlib import Path
 
 from cnctwin.cli import main
 from cnctwin.iotools import read_recording
-from cnctwin.sim.programs import production_program
+from cnctwin.sim.programs import PRODUCTION_STOCK, PRODUCTION_TOOLS, production_program
 from cnctwin.sim.scenarios import random_spindle_overrides
 from cnctwin.usecases.hole_load import HoleLoadJudge
 from cnctwin.validation.soak import SoakTally, current_noise_a, tally_run
@@ -65,37 +65,14 @@ def calibrated_machine(d: Path, seed: int) -> tuple[Path, list[str]]:
     return m, sets
 
 
-TOOLS = """[tools.1]
-kind = "drill"
-diameter_mm = 8.5
-
-[tools.2]
-kind = "tap"
-diameter_mm = 8
-pitch_mm = 1.25
-
-[tools.3]
-kind = "end_mill"
-diameter_mm = 10
-flutes = 2
-helix_deg = 30
-max_chip_mm = 0.1
-
-[tools.4]
-kind = "drill"
-diameter_mm = 8.5
-"""
-STOCK = "0,0,-40,210,210,0"
-
-
 def milling_options(d: Path, milling: bool) -> tuple[list[object], list[object]]:
     """The simulator's and the edge's extra options of a draw with real milling (the tool
     table, and the stock for the simulator); none without."""
     if not milling:
         return [], []
     tools = d / "tools.toml"
-    tools.write_text(TOOLS, encoding="utf-8")
-    return ["--tools", tools, "--stock", STOCK], ["--tools", tools]
+    tools.write_text(PRODUCTION_TOOLS, encoding="utf-8")
+    return ["--tools", tools, "--stock", PRODUCTION_STOCK], ["--tools", tools]
 
 
 def draw(d: Path, machine: Path, sets: list[str], seed: int, operations: int,

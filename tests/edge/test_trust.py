@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 
 from cnctwin.iotools import read_recording
-from cnctwin.sim.programs import production_program
+from cnctwin.sim.programs import PRODUCTION_STOCK, PRODUCTION_TOOLS, production_program
 from cnctwin.sim.scenarios import random_spindle_overrides
 from cnctwin.validation.soak import current_noise_a, tally_run
 from tests.calibration._campaign import REFERENCE, cli, sets
@@ -208,6 +208,45 @@ def test_faults_are_found_on_their_hole(machine: dict[str, Any], fault: dict[str
     assert first["hole"] == hole, first["message"]
     holes = [m for m in msgs if m["kind"] == "hole"]
     assert len(holes) == prog.holes  # the holes are still counted
+
+
+@pytest.mark.parametrize(("fault", "kind"), [
+    ({"type": "LooseTool", "start_hole": 10}, "loose_tool"),
+    ({"type": "ToolBreakage", "hole": 10, "depth_fraction": 0.5}, "breakage"),
+])
+def test_a_tap_fault_in_a_milling_job_is_found_on_its_hole(
+        machine: dict[str, Any], fault: dict[str, Any], kind: str) -> None:
+    """Issue 24, the faulted runs with real milling (``bench_soak.py --faults --milling``):
+    draw 6003 with the end mill (T3) through a stock and a tool table; holes 0-8 and 12-17
+    are drilled (T1), 9-11 tapped (T2). The tap works loose, or breaks half-way, in hole 10:
+    the first alarm is on hole 10 with that fault, and the drill's later holes are not
+    judged broken (the fault acts on the tap that cut hole 10). Before the simulator counted
+    a tool table's holes over the program, the tap took no fault at all and a breakage went
+    to the drill's tenth hole (program hole 12)."""
+    d: Path = machine["dir"]
+    prog = production_program(6003, operations=12, end_mill=3)
+    part = d / f"mill_{kind}.mpf"
+    part.write_text(prog.text, encoding="utf-8")
+    tools = d / "production_tools.toml"
+    tools.write_text(PRODUCTION_TOOLS, encoding="utf-8")
+    assert cli("simulate", "--program", part, "--machine", machine["machine"], "--material",
+               "aisi1045", "--seed", 6003, *machine["sets"], "--tools", tools, "--stock",
+               PRODUCTION_STOCK, "--option", f"faults={json.dumps([fault])}",
+               "--out", d / f"sim_mill_{kind}") == 0
+    out = d / f"edge_mill_{kind}"
+    assert cli("edge", "run", "--source", d / f"sim_mill_{kind}" / f"mill_{kind}.json",
+               "--machine", machine["machine"], "--out", out, "--no-twin",
+               "--tools", tools) == 0
+    msgs = [json.loads(x) for x in (out / "results.jsonl").read_text().splitlines()]
+    holes = {m["hole"]: m["row"] for m in msgs if m["kind"] == "hole"}
+    assert len(holes) == prog.holes == 18
+    assert [holes[h]["cycle"] for h in (8, 9, 10, 11, 12)] == [
+        "CYCLE83", "CYCLE84", "CYCLE84", "CYCLE84", "CYCLE83"]
+    alarms = [m for m in msgs if m["kind"] == "alarm"]
+    assert alarms and (alarms[0]["fault"], alarms[0]["hole"]) == (kind, 10)
+    assert all(a["hole"] in (10, 11) for a in alarms), [a["message"] for a in alarms]
+    if kind == "breakage":
+        assert "the tap broke" in alarms[0]["message"]
 
 
 def test_a_friction_rise_is_found_against_the_calibration(machine: dict[str, Any]) -> None:

@@ -34,6 +34,8 @@ from cnctwin.sim.gcode import ISO_COARSE_PITCH_MM
 __all__ = [
     "ADAPTIVE_SLOT",
     "AIR_CUT_SPEEDS_RPM",
+    "PRODUCTION_STOCK",
+    "PRODUCTION_TOOLS",
     "ProductionProgram",
     "air_cut_sweep_program",
     "axis_test_program",
@@ -565,6 +567,34 @@ def tapping_program(
             lines.append(f"X{_fmt(x)} Y{_fmt(y)}")
     lines += ["MCALL" if cycle == "CYCLE84" else "G80", "G0 Z50", "M5 M9", "M30"]
     return "\n".join(lines) + "\n"
+
+
+PRODUCTION_TOOLS = """[tools.1]
+kind = "drill"
+diameter_mm = 8.5
+
+[tools.2]
+kind = "tap"
+diameter_mm = 8
+pitch_mm = 1.25
+
+[tools.3]
+kind = "end_mill"
+diameter_mm = 10
+flutes = 2
+helix_deg = 30
+max_chip_mm = 0.1
+
+[tools.4]
+kind = "drill"
+diameter_mm = 8.5
+"""
+"""Tool table (TOML, docs/machine-file.md) of :func:`production_program` with ``end_mill=3``:
+T1 and T4 drills of 8.5 mm, T2 an M8 x 1.25 tap, T3 a 10 mm 2-flute end mill."""
+
+PRODUCTION_STOCK = "0,0,-40,210,210,0"
+"""Stock (``--stock``: x0, y0, z0, x1, y1, z1 [mm]) of :func:`production_program`'s 16 x 16
+grid of 12 mm, its top at Z 0."""
 
 
 @dataclass(frozen=True)

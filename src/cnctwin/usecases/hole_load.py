@@ -174,6 +174,7 @@ class HoleLoadJudge:
         cyc_name = str(row.get("cycle", "")).upper()
         cutting = cyc_name.startswith("CYCLE8")  # drilling and tapping cycles
         drilling = cutting and cyc_name != "CYCLE84"
+        what = "tap" if cyc_name == "CYCLE84" else "drill"
         key = self._key(row)
         refs = self.references.get(key, [])
         tool = row.get("tool")
@@ -195,7 +196,6 @@ class HoleLoadJudge:
                 # tap's chamfer lowers the mean; healthy taps of the soak: last/mean
                 # 1.13-1.16, a tap broken half-way: 0.24)
                 self.broken[tool] = last
-                what = "tap" if not drilling else "drill"
                 return HoleLoadVerdict(
                     "breakage", hole, last / mean, mean,
                     f"hole {hole}: the torque fell to {last:.2f} Nm at the end of the cut, "
@@ -227,13 +227,13 @@ class HoleLoadJudge:
                 "no_load", hole, mean / ref_mean, ref_mean,
                 f"hole {hole}: {mean:.2f} Nm over the whole cut, {100 * mean / ref_mean:.0f} % "
                 f"of the {ref_mean:.2f} Nm of its cut condition: no cutting load (a broken "
-                "drill?)")
+                f"{what}?)")
         if last is not None and last < self.breakage_ratio * ref_last:
             self.broken[tool] = last
             return HoleLoadVerdict(
                 "breakage", hole, last / ref_last, ref_last,
                 f"hole {hole}: the torque fell to {last:.2f} Nm at the end of the cut, "
-                f"{100 * last / ref_last:.0f} % of the {ref_last:.2f} Nm taught: the drill "
+                f"{100 * last / ref_last:.0f} % of the {ref_last:.2f} Nm taught: the {what} "
                 "broke in this hole")
         ratio = mean / ref_mean
         up, down = (*key, "load_rise"), (*key, "load_drop")
@@ -251,7 +251,8 @@ class HoleLoadJudge:
             return HoleLoadVerdict(
                 "load_rise", hole, ratio, ref_mean,
                 f"hole {hole}: {mean:.2f} Nm, {100 * (ratio - 1):+.0f} % over the "
-                f"{ref_mean:.2f} Nm taught{further} (worn or chipped drill, harder material)")
+                f"{ref_mean:.2f} Nm taught{further} (worn or chipped {what}, harder "
+                "material)")
         if ratio < 1 - self.drop:
             last_down = self.raised.get(down)
             if last_down is not None and ratio > last_down - self.drop:
