@@ -19,6 +19,7 @@ from cnctwin.cli import main
 from cnctwin.engagement import parse_stock
 from cnctwin.machine import read_tool_table
 from cnctwin.sim.cutting import MATERIALS
+from cnctwin.sim.programs import PRODUCTION_TOOLS
 from cnctwin.sim.scenarios import part_program
 
 TOOLS = """
@@ -179,21 +180,6 @@ def test_limits_compare_ratings_with_what_they_rate(tmp_path: Path,
     assert "exceeds the rated (S1) torque 25 Nm" in err
 
 
-TOOLS3 = """
-[tools.1]
-kind = "drill"
-diameter_mm = 8.5
-
-[tools.2]
-kind = "tap"
-diameter_mm = 8
-pitch_mm = 1.25
-
-[tools.4]
-kind = "drill"
-diameter_mm = 8.5
-"""
-
 DRILL_TAP_DRILL = """; two holes drilled, two tapped, one drilled with a second drill
 G90 G17 G94
 T1 M6
@@ -228,7 +214,7 @@ def test_a_tool_table_numbers_the_programs_holes_and_breaks_the_tool_that_cut(
     (as the edge counts them and as ``faults`` name them); a breakage in hole 3 breaks the
     tap that cut it, not the drill T4 of hole 4; a harder stock from hole 3 on acts on both
     (the faulted soak with milling found the fault put on tool 1's hole 3 instead)."""
-    (tmp_path / "tools.toml").write_text(TOOLS3)
+    (tmp_path / "tools.toml").write_text(PRODUCTION_TOOLS)  # T1, T4 drills, T2 a tap
     (tmp_path / "p.mpf").write_text(DRILL_TAP_DRILL)
     tools = read_tool_table(tmp_path / "tools.toml")
 
