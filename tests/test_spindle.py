@@ -470,3 +470,33 @@ def test_streaming_against_the_hand_formula() -> None:
     np.testing.assert_allclose(out[1:-1], hand[1:-1], rtol=0, atol=1e-9)  # inner samples
     assert out[250] == pytest.approx(4.16 - 8.42e-5 * 2250.0 - 0.35 - 0.01 * dw, abs=1e-9)
     assert out[250] == pytest.approx(3.0970, abs=1e-4)
+
+
+def test_stribeck_term_of_the_calibrated_friction() -> None:
+    """The low-speed friction the improved calibration identifies (``tau_s exp(-|n|/n_s)``,
+    the simulator's law, docs/simulator.md): the air current it predicts gives zero cutting
+    torque at every speed and direction, batch and streaming alike; at 300 rpm the term is
+    0.23 exp(-300/500) = 0.126 Nm, which the model without it showed as a cut (the soak's
+    air torque over its bound at 300-500 rpm, BENCHMARKS.md "Soak")."""
+    m = SpindleModel(0.99, 7.6e-5, 0.38, j_kgm2=0.02, stribeck_torque_nm=0.23,
+                     stribeck_speed_rpm=500.0)
+    n = np.array([-2400.0, -300.0, 0.0, 300.0, 600.0, 2400.0])
+    np.testing.assert_allclose(m.stribeck_nm(n), 0.23 * np.exp(-np.abs(n) / 500.0) * np.sign(n))
+    assert float(m.stribeck_nm(300.0)) == pytest.approx(0.1262, abs=1e-4)
+    i = m.predict_current_a(0.0, n)
+    np.testing.assert_allclose(m.cutting_torque(i, n, accel_term=False), 0.0, atol=1e-12)
+    plain = SpindleModel(0.99, 7.6e-5, 0.38)
+    assert float(plain.cutting_torque(i[3], 300.0)) == pytest.approx(0.1262, abs=1e-4)
+    np.testing.assert_allclose(m.friction_torque_nm(n) - plain.friction_torque_nm(n),
+                               m.stribeck_nm(n))
+    ramp = np.linspace(200.0, 800.0, 501)
+    cur = m.predict_current_a(1.0, ramp)
+    est = StreamingTorqueEstimator(m)
+    out = np.concatenate([est.update(cur[k:k + 37], ramp[k:k + 37]) for k in range(0, 501, 37)]
+                         + [est.flush()])
+    np.testing.assert_array_equal(out, m.cutting_torque(cur, ramp))
+    assert "Stribeck 0.23 Nm" in m.describe()
+    with pytest.raises(ConfigError):
+        SpindleModel(1.0, 8e-5, 0.3, stribeck_torque_nm=-0.1)
+    with pytest.raises(ConfigError):
+        SpindleModel(1.0, 8e-5, 0.3, stribeck_torque_nm=0.1, stribeck_speed_rpm=0.0)

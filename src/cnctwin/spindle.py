@@ -943,6 +943,12 @@ class SpindleModel:
     kt_valid_speed_rpm : tuple of float or None, default None
         Speed range Kt (and the flux law) was calibrated over [rpm]; an estimate outside it is
         an extrapolation (:meth:`kt_extrapolated`).
+    stribeck_torque_nm : float, default 0.0
+        Low-speed (Stribeck, mixed-lubrication) friction ``tau_s`` on top of the Coulomb
+        friction: ``tau_s exp(-|n| / n_s) sign(n)`` [Nm] (the improved calibration fits it
+        with B and tau_f, :func:`cnctwin.twin.fit_friction_stribeck`); 0 = none.
+    stribeck_speed_rpm : float, default 1.0
+        Its decay speed ``n_s`` [rpm].
 
     Notes
     -----
@@ -962,6 +968,21 @@ class SpindleModel:
     flux_base_speed_rpm: float = 0.0
     flux_exponent: float = 1.0
     kt_valid_speed_rpm: tuple[float, float] | None = None
+    stribeck_torque_nm: float = 0.0
+    stribeck_speed_rpm: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (self.stribeck_torque_nm >= 0 and self.stribeck_speed_rpm > 0):
+            raise ConfigError("stribeck_torque_nm must be >= 0 and stribeck_speed_rpm > 0; got "
+                              f"{self.stribeck_torque_nm}, {self.stribeck_speed_rpm}")
+
+    def stribeck_nm(self, speed_rpm: ArrayLike) -> NDArray[np.float64]:
+        """The low-speed friction ``tau_s exp(-|n| / n_s) sign(n)`` [Nm] (0 without it)."""
+        n = np.asarray(speed_rpm, dtype=np.float64)
+        if not self.stribeck_torque_nm:
+            return np.zeros(n.shape)
+        return np.asarray(self.stribeck_torque_nm * np.exp(-np.abs(n) / self.stribeck_speed_rpm)
+                          * np.sign(n), dtype=np.float64)
 
     def describe(self) -> str:
         """The parameters in words with units, as pages and reports show them.
@@ -987,6 +1008,9 @@ class SpindleModel:
                          f"{self.reference_temperature_c:.4g} °C"
                          if self.reference_temperature_c is not None else
                          f"temperature coefficient Kt {self.kt_temp_coeff_per_k:.3g} 1/K")
+        if self.stribeck_torque_nm:
+            parts.append(f"Stribeck {self.stribeck_torque_nm:.3g} Nm decaying over "
+                         f"{self.stribeck_speed_rpm:.0f} rpm")
         if self.flux_base_speed_rpm > 0:
             parts.append(f"field weakening above {self.flux_base_speed_rpm:.0f} rpm "
                          f"(exponent {self.flux_exponent:.3g})")
@@ -1046,10 +1070,13 @@ class SpindleModel:
         ``kt_ref_temperature_c`` with the magnet coefficient ``magnet_temp_coeff_per_k``
         where the file states a calibrated reference temperature; J is used only where it was
         identified (else 0: no acceleration term). Whether the values were calibrated is for
-        the caller to check (:meth:`MachineFile.is_identified`).
+        the caller to check (:meth:`MachineFile.is_identified`). The Stribeck term is used
+        where the calibration identified it (``stribeck_torque_nm``, ``stribeck_speed_rpm``).
         """
         s = machine_file.machine.spindle
         calibrated_t = machine_file.is_identified("spindle.kt_ref_temperature_c")
+        strib = (machine_file.is_identified("spindle.stribeck_torque_nm")
+                 and machine_file.is_identified("spindle.stribeck_speed_rpm"))
         return cls(
             kt_nm_per_a=s.kt_nm_per_a, b_nm_per_rpm=s.viscous_friction_nm_per_rpm,
             tau_f_nm=s.coulomb_friction_nm,
@@ -1059,7 +1086,9 @@ class SpindleModel:
             reference_temperature_c=s.kt_ref_temperature_c if calibrated_t else None,
             flux_base_speed_rpm=s.flux_base_speed_rpm, flux_exponent=s.flux_exponent,
             kt_valid_speed_rpm=rec.valid_range
-            if (rec := machine_file.record("spindle.kt_nm_per_a")) is not None else None)
+            if (rec := machine_file.record("spindle.kt_nm_per_a")) is not None else None,
+            stribeck_torque_nm=s.stribeck_torque_nm if strib else 0.0,
+            stribeck_speed_rpm=s.stribeck_speed_rpm if strib else 1.0)
 
     def to_dict(self) -> dict[str, float | None]:
         """Parameters as a plain dict (for JSON/TOML)."""
@@ -1093,10 +1122,10 @@ class SpindleModel:
     def friction_torque_nm(
         self, speed_rpm: ArrayLike, *, temperature_c: ArrayLike | None = None
     ) -> NDArray[np.float64]:
-        """Friction torque ``B n + tau_f sign(n)`` [Nm]."""
+        """Friction torque ``B n + tau_f sign(n)`` (+ the Stribeck term) [Nm]."""
         n = np.asarray(speed_rpm, dtype=np.float64)
         _, b, tf = self._params_at(temperature_c)
-        return np.asarray(b * n + tf * np.sign(n), dtype=np.float64)
+        return np.asarray(b * n + tf * np.sign(n) + self.stribeck_nm(n), dtype=np.float64)
 
     def cutting_torque(
         self,
@@ -1125,7 +1154,8 @@ class SpindleModel:
         Returns
         -------
         numpy.ndarray
-            ``tau_c = Kt I - B n - tau_f sign(n) - J dOmega/dt`` [Nm], Omega in rad/s.
+            ``tau_c = Kt I - B n - tau_f sign(n) - J dOmega/dt`` [Nm], Omega in rad/s (and
+            minus the Stribeck term, :meth:`stribeck_nm`, where the model has one).
 
         Notes
         -----
@@ -1146,7 +1176,7 @@ class SpindleModel:
         kt, b, tf = self._params_at(temperature_c)
         if self.flux_base_speed_rpm > 0:
             kt = kt * self.flux_factor(n)
-        tau = kt * i - b * n - tf * np.sign(n)
+        tau = kt * i - b * n - tf * np.sign(n) - self.stribeck_nm(n)
         if accel_term and self.j_kgm2 != 0.0 and n.ndim == 1 and n.size >= 2:
             tau = tau - self.j_kgm2 * _domega_dt(n, fs_hz)
         return np.asarray(tau, dtype=np.float64)
@@ -1164,7 +1194,8 @@ class SpindleModel:
         if self.flux_base_speed_rpm > 0:
             kt = kt * self.flux_factor(n)
         return np.asarray(
-            (np.asarray(torque_nm, dtype=np.float64) + b * n + tf * np.sign(n)) / kt
+            (np.asarray(torque_nm, dtype=np.float64) + b * n + tf * np.sign(n)
+             + self.stribeck_nm(n)) / kt
         )
 
 
@@ -1856,7 +1887,7 @@ class StreamingTorqueEstimator:
         kt, b, tf = self.model._params_at(t)
         if self.model.flux_base_speed_rpm > 0:
             kt = kt * self.model.flux_factor(n)
-        tau = kt * i - b * n - tf * np.sign(n)
+        tau = kt * i - b * n - tf * np.sign(n) - self.model.stribeck_nm(n)
         if acc is not None:
             tau = tau - self.model.j_kgm2 * acc
         return np.asarray(tau, dtype=np.float64)

@@ -40,6 +40,8 @@ MODEL_UNITS: dict[str, str] = {
     "flux_base_speed_rpm": "rpm",
     "flux_exponent": "-",
     "kt_valid_speed_rpm": "rpm",
+    "stribeck_torque_nm": "Nm",
+    "stribeck_speed_rpm": "rpm",
 }
 """Units of the :class:`~cnctwin.spindle.SpindleModel` fields."""
 

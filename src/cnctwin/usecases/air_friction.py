@@ -9,8 +9,9 @@ uncertainty. A friction rise (a bearing, a seal, lubrication) shows as a lasting
 A learned detector cannot see a friction that was high from the start of its learning; this
 check compares with the machine file, so it sees it in the first air seconds.
 
-Below ``min_speed_rpm`` the friction law of the calibration is not used: there the Stribeck
-friction the model leaves out adds up to ~0.2 A (BENCHMARKS.md, "Soak").
+Below ``min_speed_rpm`` the check does not judge: there the low-speed (Stribeck) friction is
+most of the air current, and its calibrated term (:meth:`cnctwin.spindle.SpindleModel.
+stribeck_nm`) comes without a stated uncertainty.
 
 Production leaves little time with every axis still and the spindle turning (none at all in
 some drawn jobs: the spindle changes speed while the axes reposition). The NC program says
@@ -87,7 +88,7 @@ class AirFrictionCheck:
     abs_tol_a : float, default 0.1
         Allowed offset at least [A].
     min_speed_rpm : float, default 600
-        Slower samples are not judged (Stribeck friction, not in the model).
+        Slower samples are not judged (the Stribeck friction dominates there).
     settle_s : float, default 0.3
         Samples after a speed change that are not judged [s] (the speed rule is
         :class:`cnctwin.spindle.SpeedChangeFlags`, as for the cutting torque).
