@@ -1176,7 +1176,9 @@ class SpindleModel:
         kt, b, tf = self._params_at(temperature_c)
         if self.flux_base_speed_rpm > 0:
             kt = kt * self.flux_factor(n)
-        tau = kt * i - b * n - tf * np.sign(n) - self.stribeck_nm(n)
+        tau = kt * i - b * n - tf * np.sign(n)
+        if self.stribeck_torque_nm:
+            tau = tau - self.stribeck_nm(n)
         if accel_term and self.j_kgm2 != 0.0 and n.ndim == 1 and n.size >= 2:
             tau = tau - self.j_kgm2 * _domega_dt(n, fs_hz)
         return np.asarray(tau, dtype=np.float64)
@@ -1193,10 +1195,10 @@ class SpindleModel:
         kt, b, tf = self._params_at(temperature_c)
         if self.flux_base_speed_rpm > 0:
             kt = kt * self.flux_factor(n)
-        return np.asarray(
-            (np.asarray(torque_nm, dtype=np.float64) + b * n + tf * np.sign(n)
-             + self.stribeck_nm(n)) / kt
-        )
+        need = np.asarray(torque_nm, dtype=np.float64) + b * n + tf * np.sign(n)
+        if self.stribeck_torque_nm:
+            need = need + self.stribeck_nm(n)
+        return np.asarray(need / kt)
 
 
 # ====================================================================== speed law of Kt
@@ -1887,7 +1889,9 @@ class StreamingTorqueEstimator:
         kt, b, tf = self.model._params_at(t)
         if self.model.flux_base_speed_rpm > 0:
             kt = kt * self.model.flux_factor(n)
-        tau = kt * i - b * n - tf * np.sign(n) - self.model.stribeck_nm(n)
+        tau = kt * i - b * n - tf * np.sign(n)
+        if self.model.stribeck_torque_nm:
+            tau = tau - self.model.stribeck_nm(n)
         if acc is not None:
             tau = tau - self.model.j_kgm2 * acc
         return np.asarray(tau, dtype=np.float64)

@@ -267,6 +267,52 @@ def test_a_machine_that_fails_in_the_shared_thread_ends_alone() -> None:
                     "bad": ("error", "internal error: RuntimeError: boom")}
 
 
+def test_replays_at_full_speed_share_one_thread(tmp_path: Path, wear_recording: Any,
+                                               spindle_model: SpindleModel) -> None:
+    """Issue 28, the replay plant: machines replaying a file as fast as they can are driven
+    from ``run_machines``' own thread, a chunk of each in turn (a thread each spent as much CPU
+    on handing the interpreter lock around, futex calls, as on the pipelines: BENCHMARKS.md
+    "Replay plant"); a paced replay (``speed``) keeps its thread. Each machine's torque is
+    the one its own run gives."""
+    import threading
+
+    from cnctwin.edge import EdgeRuntime, JsonLinesSink, ReplaySource, TorqueProcessor
+    from cnctwin.edge.plant import run_machines
+
+    ran_alone: list[str] = []
+
+    class Tracked(EdgeRuntime):
+        def run(self, **kw: Any) -> dict[str, Any]:
+            ran_alone.append(self.name)
+            return super().run(**kw)
+
+    def build(name: str, speed: float | None) -> Any:
+        def make() -> EdgeRuntime:
+            rt = Tracked(ReplaySource(wear_recording, chunk_cycles=250, speed=speed),
+                         [TorqueProcessor(spindle_model)],
+                         [JsonLinesSink(tmp_path / f"{name}.jsonl")])
+            rt.name = name
+            return rt
+        return make
+
+    names = [f"r{k}" for k in range(6)]
+    reports: list[tuple[str, str, Any]] = []
+    run_machines([(n, build(n, None)) for n in names] + [("paced", build("paced", 50.0))],
+                 report=lambda *r: reports.append(r), stop=threading.Event())
+    # run() is a machine's own thread: only the paced one (the others were handed over)
+    assert ran_alone == ["paced"]
+    ends = {r[0]: r[1] for r in reports if r[1] != "started"}
+    assert ends == dict.fromkeys([*names, "paced"], "done")
+    alone = tmp_path / "alone.jsonl"
+    EdgeRuntime(ReplaySource(wear_recording, chunk_cycles=250),
+                [TorqueProcessor(spindle_model)], [JsonLinesSink(alone)]).run()
+    ref = _torque(alone)
+    for n in [*names, "paced"]:
+        got = _torque(tmp_path / f"{n}.jsonl")
+        np.testing.assert_array_equal(got[0], ref[0])
+        np.testing.assert_array_equal(got[1], ref[1])
+
+
 def _env_worker(plant_path: str, names: list[str], report_queue: Any, key: str) -> None:
     """A stand-in worker (top level: spawn imports it): reports its BLAS thread setting."""
     report_queue.put(("", "ready", os.getpid()))

@@ -109,3 +109,18 @@ def test_rapid_air_knows_nothing_before_a_block_or_without_ipo_gcode() -> None:
     assert not _marks(RapidAir(), ev, 500, 100).any()
     with pytest.raises(ConfigError):
         RapidAir(settle_s=-1.0)
+
+
+def test_rapid_air_reads_missing_values_and_unsorted_events() -> None:
+    """Event tables as readers give them: pandas' missing values (NA, NaN) in any column and,
+    from a merged source, rows out of cycle order; the marks equal those of the clean table."""
+    clean = _events([(0, "block", "G0 X10", "G0", None), (100, "block", "G1 X20", "G1", None),
+                     (200, "block", "G0 Z10", "G0", None)])
+    messy = clean.iloc[[2, 0, 1]].astype(object).reset_index(drop=True)
+    messy.loc[0, "path"] = pd.NA
+    messy.loc[1, "path"] = float("nan")
+    messy = pd.concat([messy, pd.DataFrame({"cycle": [150], "kind": [pd.NA], "gcode": [None],
+                                            "ipo_gcode": [pd.NA], "path": [pd.NA]})])
+    a = _marks(RapidAir(), clean, 300, 300)
+    b = _marks(RapidAir(), messy, 300, 300)
+    assert a.sum() == 50 + 50 and np.array_equal(a, b)

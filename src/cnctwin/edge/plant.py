@@ -27,8 +27,9 @@ losses) holds for each machine of the plant.
 
 :func:`run_machines` runs the runtimes of some machines in one process: the live machines on
 one broker share one MQTT connection (:class:`~cnctwin.iotools.mqtt.MqttHub`) and are driven
-from one thread, each message routed to its machine; any other source runs in a thread of its
-own;
+from one thread, each message routed to its machine; the replays at full speed are driven
+from that thread too, a chunk of each in turn; any other source (a paced replay, OPC UA) runs
+in a thread of its own;
 :class:`PlantRunner` spreads the machines over worker processes (``spawn``), one per core, so
 the interpreter lock never limits a plant to one core, restarts a worker that dies and stops
 them all on SIGTERM or Ctrl-C.
@@ -267,8 +268,36 @@ class _Pumped:
         return True
 
 
+class _Replayed:
+    """A replay at full speed driven from the worker's thread: a chunk per turn (its source
+    never waits, so many of them in one thread lose nothing to one another, where a thread
+    each spent as much CPU handing the interpreter lock around as on the pipelines)."""
+
+    def __init__(self, name: str, rt: Any) -> None:
+        self.name = name
+        self.rt = rt
+        self.chunks = rt.begin()
+
+    def turn(self) -> bool:
+        """Process the next chunk; True when the run ended (the source or a stop)."""
+        chunk = next(self.chunks, None)
+        if chunk is None:
+            return True
+        self.rt.handle(chunk)
+        return bool(self.rt.stopping)
+
+
+def _unpaced_replay(rt: Any) -> bool:
+    """Whether ``rt`` replays a recording as fast as it can (no pace to wait for)."""
+    from cnctwin.edge.sources import ReplaySource
+
+    src = getattr(rt, "source", None)
+    return isinstance(src, ReplaySource) and not src.speed
+
+
 class _PumpLoop:
-    """The machines of one process that share MQTT hubs, driven from one thread."""
+    """The machines of one process driven from one thread: those that share MQTT hubs and the
+    replays at full speed."""
 
     def __init__(self, report: Report, wake: threading.Event, tick_s: float) -> None:
         self.report = report
@@ -276,6 +305,31 @@ class _PumpLoop:
         self.tick_s = tick_s
         self.machines: dict[Any, _Pumped] = {}  # the source's hub port -> machine
         self.hubs: set[Any] = set()
+        self.replays: list[_Replayed] = []
+
+    def add_replay(self, name: str, rt: Any) -> None:
+        try:
+            self.replays.append(_Replayed(name, rt))
+        except Exception as exc:
+            self.report(name, "error", _error_text(exc))
+
+    def _replay_turns(self) -> None:
+        """One chunk of every replay (then the live machines get their turn again)."""
+        for m in list(self.replays):
+            try:
+                ended = m.turn()
+            except Exception as exc:  # one machine's failure must not stop the others
+                self.replays.remove(m)
+                self.report(m.name, "error", _error_text(exc))
+                with contextlib.suppress(Exception):
+                    m.rt.end()
+                continue
+            if ended:
+                self.replays.remove(m)
+                try:
+                    self.report(m.name, "done", m.rt.end())
+                except Exception as exc:
+                    self.report(m.name, "error", _error_text(exc))
 
     def add(self, name: str, rt: Any) -> None:
         try:
@@ -320,7 +374,9 @@ class _PumpLoop:
                     self.report(m.name, "done", m.rt.end())
                 except Exception as exc:
                     self.report(m.name, "error", _error_text(exc))
-        if touched:
+        if self.replays:
+            self._replay_turns()
+        if touched or self.replays:
             return 0.0
         nxt = [m.next_tick for m in self.machines.values()] + \
             [m.due for m in self.machines.values() if m.due]
@@ -358,9 +414,10 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
     the hub's network thread routes each message to its machine's queue, this thread runs
     that machine's pipeline on it (what arrived within the source's ``batch_s`` as one
     chunk), and ticks every machine (status, sinks, idle timeout) once per ``tick_s``, the
-    machines' ticks spread over it: no thread per machine. Any other runtime (a replay, OPC
-    UA) runs in its build thread. A machine whose build or run fails (a broker that refuses
-    it, a missing file) is reported and ends; the others go on.
+    machines' ticks spread over it: no thread per machine. A replay at full speed (no
+    ``speed``) is driven from this thread too, one chunk of each in turn. Any other runtime
+    (a paced replay, OPC UA) runs in its build thread. A machine whose build or run fails (a
+    broker that refuses it, a missing file) is reported and ends; the others go on.
     """
     runtimes: dict[str, _Runtime] = {}
     lock = threading.Lock()
@@ -377,7 +434,8 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
                 _closing(rt)
                 rt.stop()
             report(name, "started", None)
-            if getattr(getattr(rt, "source", None), "hub", None) is not None:
+            if getattr(getattr(rt, "source", None), "hub", None) is not None or \
+                    _unpaced_replay(rt):
                 with lock:
                     handed.append((name, rt))
                 wake.set()
@@ -396,8 +454,12 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
         with lock:
             new, handed[:] = list(handed), []
         for name, rt in new:
-            loop.add(name, rt)
-        if not loop.machines and not new and not any(th.is_alive() for th in threads):
+            if _unpaced_replay(rt):
+                loop.add_replay(name, rt)
+            else:
+                loop.add(name, rt)
+        if not loop.machines and not loop.replays and not new and \
+                not any(th.is_alive() for th in threads):
             with lock:
                 if not handed:
                     break

@@ -182,6 +182,7 @@ class RapidAir:
         return self._g0 and not self._mcall and not self._in_cycle
 
     def _event(self, kind: object, gcode: object, ipo: object, path: object) -> None:
+        kind = kind if isinstance(kind, str) else ""  # (pd.NA has no truth value)
         if kind == "block":
             self._g0 = isinstance(ipo, str) and ipo.strip().upper() in ("G0", "G00")
             text = gcode if isinstance(gcode, str) else ""
@@ -216,18 +217,19 @@ class RapidAir:
         state = np.zeros(n, dtype=bool)
         pos = 0
         if len(events):
-            ev = events.sort_values("cycle", kind="stable")
-            col = {c: (ev[c].to_numpy(dtype=object, na_value=None)  # type: ignore[call-overload]
-                       if c in ev.columns else np.full(len(ev), None, dtype=object))
-                   for c in ("kind", "gcode", "ipo_gcode", "path")}
-            at = np.searchsorted(cycles, ev["cycle"].to_numpy(dtype=np.int64), side="left")
-            for j in range(len(ev)):
+            ec = events["cycle"].to_numpy(dtype=np.int64)
+            order = (np.arange(ec.size) if ec.size < 2 or bool((ec[1:] >= ec[:-1]).all())
+                     else np.argsort(ec, kind="stable"))  # chunks come sorted: no pandas sort
+            # plain lists (a few rows per chunk: to_numpy with na_value costs more than them)
+            col = [events[c].tolist() if c in events.columns else [None] * ec.size
+                   for c in ("kind", "gcode", "ipo_gcode", "path")]
+            at = np.searchsorted(cycles, ec, side="left")
+            for j in order.tolist():
                 k = min(int(at[j]), n)
                 if k > pos:
                     state[pos:k] = self.rapid
                     pos = k
-                self._event(col["kind"][j], col["gcode"][j], col["ipo_gcode"][j],
-                            col["path"][j])
+                self._event(col[0][j], col[1][j], col[2][j], col[3][j])
         state[pos:] = self.rapid
         need = round(self.settle_s / cycle_time_s)
         since = samples_since(~state, before=self._since)
