@@ -155,6 +155,11 @@ def test_model_file_round_trip(tmp_path: Path, suffix: str) -> None:
                      reference_temperature_c=25.0)
     p = save_spindle_model(m, tmp_path / f"spindle{suffix}")
     assert load_spindle_model(p) == m
+    # without a Stribeck term the file has no such keys (earlier versions read it); with one
+    # it round-trips
+    assert "stribeck" not in p.read_text(encoding="utf-8")
+    ms = SpindleModel(1.0, 8e-5, 0.38, stribeck_torque_nm=0.23, stribeck_speed_rpm=502.0)
+    assert load_spindle_model(save_spindle_model(ms, tmp_path / f"s2{suffix}")) == ms
     bad = tmp_path / "bad.json"
     bad.write_text('{"kt_nm_per_a": 1.0, "b_nm_per_rpm": 1e-4}')
     with pytest.raises(ConfigError, match="tau_f_nm"):

@@ -67,6 +67,9 @@ def save_spindle_model(model: SpindleModel, path: str | PathLike[str], *,
     """
     p = Path(path)
     params = {k: v for k, v in model.to_dict().items() if v is not None}
+    if not model.stribeck_torque_nm:  # no low-speed term: the file as earlier versions read it
+        params.pop("stribeck_torque_nm", None)
+        params.pop("stribeck_speed_rpm", None)
     doc: dict[str, Any] = {"kind": _KIND, "version": 1, "source": source,
                            "parameters": params,
                            "units": {k: MODEL_UNITS[k] for k in params}}
