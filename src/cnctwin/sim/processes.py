@@ -552,17 +552,15 @@ class TappingProcess(_Process):
     The spindle runs in position control coupled to Z (interpolator); the commanded speed is
     negative while the tap reverses out. Faults (e.g. :class:`~cnctwin.sim.faults.LooseTool`)
     act on the torque and on the axial force, which is the Z disturbance force;
-    ``hole_depth_mm`` (the thread depth; or ``block_depths_mm``) places a
-    :class:`~cnctwin.sim.faults.ToolBreakage` at its depth fraction (without either the tap
+    ``block_depths_mm`` (the cycles' thread depths) places a
+    :class:`~cnctwin.sim.faults.ToolBreakage` at its depth fraction (without it the tap
     breaks on entering the next hole).
     """
 
-    def __init__(self, cfg: ScenarioConfig, *, material: Material,
-                 hole_depth_mm: float | None = None, **kw: Any) -> None:
+    def __init__(self, cfg: ScenarioConfig, *, material: Material, **kw: Any) -> None:
         super().__init__(**kw)
         self.cfg = cfg
         self.material = material
-        self.hole_depth_mm = hole_depth_mm
 
     def __call__(self, ci: CuttingInput) -> CuttingOutput:
         z = ci.position["Z1"]
@@ -572,8 +570,7 @@ class TappingProcess(_Process):
         hard = hardness_factor(self.faults, hole)
         load = tapping_load(depth, n, tap=self.cfg.tap, material=self.material,
                             hardness_factor=hard)
-        load = self._faults(load, ci, hole, n,
-                            self._hole_progress(depth, ci, self.hole_depth_mm))
+        load = self._faults(load, ci, hole, n, self._hole_progress(depth, ci, None))
         for h in np.unique(hole[(hole >= 0) & (depth > 0.0)]):
             row = self.holes[int(h)]
             sel = (hole == h) & (depth > 0.0)
