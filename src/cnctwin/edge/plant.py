@@ -38,6 +38,7 @@ them all on SIGTERM or Ctrl-C.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import multiprocessing as mp
 import os
@@ -313,23 +314,26 @@ class _PumpLoop:
         except Exception as exc:
             self.report(name, "error", _error_text(exc))
 
+    def _over(self, m: _Pumped | _Replayed, turn: Callable[[], bool]) -> bool:
+        """Give ``m`` its turn; True when its run is over (ended: reported done; or failed:
+        reported with its error), and the caller forgets it."""
+        try:
+            if not turn():
+                return False
+        except Exception as exc:  # one machine's failure must not stop the others
+            self.report(m.name, "error", _error_text(exc))
+            with contextlib.suppress(Exception):
+                m.rt.end()
+            return True
+        try:
+            self.report(m.name, "done", m.rt.end())
+        except Exception as exc:
+            self.report(m.name, "error", _error_text(exc))
+        return True
+
     def _replay_turns(self) -> None:
         """One chunk of every replay (then the live machines get their turn again)."""
-        for m in list(self.replays):
-            try:
-                ended = m.turn()
-            except Exception as exc:  # one machine's failure must not stop the others
-                self.replays.remove(m)
-                self.report(m.name, "error", _error_text(exc))
-                with contextlib.suppress(Exception):
-                    m.rt.end()
-                continue
-            if ended:
-                self.replays.remove(m)
-                try:
-                    self.report(m.name, "done", m.rt.end())
-                except Exception as exc:
-                    self.report(m.name, "error", _error_text(exc))
+        self.replays = [m for m in self.replays if not self._over(m, m.turn)]
 
     def add(self, name: str, rt: Any) -> None:
         try:
@@ -360,20 +364,8 @@ class _PumpLoop:
                 continue
             if tick:
                 m.next_tick = now + self.tick_s
-            try:
-                ended = m.pump(idle=tick)
-            except Exception as exc:  # one machine's failure must not stop the others
+            if self._over(m, functools.partial(m.pump, idle=tick)):
                 del self.machines[port]
-                self.report(m.name, "error", _error_text(exc))
-                with contextlib.suppress(Exception):
-                    m.rt.end()
-                continue
-            if ended:
-                del self.machines[port]
-                try:
-                    self.report(m.name, "done", m.rt.end())
-                except Exception as exc:
-                    self.report(m.name, "error", _error_text(exc))
         if self.replays:
             self._replay_turns()
         if touched or self.replays:
@@ -422,7 +414,8 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
     runtimes: dict[str, _Runtime] = {}
     lock = threading.Lock()
     wake = threading.Event()
-    handed: list[tuple[str, Any]] = []  # built, to be driven from this thread
+    # built, to be driven from this thread: (name, runtime, a full-speed replay)
+    handed: list[tuple[str, Any, bool]] = []
 
     def one(name: str, build: Callable[[], _Runtime]) -> None:
         try:
@@ -434,10 +427,10 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
                 _closing(rt)
                 rt.stop()
             report(name, "started", None)
-            if getattr(getattr(rt, "source", None), "hub", None) is not None or \
-                    _unpaced_replay(rt):
+            replay = _unpaced_replay(rt)
+            if replay or getattr(getattr(rt, "source", None), "hub", None) is not None:
                 with lock:
-                    handed.append((name, rt))
+                    handed.append((name, rt, replay))
                 wake.set()
                 return
             report(name, "done", rt.run())
@@ -453,11 +446,8 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
     while True:
         with lock:
             new, handed[:] = list(handed), []
-        for name, rt in new:
-            if _unpaced_replay(rt):
-                loop.add_replay(name, rt)
-            else:
-                loop.add(name, rt)
+        for name, rt, replay in new:
+            (loop.add_replay if replay else loop.add)(name, rt)
         if not loop.machines and not loop.replays and not new and \
                 not any(th.is_alive() for th in threads):
             with lock:
