@@ -11,6 +11,7 @@ directory), writes ``status.json`` there and sends a ``status`` message every
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import json
 import os
@@ -37,6 +38,7 @@ from cnctwin.edge.pipeline import (
     needed_columns,
 )
 from cnctwin.edge.sinks import tail_messages
+from cnctwin.edge.status_file import StatusFile
 from cnctwin.exceptions import ConfigError
 from cnctwin.recording import CounterGap
 
@@ -59,11 +61,56 @@ class _Counters:
     age_s: float = float("nan")
     last_cycle: int | None = None
     recent: list[tuple[float, int]] = field(default_factory=list)
-    latencies: deque[float] = field(default_factory=lambda: deque(maxlen=LATENCY_WINDOW))
+    latencies: LatencyWindow = field(default_factory=lambda: LatencyWindow(LATENCY_WINDOW))
 
 
 LATENCY_WINDOW = 5000
 """Chunks whose arrival-to-publish latency the status summarises (the most recent)."""
+
+
+class LatencyWindow:
+    """The most recent ``size`` latencies, kept sorted as they come: a percentile of the
+    window costs a lookup, not a sort (the status asks every second, for every machine).
+
+    Parameters
+    ----------
+    size : int
+        Values kept (the oldest leaves when a new one comes).
+    """
+
+    def __init__(self, size: int) -> None:
+        if size < 1:
+            raise ConfigError(f"a latency window of {size} values: give at least 1")
+        self._order: deque[float] = deque(maxlen=size)
+        self._sorted: list[float] = []
+
+    def __len__(self) -> int:
+        return len(self._order)
+
+    def append(self, value_s: float) -> None:
+        """Add a latency [s] (NaN is not kept: it has no place in an order)."""
+        if value_s != value_s:
+            return
+        if len(self._order) == self._order.maxlen:
+            old = self._order[0]
+            del self._sorted[bisect.bisect_left(self._sorted, old)]
+        self._order.append(value_s)
+        bisect.insort(self._sorted, value_s)
+
+    def percentile(self, q: float) -> float:
+        """The ``q``-th percentile [s], interpolated linearly between the order statistics
+        (numpy's default method); NaN when empty."""
+        a = self._sorted
+        if not a:
+            return float("nan")
+        pos = (len(a) - 1) * q / 100.0
+        lo = int(pos)
+        hi = min(lo + 1, len(a) - 1)
+        return a[lo] + (a[hi] - a[lo]) * (pos - lo)
+
+    def max(self) -> float:
+        """The largest latency [s]; NaN when empty."""
+        return self._sorted[-1] if self._sorted else float("nan")
 
 
 class EdgeRuntime:
@@ -121,6 +168,8 @@ class EdgeRuntime:
         self._ckpt_wall = 0.0
         self._suppress: dict[str, int] = {}
         self.resumed: dict[str, Any] | None = None
+        self._status_file = StatusFile(self.state_dir / STATUS_FILE) \
+            if self.state_dir is not None else None
 
     # ------------------------------------------------------------------ messages
     def _reserve(self, n: int) -> None:
@@ -445,13 +494,11 @@ class EdgeRuntime:
         if alarms:
             self._emit(alarms, None)
         st = self.status()
-        if self.state_dir is not None:
-            tmp = self.state_dir / (STATUS_FILE + ".tmp")
+        if self._status_file is not None:
             # strict JSON: orjson writes a value not known yet (NaN) as null (RFC 8259 has no
             # NaN), as the results are encoded
-            tmp.write_bytes(orjson.dumps(st, option=orjson.OPT_INDENT_2
-                                         | orjson.OPT_SERIALIZE_NUMPY, default=str))
-            os.replace(tmp, self.state_dir / STATUS_FILE)
+            self._status_file.write(orjson.dumps(st, option=orjson.OPT_INDENT_2
+                                                 | orjson.OPT_SERIALIZE_NUMPY, default=str))
         self._emit([Result("status", self.c.last_cycle or 0,
                            {k: v for k, v in st.items() if k not in ("machine",)})], None)
         if self._on_status is not None:
@@ -581,6 +628,8 @@ class EdgeRuntime:
         for s in self.sinks:
             s.close()
         self.source.close()
+        if self._status_file is not None:
+            self._status_file.close()
         if self.state_dir is not None:  # a clean end: the next run continues without a gap
             _write_seq(self.state_dir, self._seq)
             (self.state_dir / CHECKPOINT_FILE).unlink(missing_ok=True)
@@ -668,14 +717,12 @@ def _write_seq(state_dir: Path, next_seq: int) -> None:
     os.replace(tmp, p)
 
 
-def _latency_ms(lat: deque[float]) -> dict[str, Any]:
+def _latency_ms(lat: LatencyWindow) -> dict[str, Any]:
     """p50/p99/max [ms] of the recent chunks' arrival-to-publish latency (None before any)."""
-    if not lat:
+    if not len(lat):
         return {"p50": None, "p99": None, "max": None, "chunks": 0}
-    a = np.asarray(lat) * 1e3
-    p50, p99 = np.percentile(a, [50, 99])
-    return {"p50": round(float(p50), 3), "p99": round(float(p99), 3),
-            "max": round(float(a.max()), 3), "chunks": int(a.size)}
+    return {"p50": round(lat.percentile(50) * 1e3, 3), "p99": round(lat.percentile(99) * 1e3, 3),
+            "max": round(lat.max() * 1e3, 3), "chunks": len(lat)}
 
 
 def _iso(t_ns: int) -> str:
