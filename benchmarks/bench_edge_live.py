@@ -104,6 +104,32 @@ def _tree_cpu_s(pid: int) -> float:
     return total
 
 
+def _decode_cost_ms(payload: bytes, repeat: int = 200) -> dict[str, float]:
+    """CPU per message [ms] of the plant's Databus pass (``DatabusDecoder.decode_columns``) and
+    of its numba scan alone, on one of the bench's messages, in this process."""
+    from cnctwin.iotools import _databus_scan as scan
+    from cnctwin.iotools.databus import DatabusDecoder
+
+    _, topic, meta = _metadata(0)
+    dec = DatabusDecoder(meta)
+    if dec.decode_columns(payload, topic=topic) is None:
+        raise SystemExit("the bench's message left the fast path: fix the publisher")
+    c0 = time.process_time()
+    for _ in range(repeat):
+        dec.decode_columns(payload, topic=topic)
+    full = (time.process_time() - c0) / repeat
+    lut = scan.id_table({str(i + 1): i for i in range(1 + len(COLUMNS))})
+    buf = np.frombuffer(payload, dtype=np.uint8)
+    cap = buf.size // 16 + 1
+    tok = np.empty(buf.size + 2, dtype=np.uint8)
+    col, t_row, qc = (np.empty(cap, dtype=np.int64) for _ in range(3))
+    fn = scan._scanner()
+    c0 = time.process_time()
+    for _ in range(repeat):
+        fn(buf, lut, tok, col, t_row, qc)
+    return {"decode": full * 1e3, "scan": (time.process_time() - c0) / repeat * 1e3}
+
+
 def _metadata(k: int) -> tuple[str, str, bytes]:
     meta = f"ie/m/j/simatic/v1/m{k:03d}/dp"
     data = f"ie/d/j/simatic/v1/m{k:03d}/dp/r/NCK/hf"
@@ -294,6 +320,8 @@ def main() -> None:
                      for i, col in enumerate(COLUMNS)]
         payloads.append(orjson.dumps({"seq": j + 1, "vals": vals}))
 
+    decode_ms = _decode_cost_ms(payloads[len(payloads) // 2])
+
     codes: list[tuple[str, dict[str, str] | None]] = [("this code", None)]
     if args.baseline_rev:
         from _common import export_rev
@@ -339,6 +367,9 @@ def main() -> None:
     for title, key, fmt in rows:
         print(f"| {title} | " + " | ".join(format(r[key], fmt) for _, r in res) + " |")
     print(f"| floor: bare estimator, same chunks, machines per core | {floor / NEED:,.0f} |"
+          + " |" * (len(res) - 1))
+    print(f"| one message's Databus pass in this process (`decode_columns`), of which the "
+          f"numba scan [ms] | {decode_ms['decode']:.2f}, {decode_ms['scan']:.2f} |"
           + " |" * (len(res) - 1))
     if args.keep:
         print(f"kept: {tmp}")
