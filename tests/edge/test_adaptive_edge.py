@@ -228,3 +228,27 @@ def test_cut_tracker_context_does_not_depend_on_the_chunking(wear_recording: Any
         b = np.concatenate([getattr(c, name) for c in slow])
         np.testing.assert_array_equal(a, b, err_msg=name)
     assert (np.concatenate([c.hole for c in fast]) >= 0).sum() > 1000  # cutting was covered
+
+
+@pytest.mark.parametrize("cancel", ["MCALL", "N120 MCALL", "n120 mcall ; end of the pattern",
+                                    "/1 N120 MCALL", "G80"])
+def test_a_cancelled_cycle_call_ends_the_live_hole_context(cancel: str) -> None:
+    """After the modal drilling cycle is cancelled, a plunge into the material (a milling
+    plunge) is no hole, however the control writes the cancelling block: real
+    Capture4Analysis block texts carry block numbers (``N50 ...``, tests/data/real), which the
+    live tracker did not recognise before (it kept the drilling cycle's geometry)."""
+    import pandas as pd
+
+    z = np.concatenate([np.linspace(2.0, -10.0, 601), np.full(50, -10.0),
+                        np.linspace(-10.0, 2.0, 100)])
+    n = z.size
+    t = CutTracker()
+    ev = pd.DataFrame({"cycle": [0], "kind": ["block"],
+                       "gcode": ["N100 MCALL CYCLE81(10, 0, 2, -20)"]})
+    one = t.update(np.arange(n), z, z, np.full(n, 2400.0), xy_des_mm=(np.zeros(n),),
+                   events=ev)
+    assert (one.hole == 0).sum() == 501  # a hole while the cycle is called
+    ev = pd.DataFrame({"cycle": [n], "kind": ["block"], "gcode": [cancel]})
+    two = t.update(np.arange(n) + n, z, z, np.full(n, 2400.0),
+                   xy_des_mm=(np.full(n, 50.0),), events=ev)
+    assert (two.hole == -1).all(), cancel

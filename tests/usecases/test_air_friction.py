@@ -124,3 +124,26 @@ def test_rapid_air_reads_missing_values_and_unsorted_events() -> None:
     a = _marks(RapidAir(), clean, 300, 300)
     b = _marks(RapidAir(), messy, 300, 300)
     assert a.sum() == 50 + 50 and np.array_equal(a, b)
+
+
+@pytest.mark.parametrize(("block", "effect"), [
+    ("MCALL CYCLE81(10, 0, 2, -20)", True),
+    ("N100 MCALL CYCLE82(10, 0, 2, -20, , 0.5)", True),
+    ("MCALL", False),
+    ("N120 MCALL", False),
+    ("N120 MCALL ; end of the pattern", False),
+    ("/1 N120 MCALL", False),
+    (":10 MCALL", False),
+    ("G80", False),
+    ("N130 G0 X10 ; MCALL and G80 in a comment", None),
+    ("CYCLE81(10, 0, 2, -20)", None),  # a single call, not modal
+    ("N140 G1 X20 F500", None),
+])
+def test_every_recogniser_reads_a_blocks_modal_cycle_call_alike(block: str,
+                                                                 effect: bool | None) -> None:
+    """The three readers of the modal cycle call (rapid air, the live cut tracker, the hole
+    table's cycle name) share one rule: SINUMERIK's ``MCALL`` (Programming Manual Job
+    Planning) with block numbers, skip levels and comments as the control records them."""
+    from cnctwin.usecases.holes import modal_cycle_call
+
+    assert modal_cycle_call(block) is effect

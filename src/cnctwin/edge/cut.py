@@ -37,12 +37,11 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from cnctwin.usecases.holes import HoleEvents
+from cnctwin.usecases.holes import HoleEvents, modal_cycle_call
 
 __all__ = ["CutContext", "CutTracker", "drilling_cycle_geometry"]
 
 _CYCLE = re.compile(r"\b(CYCLE8[1-9])\s*\(([^)]*)\)", re.IGNORECASE)
-_CANCEL = re.compile(r"^\s*MCALL\s*$|\bG80\b", re.IGNORECASE)
 
 
 def drilling_cycle_geometry(block: str) -> tuple[float, float] | None:
@@ -197,7 +196,7 @@ class CutTracker:
             geo = drilling_cycle_geometry(text)
             if geo is not None:
                 out.append((int(c), geo))
-            elif _CANCEL.search(text):
+            elif modal_cycle_call(text) is False:
                 out.append((int(c), None))
         return out
 

@@ -25,7 +25,6 @@ collision.
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,6 +34,7 @@ from numpy.typing import NDArray
 from cnctwin.analysis.segments import samples_since
 from cnctwin.exceptions import ConfigError
 from cnctwin.spindle import SpeedChangeFlags
+from cnctwin.usecases.holes import modal_cycle_call
 
 __all__ = ["AirFrictionCheck", "FrictionFinding", "RapidAir"]
 
@@ -145,10 +145,6 @@ class AirFrictionCheck:
         return out
 
 
-_MCALL_CYCLE = re.compile(r"^\s*(N\d+\s+)?MCALL\s+\S", re.IGNORECASE)
-_MCALL_OFF = re.compile(r"^\s*(N\d+\s+)?MCALL\s*(;.*)?$", re.IGNORECASE)
-
-
 class RapidAir:
     """Samples where the NC moves the tool in rapid traverse outside a machining cycle.
 
@@ -161,9 +157,11 @@ class RapidAir:
     Notes
     -----
     State per NC event, in cycle order: a ``block`` event sets the motion from its ``ipo_gcode``
-    (``G0``: rapid; any other or none: not) and the modal cycle call (``MCALL CYCLE..`` on,
-    bare ``MCALL`` off); a ``call`` event into a path naming a cycle (``CYCLE``) marks a cycle
-    active until the next call event (the return into the caller). Before the first block event
+    (``G0``: rapid; any other or none: not) and the modal cycle call
+    (:func:`~cnctwin.usecases.holes.modal_cycle_call`: ``MCALL CYCLE..`` on, a bare ``MCALL``
+    or ``G80`` off, block numbers and comments allowed); a ``call`` event into a path naming a
+    cycle (``CYCLE``) marks a cycle active until the next call event (the return into the
+    caller). Before the first block event
     of a stream (or after a restart without the state) nothing is marked.
     """
 
@@ -185,11 +183,9 @@ class RapidAir:
         kind = kind if isinstance(kind, str) else ""  # (pd.NA has no truth value)
         if kind == "block":
             self._g0 = isinstance(ipo, str) and ipo.strip().upper() in ("G0", "G00")
-            text = gcode if isinstance(gcode, str) else ""
-            if _MCALL_OFF.match(text):
-                self._mcall = False
-            elif _MCALL_CYCLE.match(text):
-                self._mcall = True
+            call = modal_cycle_call(gcode) if isinstance(gcode, str) else None
+            if call is not None:
+                self._mcall = call
         elif kind == "call":
             self._in_cycle = isinstance(path, str) and "CYCLE" in path.upper()
 

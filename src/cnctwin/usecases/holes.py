@@ -57,6 +57,7 @@ __all__ = [
     "hole_records",
     "holes_from_arrays",
     "holes_path",
+    "modal_cycle_call",
     "read_holes",
     "write_holes",
 ]
@@ -103,6 +104,51 @@ HOLE_COLUMNS: dict[str, str] = {
              "drilling load outside any drilling cycle",
 }
 """Columns of :func:`hole_record` with their meaning and unit."""
+
+# a block's optional skip level and block number (``/1 N120``, ``:10`` a main block) before
+# its first word
+_BLOCK_HEAD = r"^\s*(?:/\d?\s*)?(?:[N:]\d+\s*)?"
+_MCALL_ON = re.compile(_BLOCK_HEAD + r"MCALL\s+\S", re.IGNORECASE)
+_MCALL_OFF = re.compile(_BLOCK_HEAD + r"MCALL\s*$|\bG80\b", re.IGNORECASE)
+
+
+def modal_cycle_call(block: str) -> bool | None:
+    """What an NC block does to the modal cycle call.
+
+    Parameters
+    ----------
+    block : str
+        The block's text as the control records it (block number and comment included,
+        e.g. ``'N120 MCALL ; end of the drilling pattern'``).
+
+    Returns
+    -------
+    bool or None
+        True: a cycle is called modally from here on (``MCALL CYCLE81(...)``); False: the
+        modal call is cancelled (a bare ``MCALL``; ``G80`` of the ISO dialect); None: neither.
+
+    Notes
+    -----
+    SINUMERIK 840D sl, Programming Manual Job Planning, "MCALL": a modal subprogram or cycle
+    call stays active for every following block with a path motion until ``MCALL`` without
+    a name ends it. The comment (after ``;``) is not read.
+
+    Examples
+    --------
+    >>> modal_cycle_call("N120 MCALL ; end of the pattern")
+    False
+    >>> modal_cycle_call("MCALL CYCLE81(10, 0, 2, -20)")
+    True
+    >>> modal_cycle_call("N130 G0 X10 ; MCALL later") is None
+    True
+    """
+    text = block.split(";", 1)[0]
+    if _MCALL_OFF.search(text):
+        return False
+    if _MCALL_ON.match(text):
+        return True
+    return None
+
 
 _CYCLE_RE = re.compile(r"\b(CYCLE8[1-9]|G8[1-9])\b", re.IGNORECASE)
 _CALL_RE = re.compile(r"_?(CYCLE8[1-9])", re.IGNORECASE)
@@ -357,7 +403,7 @@ def _cycle_info(ev: HoleEvents, cycles: NDArray[np.int64]) -> tuple[list[str], l
                         cur_rfp = float(parts[1]) if len(parts) > 1 and parts[1] else math.nan
                     except ValueError:
                         cur_rfp = math.nan
-            elif re.fullmatch(r"\s*MCALL\s*", t) or re.search(r"\bG80\b", t):
+            elif modal_cycle_call(t) is False:
                 cur_name, cur_rfp = "", math.nan
         elif kind == "call":
             m = _CALL_RE.search(str(path or ""))
