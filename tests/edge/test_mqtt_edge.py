@@ -146,7 +146,18 @@ def test_queue_survives_restart(tmp_path: Path) -> None:
     q.close()
     q2 = ForwardQueue(tmp_path / "outbox.sqlite", max_messages=3)
     assert [p for _, _, p in q2.peek(10)] == [b"b", b"c", b"d"] and q2.dropped == 1
+    # acknowledged ones leave; the counts hold across a restart: 4 appended = 1 dropped +
+    # 2 sent + 1 queued (by hand)
+    ids = [i for i, _, _ in q2.peek(2)]
+    q2.put_many([], remove=ids)
+    q2.remove([ids[0]])  # an acknowledgement seen twice removes nothing more
+    assert (q2.enqueued, q2.dropped, q2.sent, len(q2)) == (4, 1, 2, 1)
     q2.close()
+    q3 = ForwardQueue(tmp_path / "outbox.sqlite", max_messages=3)
+    assert (q3.enqueued, q3.dropped, q3.sent, len(q3)) == (4, 1, 2, 1)
+    q3.remove([i for i, _, _ in q3.peek(5)])  # empty: the ids still go on, never reused
+    assert q3.put_many([("t", b"e")]) == [5] and q3.sent == 3
+    q3.close()
 
 
 def test_cli_live_databus(broker: Broker, tmp_path: Path,

@@ -56,29 +56,32 @@ class ForwardQueue:
         self._db.execute("PRAGMA synchronous=NORMAL")
         self._db.executescript(_SCHEMA)
         self._len = int(self._db.execute("SELECT count(*) FROM outbox").fetchone()[0])
-        self._counts = {str(k): int(v) for k, v in
-                        self._db.execute("SELECT name, value FROM counters").fetchall()}
+        # AUTOINCREMENT keeps the largest id ever given (never reused): the messages ever
+        # appended; sent = appended - dropped - queued. Only the drops are a counter of their
+        # own, so a transaction touches the queue's pages alone (no counter page per chunk).
+        row = self._db.execute("SELECT seq FROM sqlite_sequence WHERE name = 'outbox'"
+                               ).fetchone()
+        self._last_id = int(row[0]) if row else 0
+        self._dropped = int(self._db.execute("SELECT value FROM counters WHERE name = "
+                                             "'dropped'").fetchone()[0])
 
     def __len__(self) -> int:
         return self._len
 
-    def _counter(self, name: str) -> int:
-        return self._counts[name]
-
     @property
     def dropped(self) -> int:
         """Messages deleted unsent because the bound was hit (over the file's life)."""
-        return self._counter("dropped")
+        return self._dropped
 
     @property
     def enqueued(self) -> int:
         """Messages ever appended."""
-        return self._counter("enqueued")
+        return self._last_id
 
     @property
     def sent(self) -> int:
         """Messages acknowledged and removed."""
-        return self._counter("sent")
+        return self._last_id - self._dropped - self._len
 
     def put_many(self, items: list[tuple[str, bytes]], *,
                  remove: list[int] | None = None) -> list[int]:
@@ -102,15 +105,16 @@ class ForwardQueue:
             return []
         db = self._db
         db.execute("BEGIN")
-        drop = removed = 0
-        ids: list[int] = []
+        drop = 0
+        first = self._last_id + 1  # one writer: the ids are ours to give, consecutive
+        ids = list(range(first, first + len(items)))
+        n0 = self._len
         try:
             if remove:
-                removed = self._delete(remove)
+                self._delete(remove)
             if items:
-                db.executemany("INSERT INTO outbox (topic, payload) VALUES (?, ?)", items)
-                last = int(db.execute("SELECT last_insert_rowid()").fetchone()[0])
-                ids = list(range(last - len(items) + 1, last + 1))  # one writer: consecutive
+                db.executemany("INSERT INTO outbox (id, topic, payload) VALUES (?, ?, ?)",
+                               [(i, t, p) for i, (t, p) in zip(ids, items, strict=True)])
                 self._len += len(items)
                 drop = max(self._len - self.max_messages, 0)
                 if drop:
@@ -119,16 +123,13 @@ class ForwardQueue:
                     db.execute("UPDATE counters SET value = value + ? WHERE name = "
                                "'dropped'", (drop,))
                     self._len -= drop
-                db.execute("UPDATE counters SET value = value + ? WHERE name = 'enqueued'",
-                           (len(items),))
             db.execute("COMMIT")
         except BaseException:
             db.execute("ROLLBACK")
-            self._len = int(self._db.execute("SELECT count(*) FROM outbox").fetchone()[0])
+            self._len = n0
             raise
-        self._counts["dropped"] += drop
-        self._counts["enqueued"] += len(items)
-        self._counts["sent"] += removed
+        self._dropped += drop
+        self._last_id += len(items)
         return ids
 
     def peek(self, n: int, *, after_id: int = 0) -> list[tuple[int, str, bytes]]:
@@ -137,12 +138,9 @@ class ForwardQueue:
                                 "ORDER BY id LIMIT ?", (after_id, n)).fetchall()
         return [(int(i), str(t), bytes(p)) for i, t, p in rows]
 
-    def _delete(self, ids: list[int]) -> int:
+    def _delete(self, ids: list[int]) -> None:
         cur = self._db.executemany("DELETE FROM outbox WHERE id = ?", [(i,) for i in ids])
-        n = cur.rowcount if cur.rowcount >= 0 else len(ids)
-        self._db.execute("UPDATE counters SET value = value + ? WHERE name = 'sent'", (n,))
-        self._len -= n
-        return int(n)
+        self._len -= cur.rowcount if cur.rowcount >= 0 else len(ids)
 
     def remove(self, ids: list[int]) -> None:
         """Delete acknowledged messages."""
@@ -150,14 +148,14 @@ class ForwardQueue:
             return
         db = self._db
         db.execute("BEGIN")
+        n0 = self._len
         try:
-            n = self._delete(ids)
+            self._delete(ids)
             db.execute("COMMIT")
         except BaseException:
             db.execute("ROLLBACK")
-            self._len = int(self._db.execute("SELECT count(*) FROM outbox").fetchone()[0])
+            self._len = n0
             raise
-        self._counts["sent"] += n
 
     def close(self) -> None:
         """Close the file."""
