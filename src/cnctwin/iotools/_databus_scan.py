@@ -4,18 +4,21 @@
 "ts": "2021-03-10T22:23:04.146Z", "val": 80.5}, ...]}``, keys in any order, any JSON
 whitespace) in a numba-compiled loop: per value the datapoint's column (from a lookup table of
 the metadata's ids), the timestamp in ns since the epoch (parsed once per distinct timestamp:
-an HF message repeats one per cycle), the quality code, and the number's text, copied into one
-``[v0,v1,...]`` buffer that ``orjson`` turns into floats (correctly rounded, as every JSON
-parser of the project reads them). Anything outside that strict subset (escapes, quoted or
-64-bit numbers, text values, other keys, a timestamp with an offset, ids that are not plain
-decimals, an irregular layout) is declined: the caller then uses the general decoder, which
-handles and names every shape.
+an HF message repeats one per cycle), the quality code, and the number, read into a float64
+in the same pass (the Eisel-Lemire algorithm below: correctly rounded, bit for bit what every
+JSON parser of the project gives, and no Python float per value); a number outside its range
+(a subnormal, more than 19 significant digits) and every one after it is copied as text into
+one ``[v0,v1,...]`` buffer that ``orjson`` reads. Anything outside that strict subset
+(escapes, quoted or 64-bit numbers, text values, other keys, a timestamp with an offset, ids
+that are not plain decimals, an irregular layout) is declined: the caller then uses the
+general decoder, which handles and names every shape.
 
 From the second row on, a value object is first compared byte for byte with the first row's
 object at its place (the template: the same id, qc and keys, written the same way), so only
 its timestamp (compared with its row's) and its number are read; an object written otherwise
 is parsed in full. A 500-cycle HF message of 11 datapoints: 0.8 ms against 1.4 ms for a typed
-``msgspec`` decode into objects (BENCHMARKS.md, "Many machines live").
+``msgspec`` decode into objects (BENCHMARKS.md, "Many machines live"); with the numbers read
+in the scan ~0.65 ms (BENCHMARKS.md, "the numbers read in the scan").
 """
 
 from __future__ import annotations
@@ -257,6 +260,149 @@ def _number(buf, i, n):  # type: ignore[no-untyped-def]
     return k
 
 
+# ---------------------------------------------------------------- decimal text -> float64
+# The Eisel-Lemire algorithm (D. Lemire, "Number parsing at a gigabyte per second", Software:
+# Practice and Experience 51(8), 2021; N. Mushtak and D. Lemire, "Fast number parsing without
+# fallback", ibid. 53(7), 2023: with at most 19 significant digits the 128-bit product below
+# always decides the correctly rounded double). Subnormal and overflowing results, more than
+# 19 significant digits and decimal exponents outside [-342, 308] are declined (the caller
+# then parses the message's numbers with orjson), so what is returned is always the correctly
+# rounded double, the value every JSON parser of the project gives (tested against Python's
+# ``float`` on random and boundary texts: tests/iotools/test_databus_numbers.py).
+
+_POW5_MIN = -342
+_POW5_MAX = 308
+
+
+def _pow5_table() -> NDArray[np.uint64]:
+    """128-bit 5**q for q in [-342, 308] (high, low words), normalized to a leading 1 bit:
+    truncated for q >= 0, the reciprocal rounded up for q < 0 (as the paper's table)."""
+    rows = []
+    for q in range(_POW5_MIN, 0):
+        p5 = 5 ** -q
+        z = p5.bit_length() if p5 & (p5 - 1) else p5.bit_length() - 1  # ceil(log2(p5))
+        if q >= -27:
+            c = 2 ** (z + 127) // p5 + 1
+        else:
+            c = 2 ** (2 * z + 128) // p5 + 1
+            c >>= max(c.bit_length() - 128, 0)
+        rows.append(c)
+    for q in range(0, _POW5_MAX + 1):
+        p5 = 5 ** q
+        shift = 128 - p5.bit_length()
+        rows.append(p5 << shift if shift >= 0 else p5 >> -shift)
+    out = np.empty(2 * len(rows), dtype=np.uint64)
+    for k, c in enumerate(rows):
+        out[2 * k] = c >> 64
+        out[2 * k + 1] = c & 0xFFFFFFFFFFFFFFFF
+    return out
+
+
+_POW5 = _pow5_table()
+_M32 = np.uint64(0xFFFFFFFF)
+_S32 = np.uint64(32)
+
+
+def _mul128(a, b):  # type: ignore[no-untyped-def]
+    """The full 128-bit product of two uint64: (high, low)."""
+    a_lo = a & _M32
+    a_hi = a >> _S32
+    b_lo = b & _M32
+    b_hi = b >> _S32
+    p0 = a_lo * b_lo
+    p1 = a_lo * b_hi
+    p2 = a_hi * b_lo
+    p3 = a_hi * b_hi
+    mid = (p0 >> _S32) + (p1 & _M32) + (p2 & _M32)
+    lo = (p0 & _M32) | (mid << _S32)
+    hi = p3 + (p1 >> _S32) + (p2 >> _S32) + (mid >> _S32)
+    return hi, lo
+
+
+def _float_bits(buf, vs, ve, pow5):  # type: ignore[no-untyped-def]
+    """The JSON number text buf[vs:ve] (grammar checked by ``_number``) as the bits of the
+    correctly rounded float64: (ok, bits); not ok where the text is declined (see above)."""
+    i = vs
+    neg = buf[i] == 45
+    if neg:
+        i += 1
+    w = np.uint64(0)
+    nd = 0
+    q = 0
+    ten = np.uint64(10)
+    while i < ve and 48 <= buf[i] <= 57:
+        d = buf[i] - 48
+        if nd > 0 or d != 0:
+            if nd == 19:
+                return False, np.uint64(0)
+            w = w * ten + np.uint64(d)
+            nd += 1
+        i += 1
+    if i < ve and buf[i] == 46:
+        i += 1
+        while i < ve and 48 <= buf[i] <= 57:
+            d = buf[i] - 48
+            if nd > 0 or d != 0:
+                if nd == 19:
+                    return False, np.uint64(0)
+                w = w * ten + np.uint64(d)
+                nd += 1
+            q -= 1
+            i += 1
+    if i < ve and (buf[i] == 101 or buf[i] == 69):
+        i += 1
+        sign = 1
+        if buf[i] == 45:
+            sign = -1
+            i += 1
+        elif buf[i] == 43:
+            i += 1
+        e = 0
+        while i < ve and 48 <= buf[i] <= 57:
+            e = e * 10 + (buf[i] - 48)
+            if e > 100000:
+                return False, np.uint64(0)
+            i += 1
+        q += sign * e
+    sign_bit = np.uint64(1) << np.uint64(63) if neg else np.uint64(0)
+    if w == 0:
+        return True, sign_bit  # +-0.0
+    if q < _POW5_MIN or q > _POW5_MAX:
+        return False, np.uint64(0)
+    lz = 0  # leading zeros of w, by halving steps
+    for width in (32, 16, 8, 4, 2, 1):
+        if w < (np.uint64(1) << np.uint64(64 - width)):
+            w = w << np.uint64(width)
+            lz += width
+    idx = 2 * (q - _POW5_MIN)
+    hi, lo = _mul128(w, pow5[idx])
+    if (hi & np.uint64(0x1FF)) == np.uint64(0x1FF):
+        hi2, _ = _mul128(w, pow5[idx + 1])
+        lo2 = lo + hi2
+        if hi2 > lo2:
+            hi = hi + np.uint64(1)
+        lo = lo2
+    upperbit = int(hi >> np.uint64(63))
+    shift = np.uint64(upperbit + 9)
+    mant = hi >> shift
+    power2 = (((152170 + 65536) * q) >> 16) + 63 + upperbit - lz + 1023
+    if power2 <= 0:
+        return False, np.uint64(0)  # subnormal
+    one = np.uint64(1)
+    if lo <= one and -4 <= q <= 23 and (mant & np.uint64(3)) == one \
+            and (mant << shift) == hi:
+        mant = mant & ~one  # exactly halfway: round to even
+    mant = mant + (mant & one)
+    mant = mant >> one
+    if mant >= (np.uint64(2) << np.uint64(52)):
+        mant = np.uint64(1) << np.uint64(52)
+        power2 += 1
+    mant = mant & ~(np.uint64(1) << np.uint64(52))
+    if power2 >= 0x7FF:
+        return False, np.uint64(0)  # overflow
+    return True, mant | (np.uint64(power2) << np.uint64(52)) | sign_bit
+
+
 def _obj(buf, i, n, lut):  # type: ignore[no-untyped-def]
     """A value object at buf[i] (``{"id", "qc", "ts", "val"}`` in any order; ``qc`` may be
     left out): (ok, end, column, qc, ts start, ts end, number start, number end)."""
@@ -366,9 +512,10 @@ def _like(buf, p, n, t0, a, ln, b, vl, e, row_ts, new_row):  # type: ignore[no-u
 _TEMPLATES = 256  # row positions with a template (a row of more values parses the rest fully)
 
 
-def _vals(buf, i, n, lut, tok, nt, col, t_row, qc):  # type: ignore[no-untyped-def]
-    """The ``vals`` array after its '[': (ok, end, values, values per row, tokens)."""
-    bad = (False, 0, 0, 0, 0)
+def _vals(buf, i, n, lut, tok, nt, col, t_row, qc, bits, pow5):  # type: ignore[no-untyped-def]
+    """The ``vals`` array after its '[': (ok, end, values, values per row, tokens, leading
+    values whose number is in ``bits``; the later numbers' texts are the tokens)."""
+    bad = (False, 0, 0, 0, 0, 0)
     i = _ws(buf, i, n)
     if i < n and buf[i] == 93:
         return bad  # no values: nothing to decode fast
@@ -379,6 +526,7 @@ def _vals(buf, i, n, lut, tok, nt, col, t_row, qc):  # type: ignore[no-untyped-d
     row_ts = -1
     prev_s = -1
     prev_e = -1
+    n_exact = 0  # the leading values whose number is in bits
     while True:
         i = _ws(buf, i, n)
         j = nv % k if k > 0 else 0
@@ -447,11 +595,18 @@ def _vals(buf, i, n, lut, tok, nt, col, t_row, qc):  # type: ignore[no-untyped-d
                 tpl[nv, 5] = ve - vs
                 tpl[nv, 6] = end - i
         qc[nv] = q
-        for p in range(vs, ve):
-            tok[nt] = buf[p]
+        parsed = False
+        if n_exact == nv:  # every number before this one read into bits
+            parsed, b = _float_bits(buf, vs, ve, pow5)
+            if parsed:
+                bits[nv] = b
+                n_exact += 1
+        if not parsed:  # from the first declined number on, the texts for orjson
+            for p in range(vs, ve):
+                tok[nt] = buf[p]
+                nt += 1
+            tok[nt] = 44  # ,
             nt += 1
-        tok[nt] = 44  # ,
-        nt += 1
         nv += 1
         prev_s = ts_s
         prev_e = ts_e
@@ -464,19 +619,20 @@ def _vals(buf, i, n, lut, tok, nt, col, t_row, qc):  # type: ignore[no-untyped-d
         k = nv
     if nv % k != 0:
         return bad
-    return True, i, nv, k, nt
+    return True, i, nv, k, nt, n_exact
 
 
-def _scan_py(buf, lut, tok, col, t_row, qc):  # type: ignore[no-untyped-def]
-    """Returns (status, n_values, k, n_tok, has_seq, seq)."""
+def _scan_py(buf, lut, tok, col, t_row, qc, bits, pow5):  # type: ignore[no-untyped-def]
+    """Returns (status, n_values, k, n_tok, has_seq, seq, n_exact: values read into bits)."""
     n = buf.size
     i = _ws(buf, 0, n)
     if i >= n or buf[i] != 123:
-        return DECLINED, 0, 0, 0, 0, 0
+        return DECLINED, 0, 0, 0, 0, 0, 0
     i += 1
     has_seq = 0
     seq = 0
     seen_vals = False
+    n_exact = 0
     nv = 0
     nt = 0
     k = 0
@@ -486,25 +642,25 @@ def _scan_py(buf, lut, tok, col, t_row, qc):  # type: ignore[no-untyped-def]
     while True:
         i = _ws(buf, i, n)
         if i >= n:
-            return DECLINED, 0, 0, 0, 0, 0
+            return DECLINED, 0, 0, 0, 0, 0, 0
         if buf[i] == 125 and first:
             i += 1
             break
         if buf[i] != 34:
-            return DECLINED, 0, 0, 0, 0, 0
+            return DECLINED, 0, 0, 0, 0, 0, 0
         key, i = _key(buf, i, n)
         if key == 0:
-            return DECLINED, 0, 0, 0, 0, 0
+            return DECLINED, 0, 0, 0, 0, 0, 0
         i = _colon(buf, i, n)
         if i < 0 or i >= n:
-            return DECLINED, 0, 0, 0, 0, 0
+            return DECLINED, 0, 0, 0, 0, 0, 0
         if key == _K_SEQ:
             if has_seq != 0:
-                return DECLINED, 0, 0, 0, 0, 0
+                return DECLINED, 0, 0, 0, 0, 0, 0
             if buf[i] == 34:  # "123": the decoder reads a digit string as the number
                 v, e = _int_token(buf, i + 1, n, False)
                 if e < 0 or e >= n or buf[e] != 34:
-                    return DECLINED, 0, 0, 0, 0, 0
+                    return DECLINED, 0, 0, 0, 0, 0, 0
                 i = e + 1
                 has_seq, seq = 1, v
             elif i + 4 <= n and buf[i] == 110 and buf[i + 1] == 117 and buf[i + 2] == 108 \
@@ -514,29 +670,31 @@ def _scan_py(buf, lut, tok, col, t_row, qc):  # type: ignore[no-untyped-def]
             else:
                 v, e = _int_token(buf, i, n, False)
                 if e < 0:
-                    return DECLINED, 0, 0, 0, 0, 0
+                    return DECLINED, 0, 0, 0, 0, 0, 0
                 i = e
                 has_seq, seq = 1, v
         elif key == _K_VALS:
             if seen_vals or buf[i] != 91:
-                return DECLINED, 0, 0, 0, 0, 0
+                return DECLINED, 0, 0, 0, 0, 0, 0
             seen_vals = True
-            ok, i, nv, k, nt = _vals(buf, i + 1, n, lut, tok, nt, col, t_row, qc)
+            ok, i, nv, k, nt, n_exact = _vals(buf, i + 1, n, lut, tok, nt, col, t_row, qc,
+                                              bits, pow5)
             if not ok:
-                return DECLINED, 0, 0, 0, 0, 0
+                return DECLINED, 0, 0, 0, 0, 0, 0
         else:
-            return DECLINED, 0, 0, 0, 0, 0
+            return DECLINED, 0, 0, 0, 0, 0, 0
         first = False
         more, i = _sep(buf, i, n, 125)
         if more == 0:
-            return DECLINED, 0, 0, 0, 0, 0
+            return DECLINED, 0, 0, 0, 0, 0, 0
         if more == 2:
             break
     i = _ws(buf, i, n)
     if i != n or not seen_vals:
-        return DECLINED, 0, 0, 0, 0, 0
-    tok[nt - 1] = 93  # the last comma becomes ]
-    return OK, nv, k, nt, has_seq, seq
+        return DECLINED, 0, 0, 0, 0, 0, 0
+    if nt > 1:
+        tok[nt - 1] = 93  # the last comma becomes ]
+    return OK, nv, k, nt, has_seq, seq, n_exact
 
 
 _compiled: Any = None
@@ -553,7 +711,8 @@ def _scanner() -> Any:
             jit_inline = numba.njit(cache=True, nogil=True, inline="always")
             g = globals()
             for name in ("_ws", "_key", "_colon", "_sep", "_digits", "_int_token", "_num",
-                         "_days", "_timestamp", "_number", "_same_bytes", "_like", "_obj"):
+                         "_days", "_timestamp", "_number", "_same_bytes", "_like", "_obj",
+                         "_mul128", "_float_bits"):
                 g[name] = jit_inline(g[name])
             g["_vals"] = jit(g["_vals"])
             _compiled = jit(_scan_py)
@@ -592,14 +751,21 @@ def scan_bulk(message: bytes, lut: NDArray[np.int64]) -> BulkScan | None:
     col = np.empty(cap, dtype=np.int64)
     t_row = np.empty(cap, dtype=np.int64)
     qc = np.empty(cap, dtype=np.int64)
-    status, nv, k, nt, has_seq, seq = _scanner()(buf, lut, tok, col, t_row, qc)
+    bits = np.empty(cap, dtype=np.uint64)
+    status, nv, k, nt, has_seq, seq, n_exact = _scanner()(buf, lut, tok, col, t_row, qc,
+                                                          bits, _POW5)
     if status != OK:
         return None
-    try:
-        values = np.array(orjson.loads(tok[:nt].tobytes()), dtype=np.float64)
-    except (orjson.JSONDecodeError, OverflowError):  # e.g. 1e400: the general path says so
-        return None
-    if values.size != nv:
-        return None
+    # the numbers the scan read (Eisel-Lemire: no Python float per value), then those it
+    # declined and all after them (orjson: subnormals, > 19 digits)
+    values = bits[:nv].view(np.float64)
+    if n_exact < nv:
+        try:
+            rest = np.array(orjson.loads(tok[:nt].tobytes()), dtype=np.float64)
+        except (orjson.JSONDecodeError, OverflowError):  # 1e400: the general path says so
+            return None
+        if rest.size != nv - n_exact:
+            return None
+        values[n_exact:] = rest
     return BulkScan(k=int(k), cols=col[:k].copy(), t_ns=t_row[:nv // k].copy(), values=values,
                     qc=qc[:nv].copy(), seq=int(seq) if has_seq == 1 else None)
