@@ -8,7 +8,7 @@ keeps two spare files (hard links, ``.status.json.a`` and ``.status.json.b`` bes
 new content is written in place into the spare that is *not* the current file, then renamed
 over the file name and given its spare name back with a hard link. Readers open either the
 old or the new inode, each complete (the rename is atomic), and the file system sees an
-overwrite of already allocated blocks instead of a new file (~15 us). Where hard links or the
+overwrite of already allocated blocks instead of a new file (~20 us). Where hard links or the
 rename over an open file are not possible (some network and Windows file systems), it falls
 back to the temporary file and :func:`os.replace`.
 
@@ -54,7 +54,6 @@ class StatusFile:
     def __init__(self, path: str | PathLike[str]) -> None:
         self.path = Path(path)
         self._spares = [self.path.with_name(f".{self.path.name}.{s}") for s in "ab"]
-        self._fds: list[int | None] = [None, None]
         self._next: int | None = None  # the spare to write next (None: not chosen yet)
         self.swapping = True  # False once the fallback is in use
 
@@ -71,13 +70,6 @@ class StatusFile:
             except FileNotFoundError:
                 pass
         return 0
-
-    def _fd(self, k: int) -> int:
-        fd = self._fds[k]
-        if fd is None:
-            fd = os.open(self._spares[k], os.O_RDWR | os.O_CREAT, 0o666)  # the umask applies
-            self._fds[k] = fd
-        return fd
 
     def write(self, data: bytes) -> None:
         """Replace the file's content with ``data``.
@@ -105,19 +97,19 @@ class StatusFile:
         if self._next is None:
             self._next = self._choose()
         k = self._next
-        fd = self._fd(k)
-        os.pwrite(fd, data, 0)
-        os.ftruncate(fd, len(data))
         spare = self._spares[k]
+        # opened each time, not held: a plant worker serves hundreds of machines, each with
+        # its queue and sockets, within the process's open-file limit
+        fd = os.open(spare, os.O_WRONLY | os.O_CREAT, 0o666)  # the umask applies
+        try:
+            os.pwrite(fd, data, 0)
+            os.ftruncate(fd, len(data))
+        finally:
+            os.close(fd)
         os.replace(spare, self.path)  # the file is now spare k's inode, complete
         os.link(self.path, spare)  # which keeps its spare name for the round after next
         self._next = 1 - k
 
     def close(self) -> None:
-        """Close the spares (the file stays)."""
-        for k, fd in enumerate(self._fds):
-            if fd is not None:
-                with contextlib.suppress(OSError):
-                    os.close(fd)
-            self._fds[k] = None
+        """Forget which spare is next (the files stay; a later write looks again)."""
         self._next = None
