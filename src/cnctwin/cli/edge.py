@@ -299,12 +299,16 @@ def _plant_worker(plant_path: str, names: list[str], report_queue: Any,
     import os
 
     from cnctwin.edge import session_client_id
-    from cnctwin.edge.plant import run_machines, worker_signals
+    from cnctwin.edge.plant import raise_open_file_limit, run_machines, worker_signals
     from cnctwin.iotools.mqtt import MqttHubs
 
     stop = threading.Event()
     worker_signals(stop)
     report_queue.put(("", "ready", os.getpid()))  # a stop now drains instead of killing
+    short = raise_open_file_limit(len(names))
+    if short:
+        print(f"warning: worker of {', '.join(names[:3])}{' ...' if len(names) > 3 else ''}: "
+              f"{short}", file=sys.stderr)
     plant = read_plant_file(Path(plant_path))
     hubs = MqttHubs(session_client_id(f"plant-{session_key or '+'.join(names)}", ""),
                     machines=len(names))

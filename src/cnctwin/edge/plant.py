@@ -55,7 +55,8 @@ from typing import Any, Protocol
 
 from cnctwin.exceptions import CnctwinError, ConfigError
 
-__all__ = ["PlantFile", "PlantMachine", "PlantRunner", "read_plant", "run_machines"]
+__all__ = ["FILES_PER_MACHINE", "PlantFile", "PlantMachine", "PlantRunner", "raise_open_file_limit",
+           "read_plant", "run_machines"]
 
 
 @dataclass(frozen=True)
@@ -468,6 +469,52 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
 
 
 # ---------------------------------------------------------------------- many processes
+FILES_PER_MACHINE = 8
+"""Open files one machine of a plant worker holds: its outbox (the SQLite file, its WAL and
+shared memory), ``results.jsonl``, its MQTT sink's socket and paho's wake-up socket pair, and
+one being written (a checkpoint, the status file)."""
+
+
+def raise_open_file_limit(machines: int) -> str:
+    """Raise this process's soft limit of open files to what ``machines`` need.
+
+    Parameters
+    ----------
+    machines : int
+        Machines this process runs.
+
+    Returns
+    -------
+    str
+        Empty, or what to do when the hard limit is below the need (the soft limit is then
+        raised to the hard one).
+
+    Notes
+    -----
+    Linux's usual soft limit of 1024 open files would stop a worker at about 125 machines
+    (:data:`FILES_PER_MACHINE` each) with "Too many open files"; the hard limit (often 4096 to
+    1048576) is the administrator's, and only the soft one is raised to it (as nginx's
+    ``worker_rlimit_nofile`` or Go's runtime do). Nothing to do where the platform has no such
+    limit (Windows).
+    """
+    try:
+        import resource
+    except ImportError:
+        return ""
+    need = machines * FILES_PER_MACHINE + 64  # + the interpreter, broker sockets, logs
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft == resource.RLIM_INFINITY or soft >= need:
+        return ""
+    target = need if hard == resource.RLIM_INFINITY else min(need, hard)
+    if target > soft:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (target, hard))
+    if target < need:
+        return (f"{machines} machines need about {need} open files, but this process may "
+                f"open at most {hard} (the hard limit): raise it (ulimit -Hn, systemd "
+                "LimitNOFILE=) or give the plant more workers (workers = N in the plant file)")
+    return ""
+
+
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 """Read by the BLAS libraries when NumPy loads them; a plant's workers start with 1 (unless
 the user set them): one worker per core, so BLAS threads in a worker would only compete for
