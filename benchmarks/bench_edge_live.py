@@ -127,7 +127,8 @@ def _decode_cost_ms(payload: bytes, repeat: int = 200) -> dict[str, float]:
     fn = scan._scanner()
     c0 = time.process_time()
     for _ in range(repeat):
-        fn(buf, lut, tok, col, t_row, qc, bits, scan._POW5)
+        fn(buf, lut, tok, col, t_row, qc, bits, scan._POW5,
+           np.empty((scan._TEMPLATES, 7), dtype=np.int64))
     return {"decode": full * 1e3, "scan": (time.process_time() - c0) / repeat * 1e3}
 
 

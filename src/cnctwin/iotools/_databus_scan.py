@@ -512,14 +512,14 @@ def _like(buf, p, n, t0, a, ln, b, vl, e, row_ts, new_row):  # type: ignore[no-u
 _TEMPLATES = 256  # row positions with a template (a row of more values parses the rest fully)
 
 
-def _vals(buf, i, n, lut, tok, nt, col, t_row, qc, bits, pow5):  # type: ignore[no-untyped-def]
+def _vals(buf, i, n, lut, tok, nt, col, t_row, qc, bits, pow5, tpl):  # type: ignore[no-untyped-def]
     """The ``vals`` array after its '[': (ok, end, values, values per row, tokens, leading
     values whose number is in ``bits``; the later numbers' texts are the tokens)."""
     bad = (False, 0, 0, 0, 0, 0)
     i = _ws(buf, i, n)
     if i < n and buf[i] == 93:
         return bad  # no values: nothing to decode fast
-    tpl = np.zeros((_TEMPLATES, 7), dtype=np.int64)  # usable, t0, a, ln, b, vl, e
+    tpl[:, 0] = 0  # per row place: usable, t0, a, ln, b, vl, e
     nv = 0
     k = 0
     n_rows = 0
@@ -622,7 +622,7 @@ def _vals(buf, i, n, lut, tok, nt, col, t_row, qc, bits, pow5):  # type: ignore[
     return True, i, nv, k, nt, n_exact
 
 
-def _scan_py(buf, lut, tok, col, t_row, qc, bits, pow5):  # type: ignore[no-untyped-def]
+def _scan_py(buf, lut, tok, col, t_row, qc, bits, pow5, tpl):  # type: ignore[no-untyped-def]
     """Returns (status, n_values, k, n_tok, has_seq, seq, n_exact: values read into bits)."""
     n = buf.size
     i = _ws(buf, 0, n)
@@ -678,7 +678,7 @@ def _scan_py(buf, lut, tok, col, t_row, qc, bits, pow5):  # type: ignore[no-unty
                 return DECLINED, 0, 0, 0, 0, 0, 0
             seen_vals = True
             ok, i, nv, k, nt, n_exact = _vals(buf, i + 1, n, lut, tok, nt, col, t_row, qc,
-                                              bits, pow5)
+                                              bits, pow5, tpl)
             if not ok:
                 return DECLINED, 0, 0, 0, 0, 0, 0
         else:
@@ -707,8 +707,13 @@ def _scanner() -> Any:
         if _compiled is None:
             import numba
 
-            jit = numba.njit(cache=True, nogil=True)
-            jit_inline = numba.njit(cache=True, nogil=True, inline="always")
+            # without the runtime's reference counting (``_nrt``, a CPU target option): the
+            # scan allocates nothing (its arrays come from the caller, who holds them), and
+            # the atomic increments and decrements of the arrays passed to the helpers took
+            # half of its time (perf: two `lock` instructions, 51 % of the samples)
+            opts: dict[str, Any] = {"cache": True, "nogil": True, "_nrt": False}
+            jit = numba.njit(**opts)
+            jit_inline = numba.njit(**opts, inline="always")
             g = globals()
             for name in ("_ws", "_key", "_colon", "_sep", "_digits", "_int_token", "_num",
                          "_days", "_timestamp", "_number", "_same_bytes", "_like", "_obj",
@@ -752,8 +757,9 @@ def scan_bulk(message: bytes, lut: NDArray[np.int64]) -> BulkScan | None:
     t_row = np.empty(cap, dtype=np.int64)
     qc = np.empty(cap, dtype=np.int64)
     bits = np.empty(cap, dtype=np.uint64)
+    tpl = np.empty((_TEMPLATES, 7), dtype=np.int64)
     status, nv, k, nt, has_seq, seq, n_exact = _scanner()(buf, lut, tok, col, t_row, qc,
-                                                          bits, _POW5)
+                                                          bits, _POW5, tpl)
     if status != OK:
         return None
     # the numbers the scan read (Eisel-Lemire: no Python float per value), then those it
