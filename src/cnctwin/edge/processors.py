@@ -325,30 +325,46 @@ class HoleProcessor:
         if self._pending is not None and (chunk.last_cycle >= self._pending
                                           or self._xy_moved(chunk)):
             self._moved_up = True
-        down = dz < -step
-        up = dz > step
-        for j in np.flatnonzero(down | up).tolist() if dz.size else []:
-            if down[j]:
-                self._down_run += 1
-                self._up_run = 0
-                if not self._in_plunge and self._down_run >= 5:
-                    self._in_plunge = True
-                    c = int(chunk.cycles[j if has_prev else j + 1])
-                    self.plunges += 1
-                    out.append(Result("hole_start", c, {"holes_done": self.holes, "cycle": c,
-                                                         "z_mm": float(zz[j + 1]),
-                                                         "units": {"z_mm": "mm"}}))
-            else:
-                self._up_run += 1
-                self._down_run = 0
-                if self._up_run >= 5:
-                    self._in_plunge = False
+        for j in self._plunge_starts(dz, step):
+            c = int(chunk.cycles[j if has_prev else j + 1])
+            self.plunges += 1
+            out.append(Result("hole_start", c, {"holes_done": self.holes, "cycle": c,
+                                                 "z_mm": float(zz[j + 1]),
+                                                 "units": {"z_mm": "mm"}}))
         if self.live_context:
             self._context(chunk, z, events)
         if self._moved_up:
             self._pending = None
             out += self._evaluate(final=False)
         self._trim()
+        return out
+
+    def _plunge_starts(self, dz: NDArray[np.float64], step: float) -> list[int]:
+        """Where a plunge starts among the Z steps ``dz``: the 5th sample of a run of samples
+        moving down (samples that do not move leave the runs as they are), unless a plunge
+        is on; 5 samples moving up end it. A loop over the runs, not the samples."""
+        sign = np.where(dz < -step, -1, np.where(dz > step, 1, 0)).astype(np.int8)
+        moving = np.flatnonzero(sign)
+        if not moving.size:
+            return []
+        s = sign[moving]
+        edges = np.flatnonzero(np.diff(s)) + 1
+        starts = np.concatenate(([0], edges))
+        lengths = np.diff(np.concatenate((starts, [s.size])))
+        out: list[int] = []
+        for a, n, down in zip(starts.tolist(), lengths.tolist(), (s[starts] < 0).tolist(),
+                              strict=True):
+            if down:
+                if not self._in_plunge and self._down_run + n >= 5:
+                    self._in_plunge = True
+                    out.append(int(moving[a + max(5 - self._down_run, 1) - 1]))
+                self._down_run += n
+                self._up_run = 0
+            else:
+                if self._up_run + n >= 5:
+                    self._in_plunge = False
+                self._up_run += n
+                self._down_run = 0
         return out
 
     def _context(self, chunk: Chunk, z: NDArray[np.float64], events: HoleEvents) -> None:
