@@ -319,6 +319,22 @@ def _mul128(a, b):  # type: ignore[no-untyped-def]
     return hi, lo
 
 
+def _sig_digits(buf, i, ve, w, nd):  # type: ignore[no-untyped-def]
+    """The decimal digits from buf[i] on appended to the significand ``w`` (``nd``
+    significant digits so far, leading zeros not counted): (ok, end, w, nd); not ok where a
+    20th significant digit comes."""
+    ten = np.uint64(10)
+    while i < ve and 48 <= buf[i] <= 57:
+        d = buf[i] - 48
+        if nd > 0 or d != 0:
+            if nd == 19:
+                return False, i, w, nd
+            w = w * ten + np.uint64(d)
+            nd += 1
+        i += 1
+    return True, i, w, nd
+
+
 def _float_bits(buf, vs, ve, pow5):  # type: ignore[no-untyped-def]
     """The JSON number text buf[vs:ve] (grammar checked by ``_number``) as the bits of the
     correctly rounded float64: (ok, bits); not ok where the text is declined (see above)."""
@@ -326,29 +342,16 @@ def _float_bits(buf, vs, ve, pow5):  # type: ignore[no-untyped-def]
     neg = buf[i] == 45
     if neg:
         i += 1
-    w = np.uint64(0)
-    nd = 0
     q = 0
-    ten = np.uint64(10)
-    while i < ve and 48 <= buf[i] <= 57:
-        d = buf[i] - 48
-        if nd > 0 or d != 0:
-            if nd == 19:
-                return False, np.uint64(0)
-            w = w * ten + np.uint64(d)
-            nd += 1
-        i += 1
-    if i < ve and buf[i] == 46:
-        i += 1
-        while i < ve and 48 <= buf[i] <= 57:
-            d = buf[i] - 48
-            if nd > 0 or d != 0:
-                if nd == 19:
-                    return False, np.uint64(0)
-                w = w * ten + np.uint64(d)
-                nd += 1
-            q -= 1
-            i += 1
+    ok, i, w, nd = _sig_digits(buf, i, ve, np.uint64(0), 0)  # the integer part
+    if not ok:
+        return False, np.uint64(0)
+    if i < ve and buf[i] == 46:  # the fraction: each digit one power of ten down
+        ok, j, w, nd = _sig_digits(buf, i + 1, ve, w, nd)
+        if not ok:
+            return False, np.uint64(0)
+        q -= j - (i + 1)
+        i = j
     if i < ve and (buf[i] == 101 or buf[i] == 69):
         i += 1
         sign = 1
@@ -717,7 +720,7 @@ def _scanner() -> Any:
             g = globals()
             for name in ("_ws", "_key", "_colon", "_sep", "_digits", "_int_token", "_num",
                          "_days", "_timestamp", "_number", "_same_bytes", "_like", "_obj",
-                         "_mul128", "_float_bits"):
+                         "_mul128", "_sig_digits", "_float_bits"):
                 g[name] = jit_inline(g[name])
             g["_vals"] = jit(g["_vals"])
             _compiled = jit(_scan_py)
