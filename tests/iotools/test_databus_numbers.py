@@ -110,3 +110,23 @@ def test_a_declined_number_mid_message_keeps_every_value() -> None:
     texts[501] = "4.9e-324"  # subnormal
     texts[700] = "1.2345678901234567890123"  # 23 digits
     _bitwise(texts)
+
+
+def test_a_numba_without_the_option_gets_the_scan_with_reference_counting(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The scan is compiled without numba's reference counting (``_nrt``, a CPU target
+    option); a numba that no longer knows the option ("Unrecognized options") must still
+    scan, with the counting: stood in for by an option no numba knows (compiled afresh,
+    ~13 s: from numba's cache the options are not checked)."""
+    from cnctwin.iotools import _databus_scan as scan
+
+    monkeypatch.setattr(scan, "_NO_REFCOUNT", {"_no_such_option": False})
+    monkeypatch.setattr(scan, "_CACHE", False)  # a cached scan is loaded unchecked
+    monkeypatch.setattr(scan, "_compiled", None)
+    try:
+        _bitwise(["1.5", "-0.0", "2.2250738585072011e-308", "123.456"])
+        opts = scan._compiled.targetoptions
+        assert "_no_such_option" not in opts and "_nrt" not in opts  # the fallback's
+    finally:
+        monkeypatch.undo()
+        scan._compiled = None  # the next scan compiles (or loads) the one without counting

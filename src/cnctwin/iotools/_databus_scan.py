@@ -702,28 +702,51 @@ def _scan_py(buf, lut, tok, col, t_row, qc, bits, pow5, tpl):  # type: ignore[no
 
 _compiled: Any = None
 _compile_lock = threading.Lock()
+_HELPERS = ("_ws", "_key", "_colon", "_sep", "_digits", "_int_token", "_num", "_days",
+            "_timestamp", "_number", "_same_bytes", "_like", "_obj", "_mul128", "_sig_digits",
+            "_float_bits", "_vals")
+_PY = {name: globals()[name] for name in (*_HELPERS, "_scan_py")}  # before any compiling
+_CACHE = True  # numba's on-disk cache of the compiled scan
+_NO_REFCOUNT: dict[str, Any] = {"_nrt": False}
+"""Without the runtime's reference counting (``_nrt``, a CPU target option of numba): the
+scan allocates nothing (its arrays come from the caller, who holds them), and the atomic
+increments and decrements of the arrays handed to its helpers took half of its time (perf:
+two ``lock`` instructions, 51 % of the samples; BENCHMARKS.md). A numba without the option
+gets the scan with reference counting."""
+
+
+def _build(options: dict[str, Any]) -> Any:
+    import numba
+
+    opts: dict[str, Any] = {"cache": _CACHE, "nogil": True, **options}
+    g = globals()
+    for name in _HELPERS:  # the helpers inlined where the scan calls them
+        g[name] = numba.njit(**opts, inline="never" if name == "_vals" else "always")(
+            _PY[name])
+    return numba.njit(**opts)(_PY["_scan_py"])
+
+
+def _warm(fn: Any) -> None:
+    """Compile (or load from numba's cache) by scanning a one-value message."""
+    buf = np.frombuffer(b'{"seq":1,"vals":[{"id":"1","qc":3,"ts":"2026-01-01T00:00:00.002Z",'
+                        b'"val":1.5}]}', dtype=np.uint8)
+    ints = np.empty(8, dtype=np.int64)
+    fn(buf, np.zeros(2, dtype=np.int64), np.empty(buf.size + 2, dtype=np.uint8), ints,
+       ints.copy(), ints.copy(), np.empty(8, dtype=np.uint64), _POW5,
+       np.empty((_TEMPLATES, 7), dtype=np.int64))
 
 
 def _scanner() -> Any:
     global _compiled
     with _compile_lock:  # the machines of a plant worker start at once: compile once
         if _compiled is None:
-            import numba
-
-            # without the runtime's reference counting (``_nrt``, a CPU target option): the
-            # scan allocates nothing (its arrays come from the caller, who holds them), and
-            # the atomic increments and decrements of the arrays passed to the helpers took
-            # half of its time (perf: two `lock` instructions, 51 % of the samples)
-            opts: dict[str, Any] = {"cache": True, "nogil": True, "_nrt": False}
-            jit = numba.njit(**opts)
-            jit_inline = numba.njit(**opts, inline="always")
-            g = globals()
-            for name in ("_ws", "_key", "_colon", "_sep", "_digits", "_int_token", "_num",
-                         "_days", "_timestamp", "_number", "_same_bytes", "_like", "_obj",
-                         "_mul128", "_sig_digits", "_float_bits"):
-                g[name] = jit_inline(g[name])
-            g["_vals"] = jit(g["_vals"])
-            _compiled = jit(_scan_py)
+            try:
+                fn = _build(_NO_REFCOUNT)
+                _warm(fn)
+            except KeyError:  # "Unrecognized options": this numba has no such option
+                fn = _build({})
+                _warm(fn)
+            _compiled = fn
     return _compiled
 
 
