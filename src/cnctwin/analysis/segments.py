@@ -28,6 +28,7 @@ __all__ = [
     "hysteresis_mask",
     "lf_on_hf",
     "runs",
+    "runs_of",
     "samples_since",
     "speed_plateaus",
     "spindle_speed_rpm",
@@ -90,6 +91,26 @@ def runs(mask: ArrayLike) -> NDArray[np.int64]:
     starts = np.flatnonzero(d == 1)
     ends = np.flatnonzero(d == -1) - 1
     return np.column_stack([starts, ends]).astype(np.int64)
+
+
+def runs_of(values: ArrayLike) -> list[tuple[int, int, int]]:
+    """Runs of equal values: ``(value, first, end)`` per run, in order (tools, blocks).
+
+    Parameters
+    ----------
+    values : array-like of int
+        One value per cycle (the active tool, the block index).
+
+    Returns
+    -------
+    list of (int, int, int)
+        The run's value, its first index and one past its last.
+    """
+    v = np.asarray(values, dtype=np.int64)
+    if v.size == 0:
+        return []
+    b = np.concatenate([[0], np.flatnonzero(np.diff(v)) + 1, [v.size]])
+    return [(int(v[lo]), int(lo), int(hi)) for lo, hi in itertools.pairwise(b)]
 
 
 def samples_since(mask: ArrayLike, *, before: int) -> NDArray[np.int64]:

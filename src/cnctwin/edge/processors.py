@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from cnctwin.analysis.segments import samples_since
+from cnctwin.analysis.segments import runs_of, samples_since
 from cnctwin.edge.cut import CutTracker
 from cnctwin.edge.pipeline import Chunk, Result
 from cnctwin.exceptions import ConfigError
@@ -343,18 +343,12 @@ class HoleProcessor:
         """Where a plunge starts among the Z steps ``dz``: the 5th sample of a run of samples
         moving down (samples that do not move leave the runs as they are), unless a plunge
         is on; 5 samples moving up end it. A loop over the runs, not the samples."""
-        sign = np.where(dz < -step, -1, np.where(dz > step, 1, 0)).astype(np.int8)
+        sign = np.where(dz < -step, -1, np.where(dz > step, 1, 0))
         moving = np.flatnonzero(sign)
-        if not moving.size:
-            return []
-        s = sign[moving]
-        edges = np.flatnonzero(np.diff(s)) + 1
-        starts = np.concatenate(([0], edges))
-        lengths = np.diff(np.concatenate((starts, [s.size])))
         out: list[int] = []
-        for a, n, down in zip(starts.tolist(), lengths.tolist(), (s[starts] < 0).tolist(),
-                              strict=True):
-            if down:
+        for value, a, end in runs_of(sign[moving]):
+            n = end - a
+            if value < 0:
                 if not self._in_plunge and self._down_run + n >= 5:
                     self._in_plunge = True
                     out.append(int(moving[a + max(5 - self._down_run, 1) - 1]))

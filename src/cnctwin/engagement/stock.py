@@ -22,7 +22,6 @@ of ae.
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 
@@ -30,6 +29,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from cnctwin.analysis.segments import runs_of
 from cnctwin.exceptions import ConfigError
 
 __all__ = ["Engagement", "Stock", "ZMap", "parse_stock", "runs_of"]
@@ -103,26 +103,6 @@ def parse_stock(text: str) -> Stock:
         raise ConfigError(f"--stock {text!r}: give six numbers X0,Y0,Z0,X1,Y1,Z1 in mm "
                           "(lower corner, upper corner), e.g. --stock 0,0,-30,200,150,0")
     return Stock(*vals)
-
-
-def runs_of(values: ArrayLike) -> list[tuple[int, int, int]]:
-    """Runs of equal values: ``(value, first, end)`` per run, in order (tools, blocks).
-
-    Parameters
-    ----------
-    values : array-like of int
-        One value per cycle (the active tool, the block index).
-
-    Returns
-    -------
-    list of (int, int, int)
-        The run's value, its first index and one past its last.
-    """
-    v = np.asarray(values, dtype=np.int64)
-    if v.size == 0:
-        return []
-    b = np.concatenate([[0], np.flatnonzero(np.diff(v)) + 1, [v.size]])
-    return [(int(v[lo]), int(lo), int(hi)) for lo, hi in itertools.pairwise(b)]
 
 
 @dataclass(frozen=True)
