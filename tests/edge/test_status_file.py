@@ -57,7 +57,6 @@ def test_a_reader_sees_only_whole_files_while_the_writer_rewrites(tmp_path: Path
     assert f.swapping
     names = sorted(p.name for p in tmp_path.iterdir())
     assert names == [".status.json.a", ".status.json.b", "status.json"]
-    f.close()
 
 
 def test_a_restart_writes_the_spare_that_is_not_the_current_file(tmp_path: Path) -> None:
@@ -68,7 +67,6 @@ def test_a_restart_writes_the_spare_that_is_not_the_current_file(tmp_path: Path)
     f = StatusFile(path)
     f.write(b'{"run": 1}')
     f.write(b'{"run": 2}')
-    f.close()
     for crash_between_rename_and_link in (False, True):
         if crash_between_rename_and_link:
             cur = path.stat().st_ino
@@ -82,7 +80,6 @@ def test_a_restart_writes_the_spare_that_is_not_the_current_file(tmp_path: Path)
             held.seek(0)
             assert held.read() == before  # the file a reader had open was not rewritten
         assert path.read_bytes() == b'{"run": 3}'
-        g.close()
 
 
 def test_where_hard_links_fail_the_temporary_file_is_renamed_over(
@@ -105,7 +102,6 @@ def test_the_file_has_the_users_umask(tmp_path: Path) -> None:
         f = StatusFile(tmp_path / "status.json")
         f.write(b"{}")
         f.write(b"{}")
-        f.close()
     finally:
         os.umask(old)
     assert stat.S_IMODE((tmp_path / "status.json").stat().st_mode) == 0o644

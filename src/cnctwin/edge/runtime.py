@@ -628,8 +628,6 @@ class EdgeRuntime:
         for s in self.sinks:
             s.close()
         self.source.close()
-        if self._status_file is not None:
-            self._status_file.close()
         if self.state_dir is not None:  # a clean end: the next run continues without a gap
             _write_seq(self.state_dir, self._seq)
             (self.state_dir / CHECKPOINT_FILE).unlink(missing_ok=True)

@@ -48,7 +48,6 @@ class StatusFile:
     >>> f.write(b'{"cycles": 1}'); f.write(b'{"cycles": 2}')
     >>> (d / "status.json").read_bytes()
     b'{"cycles": 2}'
-    >>> f.close()
     """
 
     def __init__(self, path: str | PathLike[str]) -> None:
@@ -84,7 +83,6 @@ class StatusFile:
                 self._swap(data)
                 return
             except OSError:
-                self.close()
                 self.swapping = False
                 for p in self._spares:
                     with contextlib.suppress(OSError):
@@ -109,7 +107,3 @@ class StatusFile:
         os.replace(spare, self.path)  # the file is now spare k's inode, complete
         os.link(self.path, spare)  # which keeps its spare name for the round after next
         self._next = 1 - k
-
-    def close(self) -> None:
-        """Forget which spare is next (the files stay; a later write looks again)."""
-        self._next = None
