@@ -120,15 +120,11 @@ def _decode_cost_ms(payload: bytes, repeat: int = 200) -> dict[str, float]:
     full = (time.process_time() - c0) / repeat
     lut = scan.id_table({str(i + 1): i for i in range(1 + len(COLUMNS))})
     buf = np.frombuffer(payload, dtype=np.uint8)
-    cap = buf.size // 16 + 1
-    tok = np.empty(buf.size + 2, dtype=np.uint8)
-    col, t_row, qc = (np.empty(cap, dtype=np.int64) for _ in range(3))
-    bits = np.empty(cap, dtype=np.uint64)
+    arrays = scan._scan_arrays(buf.size)
     fn = scan._scanner()
     c0 = time.process_time()
     for _ in range(repeat):
-        fn(buf, lut, tok, col, t_row, qc, bits, scan._POW5,
-           np.empty((scan._TEMPLATES, 7), dtype=np.int64))
+        scan._call(fn, buf, lut, arrays)
     return {"decode": full * 1e3, "scan": (time.process_time() - c0) / repeat * 1e3}
 
 

@@ -18,7 +18,8 @@ object at its place (the template: the same id, qc and keys, written the same wa
 its timestamp (compared with its row's) and its number are read; an object written otherwise
 is parsed in full. A 500-cycle HF message of 11 datapoints: 0.8 ms against 1.4 ms for a typed
 ``msgspec`` decode into objects (BENCHMARKS.md, "Many machines live"); with the numbers read
-in the scan ~0.65 ms (BENCHMARKS.md, "the numbers read in the scan").
+in the scan and without numba's reference counting ~0.45 ms (BENCHMARKS.md, "the scan without
+numba's reference counting").
 """
 
 from __future__ import annotations
@@ -726,14 +727,30 @@ def _build(options: dict[str, Any]) -> Any:
     return numba.njit(**opts)(_PY["_scan_py"])
 
 
+_WARM_MESSAGE = (b'{"seq":1,"vals":[{"id":"1","qc":3,"ts":"2026-01-01T00:00:00.002Z",'
+                 b'"val":1.5}]}')
+
+
+def _scan_arrays(size: int) -> tuple[NDArray[Any], ...]:
+    """The scan's output and work arrays for a message of ``size`` bytes: tokens, columns,
+    row times, quality codes, number bits, row templates."""
+    cap = size // 16 + 1  # a value object is at least 30 bytes
+    return (np.empty(size + 2, dtype=np.uint8), np.empty(cap, dtype=np.int64),
+            np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
+            np.empty(cap, dtype=np.uint64), np.empty((_TEMPLATES, 7), dtype=np.int64))
+
+
+def _call(fn: Any, buf: NDArray[np.uint8], lut: NDArray[np.int64],
+          arrays: tuple[NDArray[Any], ...]) -> Any:
+    """``fn`` (the compiled scan) on ``buf`` with the arrays of :func:`_scan_arrays`."""
+    tok, col, t_row, qc, bits, tpl = arrays
+    return fn(buf, lut, tok, col, t_row, qc, bits, _POW5, tpl)
+
+
 def _warm(fn: Any) -> None:
     """Compile (or load from numba's cache) by scanning a one-value message."""
-    buf = np.frombuffer(b'{"seq":1,"vals":[{"id":"1","qc":3,"ts":"2026-01-01T00:00:00.002Z",'
-                        b'"val":1.5}]}', dtype=np.uint8)
-    ints = np.empty(8, dtype=np.int64)
-    fn(buf, np.zeros(2, dtype=np.int64), np.empty(buf.size + 2, dtype=np.uint8), ints,
-       ints.copy(), ints.copy(), np.empty(8, dtype=np.uint64), _POW5,
-       np.empty((_TEMPLATES, 7), dtype=np.int64))
+    buf = np.frombuffer(_WARM_MESSAGE, dtype=np.uint8)
+    _call(fn, buf, np.zeros(2, dtype=np.int64), _scan_arrays(buf.size))
 
 
 def _scanner() -> Any:
@@ -753,9 +770,7 @@ def _scanner() -> Any:
 def prepare_scanner() -> None:
     """Compile (or load from numba's cache) and run the scanner once, so the first message
     of a live source does not wait for it (~0.4 s)."""
-    lut = np.zeros(2, dtype=np.int64)
-    scan_bulk(b'{"seq":1,"vals":[{"id":"1","qc":3,"ts":"2026-01-01T00:00:00.002Z",'
-              b'"val":1.5}]}', lut)
+    scan_bulk(_WARM_MESSAGE, np.zeros(2, dtype=np.int64))
 
 
 def scan_bulk(message: bytes, lut: NDArray[np.int64]) -> BulkScan | None:
@@ -777,15 +792,9 @@ def scan_bulk(message: bytes, lut: NDArray[np.int64]) -> BulkScan | None:
     import orjson
 
     buf = np.frombuffer(message, dtype=np.uint8)
-    cap = buf.size // 16 + 1  # a value object is at least 30 bytes
-    tok = np.empty(buf.size + 2, dtype=np.uint8)
-    col = np.empty(cap, dtype=np.int64)
-    t_row = np.empty(cap, dtype=np.int64)
-    qc = np.empty(cap, dtype=np.int64)
-    bits = np.empty(cap, dtype=np.uint64)
-    tpl = np.empty((_TEMPLATES, 7), dtype=np.int64)
-    status, nv, k, nt, has_seq, seq, n_exact = _scanner()(buf, lut, tok, col, t_row, qc,
-                                                          bits, _POW5, tpl)
+    arrays = _scan_arrays(buf.size)
+    tok, col, t_row, qc, bits, _ = arrays
+    status, nv, k, nt, has_seq, seq, n_exact = _call(_scanner(), buf, lut, arrays)
     if status != OK:
         return None
     # the numbers the scan read (Eisel-Lemire: no Python float per value), then those it
