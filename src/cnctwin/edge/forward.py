@@ -31,6 +31,8 @@ CREATE TABLE IF NOT EXISTS outbox (
 CREATE TABLE IF NOT EXISTS counters (name TEXT PRIMARY KEY, value INTEGER NOT NULL);
 INSERT OR IGNORE INTO counters VALUES ('dropped', 0), ('enqueued', 0), ('sent', 0);
 """
+# only 'dropped' is kept up to date; 'enqueued' and 'sent' are derived (ForwardQueue.__init__)
+# and their rows stay for the versions before that, which read them
 
 
 class ForwardQueue:
