@@ -21,7 +21,8 @@ Friction is identified at the motor (current or torque) and referred to the slid
 axis' torque constant and screw lead (``kt_nm_per_a``, ``screw_pitch_mm``, ``gear_ratio`` of
 the machine description, which the user states; they are not identifiable from these
 signals). Several recordings are pooled per parameter by the inverse-variance weighted mean;
-the stated standard uncertainty adds a relative floor (:data:`REL_FLOOR`) in quadrature.
+the stated standard uncertainty adds a relative floor (:data:`REL_FLOOR`) in quadrature where a
+model stands between the data and the parameter.
 """
 
 from __future__ import annotations
@@ -65,7 +66,11 @@ CALIBRATED_KEYS: tuple[str, ...] = (
 REL_FLOOR = 0.01
 """Relative standard-uncertainty floor of an identified loop parameter: what the loop model
 (one PT1 + dead time for the speed loop, linearly interpolated fractional delays) does not
-describe on a real drive; the same floor :class:`~cnctwin.servo.predict.DriftMonitor` uses."""
+describe on a real drive; the same floor :class:`~cnctwin.servo.predict.DriftMonitor` uses.
+Not added to Kv where it comes from the NC's own relation and the steady-state speed gain
+(:attr:`cnctwin.servo.AxisIdentification.kv_exact`): no loop model stands between the data
+and Kv there, and the coverage of its interval without the floor is measured
+(docs/validation-calibration.md)."""
 
 _BOUNDS = {"ffw_weight": (0.0, 1.0), "jerk_time_s": (0.0, 0.1),
            "equiv_speedctrl_time_s": (0.0, 0.05), "equiv_currctrl_time_s": (1e-5, 0.01),
@@ -196,7 +201,8 @@ def calibrate_axes(
             full = f"axes.{ax}.{key}"
             if est:
                 v, u = _pool(est)
-                u = math.hypot(u if u == u else 0.0, REL_FLOOR * abs(v))
+                if key != "kv_m_min_per_mm" or not all(i.kv_exact for i in idents):
+                    u = math.hypot(u if u == u else 0.0, REL_FLOOR * abs(v))
                 lo, hi = _BOUNDS.get(key, (-math.inf, math.inf))
                 if not lo <= v <= hi:
                     edge = min(max(v, lo), hi)

@@ -62,6 +62,7 @@ __all__ = [
     "fit_setpoint_chain",
     "fit_speed_loop",
     "identify_axis",
+    "steady_speed_gain",
 ]
 
 KV_PER_S_PER_M_MIN_MM = 1000.0 / 60.0
@@ -580,6 +581,78 @@ def fit_speed_loop(
                         model_delay_cycles=float(p[0]), model_time_cycles=float(p[1]))
 
 
+def steady_speed_gain(
+    cmd_per_s: FloatArray, enc: FloatArray, runs: list[slice], *, lag_cycles: float,
+    cycle_time_s: float,
+) -> tuple[float, float, int]:
+    """Steady-state gain from the speed command to the actual speed, from constant-velocity runs.
+
+    Parameters
+    ----------
+    cmd_per_s : numpy.ndarray
+        Speed command converted to position units per second.
+    enc : numpy.ndarray
+        Actual position ENC_POS [unit].
+    runs : list of slice
+        Constant-velocity runs of the setpoint (:func:`constant_velocity_runs`); each needs the
+        cycle before its start.
+    lag_cycles : float
+        Equivalent time of the speed loop in cycles, plus the half cycle of the backward
+        difference (``SpeedLoopFit.model_delay_cycles + model_time_cycles + 0.5``): the
+        command is averaged that much earlier than the travel it causes.
+    cycle_time_s : float
+        Cycle time [s].
+
+    Returns
+    -------
+    gain : float
+        Travel over the runs divided by the integral of the (delayed) command [-].
+    stderr : float
+        Jackknife standard error over the runs, times ``t(0.975, n - 1) / 1.96`` so that
+        +-1.96 of it is the small-sample 95 % interval [-].
+    n_runs : int
+        Runs used.
+
+    Raises
+    ------
+    IdentificationError
+        Fewer than 3 usable runs.
+
+    Notes
+    -----
+    In steady motion a speed loop with integral action makes the actual speed equal its
+    setpoint times the drive's normalisation, whatever its dynamics: the ratio needs no loop
+    model, unlike the gain of :func:`fit_speed_loop`, whose first order + delay fitted to a PI
+    loop with a current loop is biased by a few 1e-4 (simulated axes,
+    docs/validation-calibration.md).
+    The ratio of sums weights each run by its travel (an end-point error of the position,
+    quantisation, noise, the ripple's phase, counts relative to the travel).
+    """
+    from scipy import stats
+
+    k = np.arange(cmd_per_s.size, dtype=np.float64)
+    cmd = np.nan_to_num(cmd_per_s)
+    travel, commanded = [], []
+    for r in runs:
+        if r.start < 1 or r.stop - r.start < 3:
+            continue
+        d = float(enc[r.stop - 1] - enc[r.start - 1])
+        c = float(np.interp(np.arange(r.start, r.stop) - lag_cycles, k, cmd).sum()) \
+            * cycle_time_s
+        if math.isfinite(d) and math.isfinite(c) and c != 0.0:
+            travel.append(abs(d))
+            commanded.append(abs(c))
+    n = len(travel)
+    if n < 3:
+        raise IdentificationError(f"the steady speed gain needs >= 3 constant-velocity runs; "
+                                  f"found {n}")
+    a, b = np.array(travel), np.array(commanded)
+    g = float(a.sum() / b.sum())
+    jk = (a.sum() - a) / (b.sum() - b)
+    se = math.sqrt((n - 1) / n * float(np.sum((jk - jk.mean()) ** 2)))
+    return g, se * float(stats.t.ppf(0.975, n - 1)) / 1.96, n
+
+
 # ---------------------------------------------------------------------------- P controller
 @dataclass(frozen=True)
 class PositionControllerFit:
@@ -986,6 +1059,13 @@ class AxisIdentification:
         ``"mm"`` or ``"deg"``.
     friction : dict
         ``"CURRENT"`` / ``"TORQUE"`` -> :class:`AxisFrictionFit` (with its runs).
+    kv_exact : bool
+        Kv comes from the NC's own relation ``CMD_SPEED = Kv (CTRL_POS - ENC_POS) + c VEL_FFW``
+        (controller difference recorded) and the steady-state speed gain
+        (:func:`steady_speed_gain`): no loop model between the data and Kv, so its standard
+        error is the whole uncertainty. False: a regression approximates the unrecorded
+        setpoint filter or the gain comes from the fitted speed-loop model; the calibration
+        then allows for model error (``cnctwin.calibration.axes.REL_FLOOR``).
     """
 
     axis: str
@@ -1001,6 +1081,7 @@ class AxisIdentification:
     cycle_time_s: float = 0.002
     position_unit: str = "mm"
     friction: dict[str, AxisFrictionFit] = field(default_factory=dict)
+    kv_exact: bool = False
 
     def value(self, name: str) -> float:
         """Value of a parameter; raises IdentificationError with the reason if missing."""
@@ -1161,6 +1242,7 @@ def identify_axis(
 
     # --- speed loop
     sl: SpeedLoopFit | None = None
+    steady_gain: tuple[float, float] | None = None
     if has_cmd:
         try:
             sl = fit_speed_loop(sig["CMD_SPEED"] * f_cmd, v_act_b, segs, cycle_time_s=dt)
@@ -1177,6 +1259,19 @@ def identify_axis(
         P["speed_loop_equiv_time_s"] = Estimate(
             sl.equivalent_time_s, math.hypot(sl.stderr["time_s"], sl.stderr["delay_s"]), "s",
             meth + " (T + delay)")
+        steady = constant_velocity_runs(v_des, segs)
+        try:
+            g_ss, se_ss, n_ss = steady_speed_gain(
+                sig["CMD_SPEED"] * f_cmd, enc, steady,
+                lag_cycles=sl.model_delay_cycles + sl.model_time_cycles + 0.5, cycle_time_s=dt)
+        except IdentificationError:
+            pass
+        else:
+            P["speed_gain"] = Estimate(
+                g_ss, se_ss, "-",
+                f"travel / integral of CMD_SPEED delayed by the loop's equivalent time over "
+                f"{n_ss} constant-velocity runs; jackknife SE (t-scaled)")
+            steady_gain = (g_ss, se_ss)
         if abs(sl.gain - 1.0) > 0.03:
             ident.notes.append(
                 f"CMD_SPEED|{axis} is {1 / sl.gain:.4g} x the actual speed in steady state: its "
@@ -1221,6 +1316,8 @@ def identify_axis(
     cmd_is_setpoint = False
     g = sl.gain if sl is not None else 1.0
     se_g = sl.stderr["gain"] if sl is not None else 0.0
+    if steady_gain is not None:
+        g, se_g = steady_gain
     se_g = se_g if math.isfinite(se_g) else 0.0
     if has_cmd:
         cmd_s = sig["CMD_SPEED"] * f_cmd
@@ -1291,6 +1388,7 @@ def identify_axis(
             ident.controller = pc
             kv = g * pc.a
             se_kv = abs(kv) * math.hypot(pc.se_a / pc.a if pc.a else 0.0, se_g / g if g else 0.0)
+            ident.kv_exact = diff is not None and steady_gain is not None
             if diff is not None or not fir_used:
                 diff_name = diff_name or "DES_POS-ENC_POS"
                 meth = (f"regression CMD_SPEED = a*({diff_name})"
@@ -1333,6 +1431,7 @@ def identify_axis(
                 P["ffw_weight"] = Estimate(w, abs(g) * pc2.se_c, "-",
                                            "regression on d(CTRL_POS)/dt (VEL_FFW not recorded)")
                 P["kv_1_s"] = Estimate(g * pc2.a, abs(g) * pc2.se_a, "1/s", meth)
+                ident.kv_exact = False  # d(CTRL_POS)/dt stands in for the unrecorded VEL_FFW
                 P["kv_m_min_mm"] = Estimate(g * pc2.a / KV_PER_S_PER_M_MIN_MM,
                                             abs(g) * pc2.se_a / KV_PER_S_PER_M_MIN_MM,
                                             "(m/min)/mm", meth)
