@@ -13,6 +13,7 @@ current noise and 0.5 rpm speed noise of the model.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -139,7 +140,10 @@ def test_servo_kernel_bit_identical_to_reference_all_settings() -> None:
 
 
 def test_spindle_kernel_matches_reference() -> None:
-    motor = Machine.thesis_default().spindle
+    # the reference holds the speed setpoint over the cycle; the setpoint interpolation
+    # (issue 29, tests/sim/test_spindle.py::test_run_up_current_is_newtons) is switched off
+    motor = dataclasses.replace(Machine.thesis_default().spindle,
+                                speed_setpoint_interpolation=False)
     n = 8000
     t = np.arange(n) * TC
     cmd = np.minimum(t * 3000.0, 2400.0)

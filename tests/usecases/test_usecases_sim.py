@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from cnctwin.sim.faults import Chatter, HardnessChange, ToolBreakage
+from cnctwin.sim.faults import Chatter, ToolBreakage
 from cnctwin.sim.scenarios import tool_wear_run
 from cnctwin.usecases.anomaly import SpectralDetector, backtest
 from cnctwin.usecases.holes import hole_record
@@ -66,10 +66,14 @@ def _cut_stream(rec, holes: pd.DataFrame) -> pd.DataFrame:  # type: ignore[no-un
 
 @pytest.mark.parametrize(
     ("fault", "max_delay"),
-    [(ToolBreakage(hole=17), 0.5), (Chatter(start_s=150.0), 0.5),
-     (HardnessChange(hole=16, factor=1.15), 5.0), (None, None)],
+    [(ToolBreakage(hole=17), 0.5), (Chatter(start_s=150.0), 0.5), (None, None)],
 )
 def test_faults_at_hidden_times(fault, max_delay) -> None:  # type: ignore[no-untyped-def]
+    # A hardness change is no case for this band-power detector: it saw a 15 % step within
+    # 5 s on 4 of seeds 0-7 (2 of 8 once the drive interpolates its speed setpoint, issue 29),
+    # so the one seed asserted here was luck. The load monitors (envelope, adaptive, physics)
+    # catch it on 8 of 8 draws within 2 s: tests/usecases/test_trials.py, test_monitoring.py,
+    # docs/validation-usecases.md.
     # 30 s pauses between sets: the fault times and the scored span below were set with them
     res = tool_wear_run(n_holes=24, seed=5, faults=[fault] if fault else [],
                         gap_between_sets_s=30.0)
@@ -82,9 +86,8 @@ def test_faults_at_hidden_times(fault, max_delay) -> None:  # type: ignore[no-un
     bt = backtest(SpectralDetector(fs_hz=rec.fs_hz, band_hz=(100.0, 240.0)), data,
                   time_s=data["time_s"], learn_until_s=learn_until, fault_onsets_s=onsets,
                   max_delay_s=5.0)
-    # 12 holes x 3.0 s of cutting scored. Measured: breakage 0.13 s, chatter 0.25 s, hardness change
-    # 4.1 s after onset (a band-power detector sees the load step only through its spectrum);
-    # false alarms 1-5 per run, 2 in the fault-free run (hole-entry transients)
+    # 12 holes x 3.0 s of cutting scored. Measured: breakage 0.13 s, chatter 0.25 s after
+    # onset; false alarms 1-5 per run, 2 in the fault-free run (hole-entry transients)
     assert bt.monitored_s == pytest.approx(76.8, abs=0.5)  # span of the scored cuts [s]
     if fault is None:
         assert onsets == []

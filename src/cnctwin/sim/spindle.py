@@ -34,7 +34,7 @@ __all__ = ["SpindleMotor", "SpindleState", "SpindleTrace", "simulate_spindle"]
 
 
 # ----------------------------------------------------------------------------- state and trace
-_N_STATE = 16
+_N_STATE = 18
 # state vector layout (float64):
 _S_OMEGA, _S_THETA, _S_INTEG, _S_ID, _S_IQ, _S_TSTATOR, _S_TROTOR = 0, 1, 2, 3, 4, 5, 6
 _S_LF_SPEED, _S_LF_IABS, _S_LF_IQ, _S_LF_UTIL, _S_PREV_POSCMD, _S_HAVE_POSCMD, _S_CYCLE = (
@@ -266,8 +266,9 @@ _P_NAMES: tuple[str, ...] = (
     "spos_a",
     "flux_wb",
     "flux_exp",
+    "sp_interp",
 )
-assert len(_P_NAMES) == 48
+assert len(_P_NAMES) == 49
 
 
 def _param_vector(motor: SpindleMotor) -> NDArray[np.float64]:
@@ -342,6 +343,7 @@ def _param_vector(motor: SpindleMotor) -> NDArray[np.float64]:
         "tau_lf": motor.lf_smoothing_time_s,
         "flux_wb": motor.flux_base_speed_rpm * _RPM_TO_RAD_S,
         "flux_exp": motor.flux_exponent,
+        "sp_interp": 1.0 if motor.speed_setpoint_interpolation else 0.0,
         "roll_r": motor.viscous_rolloff_ratio,
         "spos_v": motor.spos_speed_rpm * 6.0,
         "spos_a": motor.spos_accel_rev_s2 * 360.0,
@@ -519,6 +521,14 @@ def _kernel(  # pragma: no cover - compiled
         else:
             state[12] = 0.0
         w_cmd = speed_cmd_rpm[k] / rpm
+        # the drive interpolates the speed setpoint linearly over the cycle (isochronous
+        # setpoint, S120 setpoint channel): from the previous cycle's command to this one
+        w_prev = state[16] if state[17] > 0.0 and pv[48] > 0.0 else w_cmd
+        if m == 1:
+            state[17] = 0.0
+        else:
+            state[16] = w_cmd
+            state[17] = 1.0
         tau_load = load_nm[k] + pv[41] * noise[k, 2]
         # magnet flux at rotor temperature (Kt drift) - constant within a cycle
         psi_t = psi0 * (1.0 + pv[2] * (tr - pv[3]))
@@ -533,7 +543,7 @@ def _kernel(  # pragma: no cover - compiled
                 pos_err = pc0 + dpc * i_in - th * 180.0 / math.pi
                 w_ref = ff_w + kv * pos_err * math.pi / 180.0
             else:
-                w_ref = w_cmd
+                w_ref = w_prev + (w_cmd - w_prev) * ((i_in + 1) / inner_steps)
             # field weakening: id from the voltage ellipse (steady state, Rs neglected)
             we = p * abs(w)
             id_ref = 0.0
