@@ -1152,7 +1152,9 @@ class TwinChain:
         return float(v.mean()) if v.size else float("nan")
 
     def _inertia(self, air_cut: Recording, model: SpindleModel) -> float:
-        speed, _ = spindle_speed_rpm(air_cut, self.spindle)
+        # the rotor's own speed (encoder) where recorded: the command leads it by the speed
+        # loop's lag, which biases J on short run-ups
+        speed, _ = spindle_speed_rpm(air_cut, self.spindle, prefer_actual=True)
         cur = air_cut.signal(f"CURRENT|{self.spindle}").to_numpy(dtype=np.float64)
         try:
             j = identify_inertia(speed, model.kt_nm_per_a * cur, fs_hz=air_cut.fs_hz,

@@ -167,3 +167,32 @@ def test_cutting_regions_noise_from_z_air_in_multi_hole_recording() -> None:
     assert 0.002 < reg.attrs["noise_sigma_a"] < 0.02
     assert len(reg) == len(holes)
     assert reg["baseline_a"].iloc[0] == pytest.approx(0.53, abs=0.02)
+
+
+def test_spindle_actual_speed_from_a_wrapped_angle_with_a_gap() -> None:
+    """ENC_POS of a spindle is modulo 360 deg: at 18 000 rpm it turns 216 deg per 2 ms cycle,
+    more than half a turn, so only the command tells the increment's whole turns. A counter
+    gap leaves its turns unknown (NaN there, nothing invented). Truth by construction."""
+    import numpy as np
+
+    from cnctwin.analysis.segments import spindle_actual_speed_rpm
+    from cnctwin.recording import Recording
+
+    n = 400
+    speed = np.linspace(-3000.0, 18000.0, n)  # rpm, through zero and beyond 15 000
+    angle = np.cumsum(speed * 6.0 * 0.002)  # deg
+    cycles = np.arange(1000, 1000 + n)
+    cycles[200:] += 5  # 5 cycles lost
+    angle[200:] += speed[200] * 6.0 * 0.002 * 5
+    rec = Recording.from_arrays(cycles, {"ENC_POS|SP1": np.mod(angle, 360.0),
+                                         "CMD_SPEED|SP1": speed})
+    v = spindle_actual_speed_rpm(rec)
+    assert v is not None
+    ok = np.isfinite(v)
+    assert not ok[199] and not ok[200] and ok.sum() == n - 2
+    # central differences of a linear ramp: exact up to the ramp's half-step
+    step = speed[1] - speed[0]
+    assert np.max(np.abs(v[ok][1:-1] - speed[ok][1:-1])) < step
+    # without ENC_POS there is no actual speed
+    assert spindle_actual_speed_rpm(Recording.from_arrays(cycles, {"CMD_SPEED|SP1": speed})) \
+        is None

@@ -31,6 +31,7 @@ __all__ = [
     "runs_of",
     "samples_since",
     "speed_plateaus",
+    "spindle_actual_speed_rpm",
     "spindle_speed_rpm",
 ]
 
@@ -179,12 +180,14 @@ def lf_on_hf(rec: Recording, code: str, axis: str | None) -> pd.Series | None:
     return wide[hits[0]].rename(f"{code}|{axis}" if axis else code)
 
 
-def spindle_speed_rpm(rec: Recording, spindle: str = "SP1") -> tuple[NDArray[np.float64], str]:
+def spindle_speed_rpm(rec: Recording, spindle: str = "SP1", *, prefer_actual: bool = False
+                      ) -> tuple[NDArray[np.float64], str]:
     """Spindle speed on the HF cycles and where it came from.
 
     Uses the HF speed command ``CMD_SPEED|<spindle>`` if present, else the LF smoothed actual
     speed (``SPEED_SMOOTHED``, r0063) held on the HF rows, else an HF actual speed
-    ``SPEED_ACT|<spindle>`` in rpm (the KIT merged files).
+    ``SPEED_ACT|<spindle>`` in rpm (the KIT merged files). With ``prefer_actual`` the
+    encoder's speed (:func:`spindle_actual_speed_rpm`) comes first.
 
     Parameters
     ----------
@@ -192,6 +195,9 @@ def spindle_speed_rpm(rec: Recording, spindle: str = "SP1") -> tuple[NDArray[np.
         The recording.
     spindle : str, default 'SP1'
         Spindle axis name.
+    prefer_actual : bool, default False
+        The rotor's own speed from ``ENC_POS`` where recorded (what ``J dOmega/dt`` needs;
+        the command leads it by the speed loop's lag).
 
     Returns
     -------
@@ -205,6 +211,10 @@ def spindle_speed_rpm(rec: Recording, spindle: str = "SP1") -> tuple[NDArray[np.
     SignalNotFoundError
         If neither is recorded.
     """
+    if prefer_actual:
+        enc = spindle_actual_speed_rpm(rec, spindle)
+        if enc is not None:
+            return enc, f"d(ENC_POS|{spindle})/dt"
     col = f"CMD_SPEED|{spindle}"
     if rec.has(col):
         return rec.hf[col].to_numpy(dtype=np.float64), col
@@ -218,6 +228,55 @@ def spindle_speed_rpm(rec: Recording, spindle: str = "SP1") -> tuple[NDArray[np.
         f"no spindle speed for {spindle!r}: neither HF {col!r} nor the LF smoothed speed "
         f"(SPEED_SMOOTHED / r0063) is recorded; HF columns: {', '.join(rec.columns)}"
     )
+
+
+def spindle_actual_speed_rpm(rec: Recording, spindle: str = "SP1") -> NDArray[np.float64] | None:
+    """Actual spindle speed from its encoder angle ``ENC_POS|<spindle>`` [rpm], or None.
+
+    The angle is recorded modulo 360 deg; each cycle's increment is unwrapped to the whole
+    turns nearest what the speed command (``CMD_SPEED``, if recorded) makes it turn, so speeds
+    above 15 000 rpm (more than half a turn per 2 ms cycle) come out right too. The speed of
+    a cycle is the central difference of the unwrapped angle (the backward one at the ends).
+
+    Parameters
+    ----------
+    rec : Recording
+        The recording.
+    spindle : str, default 'SP1'
+        Spindle axis name.
+
+    Returns
+    -------
+    numpy.ndarray or None
+        Speed [rpm] per HF row (NaN where the angle is missing or next to a counter gap);
+        None when ``ENC_POS|<spindle>`` is not recorded in degrees.
+
+    Notes
+    -----
+    The physics of the rotor, ``J dOmega/dt = tau_m - tau_friction``, holds for the actual
+    speed: the command leads it by the speed loop's lag, which on 0.1 s run-ups of an air
+    cut biases an inertia fitted on the command by several per cent.
+    """
+    col = f"ENC_POS|{spindle}"
+    if not rec.has(col) or rec.meta.units.get(col, "deg") != "deg":
+        return None
+    ang = rec.hf[col].to_numpy(dtype=np.float64)
+    if ang.size < 2:
+        return np.full(ang.size, np.nan)
+    dt = rec.meta.cycle_time_s
+    step = rec.cycles[1:] - rec.cycles[:-1]
+    d = np.diff(ang)
+    cmd_col = f"CMD_SPEED|{spindle}"
+    expect = np.zeros(d.size)
+    if rec.has(cmd_col):
+        c = rec.hf[cmd_col].to_numpy(dtype=np.float64)
+        expect = np.nan_to_num(0.5 * (c[1:] + c[:-1])) * 6.0 * dt  # deg per cycle
+    d = d - 360.0 * np.round((d - expect) / 360.0)
+    d[step != 1] = np.nan  # a counter gap: the turns in between are unknown
+    v = np.full(ang.size, np.nan)
+    v[1:-1] = 0.5 * (d[1:] + d[:-1])
+    v[0], v[-1] = d[0], d[-1]
+    return v / (6.0 * dt)
 
 
 def _segments_frame(
