@@ -82,3 +82,26 @@ def test_kv_of_a_hidden_loop_from_the_nc_relation_and_the_steady_gain(seed: int)
     # is small (the 1 % floor it replaces was 100x too wide)
     assert abs(est.value - kv) <= 3 * est.stderr
     assert est.stderr < 1e-4 * kv
+
+
+def test_the_loop_lag_is_taken_out_of_a_drifting_command() -> None:
+    """A command that still drifts within its runs (0.02 mm/s per cycle): the travel lags it by
+    the loop's equivalent time (a PT1 + delay follows a ramp exactly that late), so the ratio
+    is exact with the lag and 0.1 % off without it (0.02 x 5.5 / ~100 mm/s)."""
+    gain, delay, tau = 0.97, 3, 2.0
+    levels = [100.0, -120.0, 90.0, -110.0]
+    cmd = np.concatenate([np.zeros(50)] + [lv + np.sign(lv) * 0.02 * np.arange(400)
+                                           for lv in levels])
+    v = np.zeros_like(cmd)
+    a = 1.0 / (tau + 1.0)
+    for k in range(1, cmd.size):
+        u = cmd[k - delay] if k >= delay else 0.0
+        v[k] = v[k - 1] + a * (gain * u - v[k - 1])
+    # the position integrates the speed (trapezoid): a backward difference of it is the mean
+    # speed of the last cycle, half a cycle late; the PT1 above lags a ramp by tau cycles
+    enc = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]))]) * DT
+    runs = [slice(50 + 400 * i + 100, 50 + 400 * (i + 1)) for i in range(len(levels))]
+    g, _, _ = steady_speed_gain(cmd, enc, runs, lag_cycles=delay + tau + 0.5, cycle_time_s=DT)
+    g0, _, _ = steady_speed_gain(cmd, enc, runs, lag_cycles=0.0, cycle_time_s=DT)
+    assert abs(g / gain - 1) < 1e-5
+    assert abs(g0 / gain - 1) > 5e-4
