@@ -1725,19 +1725,24 @@ def inertia_uncertainty(
     """
     speed0, _ = spindle_speed_rpm(rec, spindle, prefer_actual=True)
     tau0 = model.kt_nm_per_a * rec.signal(f"CURRENT|{spindle}").to_numpy(dtype=np.float64)
-    speed, tau, acc, ok = _ramp_samples(speed0, tau0, rec.fs_hz, lowpass_hz)
-    m = ok & (np.abs(speed) >= min_speed_rpm) & (np.abs(acc) >= min_accel_rad_s2)
+
+    def ramps(lp: float | None) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                         NDArray[np.float64], NDArray[np.bool_]]:
+        """Speed, dOmega/dt, accelerating torque (friction taken out) and the ramp mask."""
+        speed, tau, acc, ok = _ramp_samples(speed0, tau0, rec.fs_hz, lp)
+        m = ok & (np.abs(speed) >= min_speed_rpm) & (np.abs(acc) >= min_accel_rad_s2)
+        return speed, acc, tau - model.friction_torque_nm(speed), m
+
+    def fit(acc: NDArray[np.float64], y: NDArray[np.float64], sel: NDArray[np.bool_]) -> float:
+        return float(np.dot(acc[sel], y[sel]) / np.dot(acc[sel], acc[sel]))
+
+    speed, acc, y, m = ramps(lowpass_hz)
     # accelerating the rotor's speed magnitude (up) or slowing it (down)
     up = m & (acc * np.sign(speed) > 0)
     down = m & (acc * np.sign(speed) < 0)
     if not up.any() or not down.any():
         return float("nan")
-    y = tau - model.friction_torque_nm(speed)
-
-    def fit(sel: NDArray[np.bool_]) -> float:
-        return float(np.dot(acc[sel], y[sel]) / np.dot(acc[sel], acc[sel]))
-
-    j_up, j_down = fit(up), fit(down)
+    j_up, j_down = fit(acc, y, up), fit(acc, y, down)
     j = model.j_kgm2
     # statistical part: Newey-West (Bartlett kernel) over the low-passed, hence correlated,
     # samples; lag window twice the filter's time scale (fs / f_c), products across the
@@ -1759,11 +1764,9 @@ def inertia_uncertainty(
     # change from halving it is taken as one standard uncertainty of the method
     u_band = 0.0
     if lowpass_hz is not None:
-        s2, t2, a2, ok2 = _ramp_samples(speed0, tau0, rec.fs_hz, 0.5 * lowpass_hz)
-        m2 = ok2 & (np.abs(s2) >= min_speed_rpm) & (np.abs(a2) >= min_accel_rad_s2)
+        _, acc2, y2, m2 = ramps(0.5 * lowpass_hz)
         if m2.any():
-            y2 = t2[m2] - model.friction_torque_nm(s2[m2])
-            u_band = abs(float(np.dot(a2[m2], y2) / np.dot(a2[m2], a2[m2])) - fit(m))
+            u_band = abs(fit(acc2, y2, m2) - fit(acc, y, m))
     return math.hypot(se, u_law, u_band)
 
 
