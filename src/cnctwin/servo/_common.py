@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -483,4 +484,160 @@ def moving_axes(rec: Recording, *, min_travel: float = 0.05) -> list[str]:
         v = v[np.isfinite(v)]
         if v.size and float(np.ptp(v)) >= min_travel:
             out.append(ax)
+    return out
+
+
+# ------------------------------------------------------------- setpoint chain, compiled
+JERK_CODES: dict[str, int] = {"none": 0, "moving_average": 1, "double_moving_average": 2,
+                              "pt2": 3}
+"""Jerk-filter model -> its code in :func:`setpoint_chain_segments`."""
+
+
+def _ma_py(x: FloatArray, window: float, out: FloatArray) -> None:  # pragma: no cover
+    """:func:`jerk_filter_average` into ``out`` (the same operations in the same order)."""
+    n = x.size
+    if window <= 1.0 + 1e-9:
+        out[:] = x
+        return
+    m = math.floor(window)
+    f = window - m
+    pad = m + 2
+    cs = np.empty(n + pad + 1)
+    cs[0] = 0.0
+    acc = 0.0
+    for i in range(n + pad):
+        acc += x[0] if i < pad else x[i - pad]
+        cs[i + 1] = acc
+    for i in range(n):
+        k = pad + i
+        xm = x[0] if k - m < pad else x[k - m - pad]
+        out[i] = (cs[k + 1] - cs[k + 1 - m] + f * xm) / window
+
+
+def _delay_py(x: FloatArray, cycles: float, out: FloatArray) -> None:  # pragma: no cover
+    """:func:`delay` into ``out`` (numpy.interp's formula: slope (t - j) + x[j])."""
+    n = x.size
+    if abs(cycles) < 1e-9:
+        out[:] = x
+        return
+    for k in range(n):
+        t = float(k) - cycles
+        if t < 0.0:
+            out[k] = x[0]
+        elif t >= n - 1:
+            out[k] = x[n - 1]
+        else:
+            j = math.floor(t)
+            if t == float(j):
+                out[k] = x[j]
+            else:
+                out[k] = (x[j + 1] - x[j]) * (t - j) + x[j]
+
+
+def _pt1_py(x: FloatArray, time_cycles: float, out: FloatArray) -> None:  # pragma: no cover
+    """:func:`pt1` into ``out`` (scipy.signal.lfilter's transposed direct form II)."""
+    n = x.size
+    if time_cycles < 1e-9:
+        out[:] = x
+        return
+    p = time_cycles / (time_cycles + 1.0)
+    b0 = 1.0 - p
+    z = p * x[0]
+    for k in range(n):
+        y = z + b0 * x[k]
+        out[k] = y
+        z = x[k] * 0.0 - y * -p
+
+
+def _pt2_py(x: FloatArray, time_cycles: float, damping: float,
+            out: FloatArray) -> None:  # pragma: no cover
+    """:func:`pt2` into ``out`` (scipy.signal.lfilter's transposed direct form II)."""
+    n = x.size
+    if time_cycles < 1e-3:
+        out[:] = x
+        return
+    k2 = (2.0 * time_cycles) ** 2
+    dk = 4.0 * damping * time_cycles
+    a0 = k2 + dk + 1.0
+    b0, b1, b2 = 1.0 / a0, 2.0 / a0, 1.0 / a0
+    a1, a2 = (2.0 - 2.0 * k2) / a0, (k2 - dk + 1.0) / a0
+    z1 = (b2 - a2) * x[0]
+    z0 = (b1 - a1) * x[0] + z1
+    for k in range(n):
+        y = z0 + b0 * x[k]
+        out[k] = y
+        z0 = z1 + x[k] * b1 - y * a1
+        z1 = x[k] * b2 - y * a2
+
+
+def _chain_py(des: FloatArray, starts: NDArray[np.int64], jerk_code: int, p: FloatArray,
+              out: FloatArray) -> None:  # pragma: no cover - compiled by numba
+    """:func:`cnctwin.servo.identify.apply_setpoint_chain` on each run
+    ``des[starts[i]:starts[i+1]]`` into ``out``."""
+    nj = 0 if jerk_code == 0 else 1 if jerk_code == 1 else 2
+    for i in range(starts.size - 1):
+        a, b = starts[i], starts[i + 1]
+        x = des[a:b]
+        u = np.empty(b - a)
+        w = np.empty(b - a)
+        if jerk_code == 0:
+            u[:] = x
+        elif jerk_code == 1:
+            _ma(x, max(p[0], 0.0), u)
+        elif jerk_code == 2:
+            _ma(x, max(p[0], 0.0), w)
+            _ma(w, max(p[1], 0.0), u)
+        else:
+            _pt2(x, max(p[0], 0.0), min(max(p[1], 0.05), 5.0), u)
+        _delay(u, max(p[nj], 0.0), w)
+        _delay(w, max(p[nj + 3], 0.0), u)
+        _pt1(u, max(p[nj + 1], 0.0), w)
+        _pt1(w, max(p[nj + 2], 0.0), out[a:b])
+
+
+_ma: Any = _ma_py
+_delay: Any = _delay_py
+_pt1: Any = _pt1_py
+_pt2: Any = _pt2_py
+_chain_compiled: Any = None  # made on first use (numba imports slowly)
+
+
+def setpoint_chain_segments(des: FloatArray, starts: NDArray[np.int64], jerk_type: str,
+                            params: FloatArray) -> FloatArray:
+    """The setpoint chain of :func:`cnctwin.servo.identify.apply_setpoint_chain` on
+    consecutive runs of one array, compiled (numba): the same operations in the same order as
+    the NumPy/SciPy filters, so the same numbers (tests/servo/test_setpoint_kernel.py).
+
+    Parameters
+    ----------
+    des : numpy.ndarray
+        The runs' DES_POS samples, one after the other [unit].
+    starts : numpy.ndarray of int64
+        Start index of each run and, last, ``des.size``; each run is filtered on its own
+        (the filters start settled at its first sample).
+    jerk_type : str
+        Jerk-filter model (:data:`JERK_CODES`).
+    params : numpy.ndarray
+        Jerk filter parameter(s) [cycles] (none, one, or two; PT2: time and damping), then
+        the first delay, the two PT1 times and the second delay [cycles].
+
+    Returns
+    -------
+    numpy.ndarray
+        The filtered setpoint [unit].
+    """
+    global _chain_compiled, _ma, _delay, _pt1, _pt2
+    if _chain_compiled is None:
+        import numba
+
+        opts: dict[str, Any] = {"cache": True, "nogil": True}
+        _ma = numba.njit(**opts)(_ma_py)
+        _delay = numba.njit(**opts)(_delay_py)
+        _pt1 = numba.njit(**opts)(_pt1_py)
+        _pt2 = numba.njit(**opts)(_pt2_py)
+        _chain_compiled = numba.njit(**opts)(_chain_py)
+    out = np.empty(des.size)
+    _chain_compiled(np.ascontiguousarray(des, dtype=np.float64),
+                    np.ascontiguousarray(starts, dtype=np.int64), JERK_CODES[jerk_type],
+                    np.ascontiguousarray(params, dtype=np.float64), out)
     return out

@@ -42,6 +42,7 @@ from cnctwin.servo._common import (
     pt1,
     pt2,
     quantum,
+    setpoint_chain_segments,
 )
 
 __all__ = [
@@ -277,31 +278,33 @@ def fit_setpoint_chain(
     if mask.sum() < 50:
         segs, mask = all_segs, full_mask
 
-    def model_of(jt: str, p: FloatArray) -> FloatArray:
-        nj = _N_JERK[jt]
-        out = np.full(des.shape, np.nan)
-        for s in segs:
-            if s.stop - s.start < 3:
-                continue
-            out[s] = apply_setpoint_chain(des[s], jerk_type=jt, jerk_cycles=tuple(p[:nj]),
-                                          delay_cycles=p[nj], pt1_cycles=p[nj + 1],
-                                          pt1b_cycles=p[nj + 2], delay2_cycles=p[nj + 3])
-        return out
-
-    def cost_of(jt: str) -> Callable[[FloatArray], float]:
-        def cost(p: FloatArray) -> float:
-            if np.any(p < -1e-9) or (jt == "pt2" and p[1] <= 0.05):
-                return 1e30
-            r = (ctrl - model_of(jt, p))[mask]
-            return float(r @ r)
-
-        return cost
+    # the runs the model is evaluated on, one after the other (compiled chain,
+    # setpoint_chain_segments: the same numbers as apply_setpoint_chain run by run); a
+    # masked sample outside every run of >= 3 cycles has no model
+    runs = [s for s in segs if s.stop - s.start >= 3]
+    mask &= _segment_mask(des.size, runs, 0)
+    run_starts = np.cumsum([0] + [s.stop - s.start for s in runs]).astype(np.int64)
+    des_c = np.concatenate([des[s] for s in runs]) if runs else np.empty(0)
+    ctrl_m = np.concatenate([ctrl[s][mask[s]] for s in runs]) if runs else np.empty(0)
+    mask_c = np.concatenate([mask[s] for s in runs]) if runs else np.empty(0, dtype=bool)
 
     def resid_of(jt: str) -> Callable[[FloatArray], FloatArray]:
         def resid(p: FloatArray) -> FloatArray:
-            return np.asarray((ctrl - model_of(jt, p))[mask], dtype=np.float64)
+            return np.asarray(ctrl_m - setpoint_chain_segments(des_c, run_starts, jt, p)[mask_c],
+                              dtype=np.float64)
 
         return resid
+
+    def cost_of(jt: str) -> Callable[[FloatArray], float]:
+        rf = resid_of(jt)
+
+        def cost(p: FloatArray) -> float:
+            if np.any(p < -1e-9) or (jt == "pt2" and p[1] <= 0.05):
+                return 1e30
+            r = rf(p)
+            return float(r @ r)
+
+        return cost
 
     fits: dict[str, tuple[FloatArray, float]] = {}
     jacs: dict[str, FloatArray] = {}
@@ -422,7 +425,7 @@ def fit_setpoint_chain(
             rms_by[chosen] = rms_by["double_moving_average"]
     nj = _N_JERK[chosen]
     cost = cost_of(chosen)
-    resid = (ctrl - model_of(chosen, p))[mask]
+    resid = resid_of(chosen)(p)
     # standard errors from the Jacobian at the solution: cov = s^2 (J'J)^-1, inflated for
     # residual autocorrelation
     rf = resid_of(chosen)
