@@ -22,7 +22,9 @@ axis' torque constant and screw lead (``kt_nm_per_a``, ``screw_pitch_mm``, ``gea
 the machine description, which the user states; they are not identifiable from these
 signals). Several recordings are pooled per parameter by the inverse-variance weighted mean;
 the stated standard uncertainty adds a relative floor (:data:`REL_FLOOR`) in quadrature where a
-model stands between the data and the parameter.
+model stands between the data and the parameter (the loop parameters; not the friction, whose
+bootstrap over whole constant-velocity strokes carries the friction law's misfit, nor Kv
+where it is model-free).
 """
 
 from __future__ import annotations
@@ -391,8 +393,9 @@ def _friction(out: AxesCalibration, ax: str, idents: list[AxisIdentification],
                 if e is not None and f is not None:
                     est.append((e.value * f, e.stderr * f))
             if est:
+                # no REL_FLOOR: the bootstrap over whole strokes (one run per stroke since
+                # issue 29) carries the friction law's misfit as the runs' scatter
                 v, u = _pool(est)
-                u = math.hypot(u if u == u else 0.0, REL_FLOOR * abs(v))
                 if v < 0.0:
                     out.records[full] = ParameterRecord(
                         float(getattr(base, key)), identified=False,
@@ -402,7 +405,7 @@ def _friction(out: AxesCalibration, ax: str, idents: list[AxisIdentification],
                                "current sign opposite to the motion; record the axis test "
                                "program in air")
                 else:
-                    out.records[full] = ParameterRecord(v, u, prov)
+                    out.records[full] = ParameterRecord(v, u if u == u else None, prov)
                 break
         else:
             why = "; ".join(sorted({i.not_identified.get(f"coulomb_{c}", "")

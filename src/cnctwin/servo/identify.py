@@ -771,7 +771,8 @@ class AxisFrictionFit:
         Coulomb level [signal unit], viscous slope [signal unit per unit/s], constant
         (weight/gravity) offset [signal unit] (0 if not fitted).
     se_coulomb, se_viscous, se_offset : float
-        Standard errors (bootstrap over runs).
+        Standard errors: bootstrap over runs, times ``sqrt(n / (n - p))`` (HC1; MacKinnon &
+        White 1985, J. Econometrics 29: the bootstrap's variance is low by (n - p) / n).
     n_runs : int
         Constant-velocity runs used.
     signal : str
@@ -967,11 +968,40 @@ def fit_axis_friction(
                                  rcond=None)
         boots.append(cb)
     se = np.asarray(boots).std(axis=0, ddof=1) if len(boots) > 2 else np.full(p, np.nan)
+    # the pairs bootstrap estimates the sandwich (HC0) variance, which is low by (n - p) / n
+    # for few runs (an axis test gives one run per stroke: 10 for 5 feeds); HC1's factor
+    se = se * math.sqrt(vm.size / (vm.size - p))
     return AxisFrictionFit(
         float(coef[0]), float(coef[1]), float(coef[2]) if both else 0.0, float(se[0]),
         float(se[1]), float(se[2]) if both else float("nan"), int(vm.size), signal, unit,
         tuple(vm.tolist()), tuple(tm.tolist()), tuple((wm**2).tolist()),
     )
+
+
+STEADY_SMOOTH_CYCLES = 25
+"""Window of the actual speed's centered mean that decides whether a friction run has settled
+[cycles] (50 ms at 2 ms): wide enough to average the encoder's differentiated noise, short
+against the speed loop's settling after a feed change."""
+
+
+def _centered_mean(x: FloatArray, segs: list[slice], window: int) -> FloatArray:
+    """Centered moving mean of ``x`` over ``window`` cycles within each segment (NaN where the
+    window leaves the segment or holds a NaN)."""
+    out = np.full(x.shape, np.nan)
+    h = window // 2
+    for s in segs:
+        xs = x[s]
+        if xs.size < window:
+            continue
+        ok = np.isfinite(xs)
+        cs = np.concatenate([[0.0], np.cumsum(np.where(ok, xs, 0.0))])
+        cn = np.concatenate([[0], np.cumsum(ok)])
+        full = (cn[window:] - cn[:-window]) == window
+        seg_out = np.full(xs.shape, np.nan)
+        seg_out[h : xs.size - (window - 1 - h)] = np.where(
+            full, (cs[window:] - cs[:-window]) / window, np.nan)
+        out[s] = seg_out
+    return out
 
 
 CUT_MARGIN_S = 0.3
@@ -1522,8 +1552,12 @@ def identify_axis(
     if d.has("TORQUE_FFW") and not torque_on:
         ident.notes.append(f"TORQUE_FFW|{axis} is recorded and zero: torque feedforward is off.")
 
-    # --- friction: runs where the *actual* speed is steady (no inertia term left)
-    v_steady = np.where(np.abs(v_act_c - v_des) <= 0.01 * np.abs(v_des), v_act_c, np.nan)
+    # --- friction: runs where the setpoint velocity is constant and the *actual* speed has
+    # settled on it (no inertia term left); settled is judged on the actual speed averaged
+    # over STEADY_SMOOTH_CYCLES, so the measuring noise of the encoder (differentiated over 2
+    # cycles: ~0.1 mm/s, more than 1 % of a slow feed) does not cut a stroke into fragments
+    v_settled = _centered_mean(v_act_c, segs, STEADY_SMOOTH_CYCLES)
+    v_steady = np.where(np.abs(v_settled - v_des) <= 0.01 * np.abs(v_des), v_des, np.nan)
     runs = constant_velocity_runs(v_steady, segs, rel_tol=0.01)
     in_cut = 0
     if exclude_cuts and runs:
