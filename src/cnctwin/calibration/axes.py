@@ -72,7 +72,9 @@ describe on a real drive; the same floor :class:`~cnctwin.servo.predict.DriftMon
 Not added to Kv where it comes from the NC's own relation and the steady-state speed gain
 (:attr:`cnctwin.servo.AxisIdentification.kv_exact`): no loop model stands between the data
 and Kv there, and the coverage of its interval without the floor is measured
-(docs/validation-calibration.md)."""
+(docs/validation-calibration.md). Not added to the friction either: its bootstrap runs over
+whole constant-velocity strokes at several feeds, whose scatter carries the friction law's
+misfit (coverage measured there too)."""
 
 _BOUNDS = {"ffw_weight": (0.0, 1.0), "jerk_time_s": (0.0, 0.1),
            "equiv_speedctrl_time_s": (0.0, 0.05), "equiv_currctrl_time_s": (1e-5, 0.01),

@@ -424,11 +424,10 @@ def fit_setpoint_chain(
             fits[chosen] = (p, fits["double_moving_average"][1])
             rms_by[chosen] = rms_by["double_moving_average"]
     nj = _N_JERK[chosen]
-    cost = cost_of(chosen)
-    resid = resid_of(chosen)(p)
     # standard errors from the Jacobian at the solution: cov = s^2 (J'J)^-1, inflated for
     # residual autocorrelation
     rf = resid_of(chosen)
+    resid = rf(p)
     jac = np.empty((int(mask.sum()), p.size))
     for i in range(p.size):
         h = max(abs(p[i]) * 1e-6, 1e-7)
