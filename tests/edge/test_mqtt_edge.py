@@ -181,6 +181,13 @@ def test_cli_live_databus(broker: Broker, tmp_path: Path,
     pub.publish(DATA, _bulk(1, raw, pd.Timestamp("2025-03-01T10:00:00Z"), current, speed),
                 qos=1, retain=True).wait_for_publish(timeout=5)
     codes: list[int] = []
+    # the Databus scanner is compiled once per process (numba; ~13 s alone on a cold clone,
+    # 30-50 s beside the other test worker): done here, outside the 30 s the CLI gets below;
+    # the source's own prepare_scanner() then finds it in memory (a test before this one in
+    # the same worker may have dropped it: test_databus_numbers' fallback case)
+    from cnctwin.iotools._databus_scan import prepare_scanner
+
+    prepare_scanner()
     th = threading.Thread(target=lambda: codes.append(main([
         "edge", "run", "--source", f"mqtt://127.0.0.1:{broker.port}/{META}",
         "--name-map", str(nmap), "--model", str(mfile), "--out", str(tmp_path / "out"),
