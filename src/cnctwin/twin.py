@@ -95,12 +95,25 @@ class FrictionCurve:
         Decay speed ``n_s`` [rpm] (NaN for the linear model).
     model : str
         Name of the friction model.
+    n_coefficients : int
+        Coefficients fitted to the plateau means, the decay speed ``n_s`` and a grid-searched
+        drift included (2 for the line); with ``line.n_points`` the residual degrees of
+        freedom.
     """
 
     line: FrictionFit
     stribeck_a: float = 0.0
     stribeck_speed_rpm: float = float("nan")
     model: str = "linear"
+    n_coefficients: int = 2
+
+    def residual_variance_a2(self) -> float:
+        """Variance of the plateau means about the curve, per degree of freedom [A^2].
+
+        NaN where the fit has no residual degree of freedom.
+        """
+        dof = self.line.n_points - self.n_coefficients
+        return self.line.norm_residuals**2 / dof if dof > 0 else float("nan")
 
     def current_a(self, speed_rpm: ArrayLike) -> NDArray[np.float64]:
         """Air-cut current predicted at ``speed_rpm`` [A]."""
@@ -175,7 +188,7 @@ def fit_friction_stribeck(
     # statistics of a, b from the line through the Stribeck-corrected means
     line = fit_friction(x, y - sol[2] * np.exp(-x / ns))
     return FrictionCurve(line, stribeck_a=float(sol[2]), stribeck_speed_rpm=ns,
-                         model="stribeck")
+                         model="stribeck", n_coefficients=4)
 
 
 @dataclass(frozen=True)
@@ -319,9 +332,24 @@ def fit_friction_thermal(
     if best is None:
         raise IdentificationError("the thermal friction fit found no non-negative Stribeck term")
     rss, ns, sol, a_mat = best
-    dof = x.size - a_mat.shape[1]
+    # covariance at the optimum of the whole model: the Jacobian holds the linear columns and
+    # the derivatives by the grid-searched decay speed (s x / n_s^2 exp(-x/n_s)) and, for
+    # 'common', the drift g ((a x + b) E); without them the standard errors came out ~0.65 of
+    # the estimates' scatter over independent noise (tests/calibration/
+    # test_friction_uncertainty.py)
+    extra = [sol[2] * x / ns**2 * np.exp(-x / ns)]
+    if drift == "common":
+        extra.append((sol[0] * x + sol[1]) * en)
+    jac = np.column_stack([a_mat, *extra])
+    dof = x.size - jac.shape[1]
     s2 = rss / dof if dof > 0 else float("nan")
-    cov = s2 * np.linalg.pinv(a_mat.T @ a_mat)
+    # the columns span ~10 decades (1 against n E ~ 1e8 A rpm^2 s): pinv of the raw normal
+    # matrix drops the small singular values and with them the offset's variance (it came out
+    # ~1e-10 Nm); scaled to unit norm first, the covariance keeps every direction
+    scale = np.linalg.norm(jac, axis=0)
+    scale[scale == 0] = 1.0
+    j_s = jac / scale
+    cov = s2 * np.linalg.pinv(j_s.T @ j_s) / np.outer(scale, scale)
     ss_tot = float(np.sum((y - y.mean()) ** 2))
     line = FrictionFit(
         slope_a_per_rpm=float(sol[0]), offset_a=float(sol[1]),
@@ -330,7 +358,7 @@ def fit_friction_thermal(
         slope_std=float(np.sqrt(cov[0, 0])), offset_std=float(np.sqrt(cov[1, 1])),
         lo_rpm=float(x.min()), hi_rpm=float(x.max()))
     curve = FrictionCurve(line, stribeck_a=float(sol[2]), stribeck_speed_rpm=ns,
-                          model="stribeck+thermal")
+                          model="stribeck+thermal", n_coefficients=jac.shape[1])
     return ThermalFrictionFit(curve, float(sol[3] / sol[0]), float(sol[4] / sol[1]))
 
 
