@@ -9,7 +9,7 @@ simulated (air cut, one drilling cut with the dynamometer, the axis test program
   low while the simulated drive stepped its speed setpoint; 0.2 % since) and the X1/Y1
   Coulomb friction within 5 % (issue 29; the axes' viscous friction: coverage only);
 * honesty: each hidden value inside its stated 95 % interval (value +- 1.96 standard
-  uncertainties) in at least 7 of the 8 seeds (the 20-seed campaign with its coverage per
+  uncertainties) in at least 7 of the 8 seeds (the 200-draw campaign with its coverage per
   parameter is ``benchmarks/bench_calibration_coverage.py``, docs/validation-calibration.md; 8 seeds
   keep this test at about a minute of the suite's 15).
 

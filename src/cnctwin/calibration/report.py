@@ -168,7 +168,11 @@ def spindle_calibration_report(
     st = res.air_cut_stats[["speed_rpm", "current_a", "current_std_a", "duration_s"]].copy()
     st.columns = ["speed [rpm]", "mean current [A]", "current std [A]", "duration [s]"]
     sec2.table(st, caption="Plateaus found", float_format="{:.4g}")
-    sec2.table(cal.variants, caption="Fit variants behind the model-form uncertainty",
+    sec2.table(cal.variants, caption="Fit variants behind the model-form uncertainty: a "
+               "variant counts ('counted') where the law fits its plateaus as well as the "
+               "chosen fit's (its residual variance over the chosen one's, 'residual_ratio', "
+               "within the F distribution's 95 % point); the model form is the counted "
+               "variants' spread beyond the statistical uncertainty",
                float_format="{:.5g}")
     if not cal.speeds.empty and len(cal.speeds) > 1:
         sp = cal.speeds.copy()
