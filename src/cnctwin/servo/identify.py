@@ -231,6 +231,43 @@ def apply_setpoint_chain(
     return pt1(pt1(y, max(pt1_cycles, 0.0)), max(pt1b_cycles, 0.0))
 
 
+_RAMP = np.arange(512, dtype=np.float64)
+_RAMP_STARTS = np.array([0, _RAMP.size], dtype=np.int64)
+
+
+def chain_lag_cycles(jerk_type: str, params: FloatArray) -> float:
+    """Lag of a setpoint chain behind a ramp once settled [cycles] (its DC group delay).
+
+    Parameters
+    ----------
+    jerk_type : str
+        One of :data:`JERK_FILTER_TYPES`.
+    params : numpy.ndarray
+        The chain's parameters in cycles, as :func:`fit_setpoint_chain` orders them (jerk
+        filter, delay, two PT1s, second delay).
+
+    Returns
+    -------
+    float
+        E.g. (w - 1) / 2 for a moving average of w cycles, T for a PT1 of T cycles, plus the
+        delays.
+    """
+    y = setpoint_chain_segments(_RAMP, _RAMP_STARTS, jerk_type,
+                                np.asarray(params, dtype=np.float64))
+    return float(_RAMP[-1] - y[-1])
+
+
+def _total_lag_cycles(cost: Callable[[FloatArray], float]) -> float:
+    """The pure delay [cycles] that best maps DES_POS on CTRL_POS (``cost`` of the 'none'
+    chain, parameters [delay, PT1, PT1, delay2])."""
+    coarse = [cost(np.array([float(t), 0.0, 0.0, 0.0])) for t in range(41)]
+    k = int(np.argmin(coarse))
+    res = optimize.minimize_scalar(lambda t: cost(np.array([t, 0.0, 0.0, 0.0])),
+                                   bounds=(max(k - 1.0, 0.0), k + 1.0), method="bounded",
+                                   options={"xatol": 1e-4})
+    return float(res.x) if float(res.fun) <= coarse[k] else float(k)
+
+
 def fit_setpoint_chain(
     des: FloatArray, ctrl: FloatArray, segs: list[slice], *, cycle_time_s: float,
     models: tuple[str, ...] = JERK_FILTER_TYPES, rel_tol: float = 0.1,
@@ -313,26 +350,33 @@ def fit_setpoint_chain(
     lag_rms = float(np.sqrt(np.mean(lag * lag)))
     early_stop = 1e-7
     q_floor = (quantum(des) + quantum(ctrl)) / math.sqrt(12.0)
+    # the setpoint's total lag [cycles], from the best pure delay: every grid point below
+    # gets the delay that makes its own lag equal to it, so the grid compares the filters'
+    # shapes. On a grid of fixed delays the lag's rounding decided instead (a lag of 3.78
+    # cycles: an 8-cycle average, 3.5, lost to 7 cycles + a PT1 of 1, 4.0) and an 8-cycle
+    # filter was fitted as 6.5 cycles + a PT1 (calibration campaign, seeds 3120, 3189, 3194)
+    d_obs = _total_lag_cycles(cost_of("none"))
     for jt in models:
         cost = cost_of(jt)
         wins = [float(w) for w in range(1, 21)] + [24.0, 28.0, 32.0]
-        taus = [0.0, 1.0, 1.5, 2.0, 2.5, 4.0]
         t1s = [0.0, 1.0, 2.5]
         t2s = [0.0, 1.5]
         if jt == "none":
-            grid = [np.array([tau, t1, t2]) for tau in [*taus, 6.0, 8.0]
-                    for t1 in [*t1s, 8.0, 12.0] for t2 in t2s]
+            shapes = [np.array([0.0, t1, t2]) for t1 in [*t1s, 8.0, 12.0] for t2 in t2s]
         elif jt == "moving_average":
-            grid = [np.array([w, tau, t1, t2]) for w in wins for tau in taus for t1 in t1s
-                    for t2 in t2s]
+            shapes = [np.array([w, 0.0, t1, t2]) for w in wins for t1 in t1s for t2 in t2s]
         elif jt == "double_moving_average":
-            grid = [np.array([w, w2, tau, t1, t2]) for w in wins[:12]
-                    for w2 in sorted({max(round(w / 2), 2.0), w}) for tau in taus[::2]
-                    for t1 in t1s for t2 in t2s]
+            shapes = [np.array([w, w2, 0.0, t1, t2]) for w in wins[:12]
+                      for w2 in sorted({max(round(w / 2), 2.0), w})
+                      for t1 in t1s for t2 in t2s]
         else:
-            grid = [np.array([t, dmp, tau, t1, t2]) for t in np.arange(0.5, 12.5, 1.0)
-                    for dmp in (0.7, 1.0) for tau in taus[::2] for t1 in t1s for t2 in t2s]
-        grid = [np.append(g, 0.0) for g in grid]  # second delay starts at 0
+            shapes = [np.array([t, dmp, 0.0, t1, t2]) for t in np.arange(0.5, 12.5, 1.0)
+                      for dmp in (0.7, 1.0) for t1 in t1s for t2 in t2s]
+        grid = []
+        for g in shapes:
+            g = np.append(g, 0.0)  # second delay starts at 0
+            g[nj_of[jt]] = max(d_obs - chain_lag_cycles(jt, g), 0.0)
+            grid.append(g)
         costs = np.array([cost(g) for g in grid])
         resid_fn = resid_of(jt)
         best_fit: tuple[FloatArray, float] | None = None
