@@ -1713,7 +1713,7 @@ def inertia_uncertainty(
     (Newey-West [1]_: the samples are low-passed, so neighbours share their noise; the
     AR(1) inflation used before overstated it about 1.7 times, its interval covered 100 of
     100 draws), and the method's dependence on its analysis bandwidth: the change of J when
-    the low-pass halves, taken as one standard uncertainty (J rises with the bandwidth by
+    the low-pass halves, a bound taken as rectangular as well (J rises with the bandwidth by
     ~0.1 % per octave on simulated air cuts: the sampled current carries within-cycle
     dynamics that the acceleration, a 2-4 cycle difference, averages away). Measured
     coverage of the resulting 95 % interval: docs/validation-calibration.md.
@@ -1761,12 +1761,14 @@ def inertia_uncertainty(
     u_law = 0.5 * abs(j_up - j_down) / math.sqrt(3.0)
     # the analysis bandwidth: J grows with it (the sampled current carries what the rotor's
     # 2 ms-averaged acceleration does not, ~0.1 % per octave on simulated air cuts); the
-    # change from halving it is taken as one standard uncertainty of the method
+    # change from halving it bounds the method's dependence on it, taken as rectangular like
+    # the law's (as one standard uncertainty the interval was 1.2x J's error scatter: rms z
+    # 0.85, 198 of 200 covered, docs/validation-calibration.md)
     u_band = 0.0
     if lowpass_hz is not None:
         _, acc2, y2, m2 = ramps(0.5 * lowpass_hz)
         if m2.any():
-            u_band = abs(fit(acc2, y2, m2) - fit(acc, y, m))
+            u_band = abs(fit(acc2, y2, m2) - fit(acc, y, m)) / math.sqrt(3.0)
     return math.hypot(se, u_law, u_band)
 
 

@@ -396,13 +396,15 @@ def fit_setpoint_chain(
         for i in starts:
             g0 = grid[int(i)].copy()
             inits.append(g0)
-            if jt != "none":
-                # same total delay split into two halves-cycle interpolations: two fractional
-                # delays in series are a 3-tap kernel no single delay reaches
-                g1 = g0.copy()
-                g1[nj_of[jt]] = max(g0[nj_of[jt]] - 0.5, 0.0)
-                g1[-1] = 0.5
-                inits.append(g1)
+            # same total delay split into two half-cycle interpolations: two fractional
+            # delays in series are a 3-tap kernel no single delay reaches (also without a
+            # jerk filter: a 2-cycle average, exactly a half-cycle delay, before a fractional
+            # balancing dead time must be reached by the plain chain, or it is taken for a
+            # filter; campaign seed 3008)
+            g1 = g0.copy()
+            g1[nj_of[jt]] = max(g0[nj_of[jt]] - 0.5, 0.0)
+            g1[-1] = 0.5
+            inits.append(g1)
         moving_window = jt in ("moving_average", "double_moving_average")
 
         def local_fit(
