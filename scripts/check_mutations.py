@@ -139,9 +139,11 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             f.write_text(text.replace(m.old, m.new), encoding="utf-8")
             t0 = time.monotonic()
-            r = subprocess.run([str(python), "-m", "pytest", "-q", "-x", "-p",
+            r = subprocess.run([str(python), "-m", "pytest", "-q", "-x", "-rf", "-p",
                                 "no:cacheprovider", *m.tests], cwd=base, env=env,
                                capture_output=True, text=True)
+            # which test failed, and on what (a mutation that breaks the import is no kill)
+            failed = [ln for ln in r.stdout.splitlines() if ln.startswith("FAILED ")]
             f.write_text(text, encoding="utf-8")
             verdict = "KILLED" if r.returncode == 1 else (
                 "ALIVE" if r.returncode == 0 else f"ERROR (pytest exit {r.returncode})")
@@ -150,6 +152,8 @@ def main(argv: list[str] | None = None) -> int:
                 print(r.stdout[-2000:], file=sys.stderr)
             print(f"[{k:2d}/{len(todo)}] {verdict:6s} {time.monotonic() - t0:5.1f} s  {m.name}",
                   flush=True)
+            for ln in failed:
+                print(f"          {ln[:150]}")
     print(f"{len(todo) - bad} of {len(todo)} mutations killed")
     return 1 if bad else 0
 
