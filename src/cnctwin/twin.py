@@ -27,6 +27,7 @@ True
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -185,10 +186,32 @@ def fit_friction_stribeck(
     if best is None:
         return _fit_linear(x, y, lo_rpm, hi_rpm)
     _, ns, sol = best
-    # statistics of a, b from the line through the Stribeck-corrected means
+    # the line through the Stribeck-corrected means (its a, b and residuals are the joint
+    # fit's); the standard errors of a, b from the whole law's Jacobian at the optimum (s and
+    # the grid-searched n_s included), as in fit_friction_thermal: the line's own carried
+    # neither
     line = fit_friction(x, y - sol[2] * np.exp(-x / ns))
+    decay = np.exp(-x / ns)
+    jac = np.column_stack([x, np.ones_like(x), decay, sol[2] * x / ns**2 * decay])
+    cov = _scaled_covariance(jac, line.norm_residuals**2)
+    line = dataclasses.replace(line, slope_std=float(np.sqrt(cov[0, 0])),
+                               offset_std=float(np.sqrt(cov[1, 1])))
     return FrictionCurve(line, stribeck_a=float(sol[2]), stribeck_speed_rpm=ns,
-                         model="stribeck", n_coefficients=4)
+                         model="stribeck", n_coefficients=jac.shape[1])
+
+
+def _scaled_covariance(jac: NDArray[np.float64], rss: float) -> NDArray[np.float64]:
+    """s^2 (J'J)^-1 of a least-squares fit, s^2 = rss / (n - p) (NaN without a degree of
+    freedom), with J's columns scaled to unit norm first: the air cut's columns span ~10
+    decades (1 against n E ~ 1e8 A rpm^2 s), and pinv of the raw normal matrix drops the small
+    singular values and with them the offset's variance (it came out ~1e-10 A)."""
+    dof = jac.shape[0] - jac.shape[1]
+    s2 = rss / dof if dof > 0 else float("nan")
+    scale = np.linalg.norm(jac, axis=0)
+    scale[scale == 0] = 1.0
+    j_s = jac / scale
+    return np.asarray(s2 * np.linalg.pinv(j_s.T @ j_s) / np.outer(scale, scale),
+                      dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -341,15 +364,7 @@ def fit_friction_thermal(
     if drift == "common":
         extra.append((sol[0] * x + sol[1]) * en)
     jac = np.column_stack([a_mat, *extra])
-    dof = x.size - jac.shape[1]
-    s2 = rss / dof if dof > 0 else float("nan")
-    # the columns span ~10 decades (1 against n E ~ 1e8 A rpm^2 s): pinv of the raw normal
-    # matrix drops the small singular values and with them the offset's variance (it came out
-    # ~1e-10 Nm); scaled to unit norm first, the covariance keeps every direction
-    scale = np.linalg.norm(jac, axis=0)
-    scale[scale == 0] = 1.0
-    j_s = jac / scale
-    cov = s2 * np.linalg.pinv(j_s.T @ j_s) / np.outer(scale, scale)
+    cov = _scaled_covariance(jac, rss)
     ss_tot = float(np.sum((y - y.mean()) ** 2))
     line = FrictionFit(
         slope_a_per_rpm=float(sol[0]), offset_a=float(sol[1]),

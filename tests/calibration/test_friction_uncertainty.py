@@ -1,7 +1,8 @@
 """The spindle friction's stated uncertainty against independent truths (issue 29, point 2).
 
-* The thermal friction fit's standard errors against the scatter of the estimates over 400
-  independent noise draws (a Monte Carlo truth, not the code's formula): its offset's
+* The thermal friction fit's (and the one-way Stribeck fit's) standard errors against the
+  scatter of the estimates over 400 independent noise draws (a Monte Carlo truth, not the
+  code's formula): its offset's
   standard error came out ~1e-10 A because the covariance was inverted from a normal matrix
   whose columns span ten decades (the air cut's ``n E`` column ~1e8 A rpm^2 s against the
   column of ones); the Coulomb friction's statistical term was then nil.
@@ -18,7 +19,7 @@ import pytest
 
 from cnctwin.calibration.spindle import LACK_OF_FIT_LEVEL, _lack_of_fit
 from cnctwin.spindle import FrictionFit
-from cnctwin.twin import FrictionCurve, fit_friction_thermal
+from cnctwin.twin import FrictionCurve, fit_friction_stribeck, fit_friction_thermal
 
 # an air cut up and back down through 400-4000 rpm, the friction energy dissipated before
 # each plateau as friction_energy gives it [A rpm s] (3 s held and the ramps: ~6 s at each
@@ -60,6 +61,23 @@ def test_thermal_fit_standard_errors_equal_the_scatter_of_its_estimates() -> Non
     # the decay speed (not in the covariance) adds a little: 20 %
     assert stated == pytest.approx(scatter, rel=0.20), (stated, scatter)
     assert np.mean(np.array(est), axis=0) == pytest.approx([A_TRUE, B_TRUE], rel=0.01)
+
+
+def test_stribeck_fit_standard_errors_equal_the_scatter_of_its_estimates() -> None:
+    # the one-way air cut (no speed held twice): line + Stribeck term, no drift; the line's
+    # own standard errors (through the Stribeck-corrected means) carried neither s nor n_s
+    speeds = np.arange(300.0, 4001.0, 200.0)
+    clean = A_TRUE * speeds + B_TRUE + S_TRUE * np.exp(-speeds / NS_TRUE)
+    rng = np.random.default_rng(30)
+    est, se = [], []
+    for _ in range(400):
+        y = clean + SIGMA_A * rng.standard_normal(speeds.size)
+        line = fit_friction_stribeck(speeds, y, 250.0, 4100.0, decay_grid_rpm=_GRID).line
+        est.append((line.slope_a_per_rpm, line.offset_a))
+        se.append((line.slope_std, line.offset_std))
+    scatter = np.std(np.array(est), axis=0, ddof=1)
+    stated = np.sqrt(np.mean(np.square(se), axis=0))
+    assert stated == pytest.approx(scatter, rel=0.20), (stated, scatter)
 
 
 def _curve(n_points: int, rss: float) -> FrictionCurve:
