@@ -27,9 +27,8 @@ True
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -108,12 +107,16 @@ class FrictionCurve:
     model: str = "linear"
     n_coefficients: int = 2
 
+    def residual_dof(self) -> int:
+        """Residual degrees of freedom: plateaus used minus coefficients fitted."""
+        return self.line.n_points - self.n_coefficients
+
     def residual_variance_a2(self) -> float:
         """Variance of the plateau means about the curve, per degree of freedom [A^2].
 
         NaN where the fit has no residual degree of freedom.
         """
-        dof = self.line.n_points - self.n_coefficients
+        dof = self.residual_dof()
         return self.line.norm_residuals**2 / dof if dof > 0 else float("nan")
 
     def current_a(self, speed_rpm: ArrayLike) -> NDArray[np.float64]:
@@ -190,12 +193,12 @@ def fit_friction_stribeck(
     # fit's); the standard errors of a, b from the whole law's Jacobian at the optimum (s and
     # the grid-searched n_s included), as in fit_friction_thermal: the line's own carried
     # neither
-    line = fit_friction(x, y - sol[2] * np.exp(-x / ns))
     decay = np.exp(-x / ns)
+    line = fit_friction(x, y - sol[2] * decay)
     jac = np.column_stack([x, np.ones_like(x), decay, sol[2] * x / ns**2 * decay])
     cov = _scaled_covariance(jac, line.norm_residuals**2)
-    line = dataclasses.replace(line, slope_std=float(np.sqrt(cov[0, 0])),
-                               offset_std=float(np.sqrt(cov[1, 1])))
+    line = replace(line, slope_std=float(np.sqrt(cov[0, 0])),
+                   offset_std=float(np.sqrt(cov[1, 1])))
     return FrictionCurve(line, stribeck_a=float(sol[2]), stribeck_speed_rpm=ns,
                          model="stribeck", n_coefficients=jac.shape[1])
 

@@ -501,12 +501,11 @@ def _lack_of_fit(variants: pd.DataFrame, curves: Sequence[FrictionCurve], *,
 
     chosen = curves[0]
     s2_c = chosen.residual_variance_a2()
-    dof_c = chosen.line.n_points - chosen.n_coefficients
     ratio, counted = [], []
     for k, c in enumerate(curves):
         r = c.residual_variance_a2() / s2_c if s2_c > 0 else float("nan")
-        dof = c.line.n_points - c.n_coefficients
-        ok = k == 0 or not np.isfinite(r) or r <= float(f_dist.ppf(level, dof, dof_c))
+        ok = k == 0 or not np.isfinite(r) or r <= float(
+            f_dist.ppf(level, c.residual_dof(), chosen.residual_dof()))
         ratio.append(r)
         counted.append(bool(ok))
     return variants.assign(residual_ratio=ratio, counted=counted)
