@@ -426,10 +426,19 @@ class MqttSink:
 
     # ---------------------------------------------------------------- sending
     def _io(self) -> None:
-        """Socket work without waiting: read acknowledgements, write what is pending."""
+        """Socket work without waiting: read acknowledgements, write what is pending.
+
+        paho's external-loop calls, not ``loop()``: that one makes a socket pair to wake a
+        network thread, and every publish then writes a byte to it and every call selects on
+        it (two system calls per message and one per call for a thread this sink does not
+        have); a read on the non-blocking socket with nothing to read returns at once."""
         c = self._client
         if c is not None:
-            rc = c.loop(timeout=0.0)
+            rc = c.loop_read()
+            if rc == 0 and c.want_write():
+                rc = c.loop_write()
+            if rc == 0:
+                rc = c.loop_misc()
             if rc != 0 and not self._lost.is_set():
                 self.last_error = f"connection lost (rc {rc})"
                 self._connected.clear()
