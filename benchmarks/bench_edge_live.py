@@ -128,6 +128,15 @@ def _decode_cost_ms(payload: bytes, repeat: int = 200) -> dict[str, float]:
     return {"decode": full * 1e3, "scan": (time.process_time() - c0) / repeat * 1e3}
 
 
+def _batches(env: dict[str, str] | None) -> bool:
+    """Whether the plant code run with ``env`` (None: this code) has ``batch-s`` (a
+    baseline older than it runs its messages unbatched)."""
+    if env is None:
+        return True
+    cli = Path(env["PYTHONPATH"]) / "cnctwin" / "cli" / "edge.py"
+    return cli.exists() and '"--batch-s"' in cli.read_text(encoding="utf-8")
+
+
 def _metadata(k: int) -> tuple[str, str, bytes]:
     meta = f"ie/m/j/simatic/v1/m{k:03d}/dp"
     data = f"ie/d/j/simatic/v1/m{k:03d}/dp/r/NCK/hf"
@@ -162,8 +171,8 @@ def _measure(args: argparse.Namespace, tmp: Path, payloads: list[bytes], n_cyc: 
              "[defaults]", f'model = "{tmp / "spindle.json"}"',
              f'publish = "mqtt://127.0.0.1:{port}/results"', "learn-s = 5",
              "idle-timeout-s = 5", "session-expiry-s = 0", "no-twin = true",
-             f"status-s = {args.status_s}", f"batch-s = {args.batch_s}" if env is None
-             else "", ""]
+             f"status-s = {args.status_s}",
+             f"batch-s = {args.batch_s}" if _batches(env) else "", ""]
     for k, (meta, _, _) in enumerate(topics):
         lines += ["[[machine]]", f'name = "mill-{k:03d}"',
                   f'source = "mqtt://127.0.0.1:{port}/{meta}"', ""]
@@ -256,7 +265,8 @@ def _measure(args: argparse.Namespace, tmp: Path, payloads: list[bytes], n_cyc: 
         if 0 <= j < sent_ns.shape[1]:
             ext.append((t_rx - sent_ns[m, j]) / 1e6)
     e = np.asarray(ext)
-    return {"lag_end_ms": lag_end * 1e3, "errors": len(errors), "cycles": cycles,
+    return {"batched": _batches(env), "lag_end_ms": lag_end * 1e3, "errors": len(errors),
+            "cycles": cycles,
             "lost": lost, "p50": float(np.median(lat_p50)), "p99_median": float(
                 np.median(lat_p99)), "p99_worst": max(lat_p99), "max": max(lat_max),
             "e2e_p50": float(np.percentile(e, 50)), "e2e_p99": float(np.percentile(e, 99)),
@@ -342,7 +352,7 @@ def main() -> None:
     for label, r in res:
         print(f"{label}: {args.machines} machines x {n_cyc} cycles ({n_cyc / NEED:.0f} s, "
               f"{cpm} cycles per message, {1 + len(COLUMNS)} datapoints, status every "
-              f"{args.status_s:g} s, batches of {args.batch_s if label == 'this code' else 0:g}"
+              f"{args.status_s:g} s, batches of {args.batch_s if r['batched'] else 0:g}"
               " s); publisher behind schedule at the end by "
               f"{r['lag_end_ms']:.0f} ms; errors {r['errors']}; cycles processed "
               f"{r['cycles']} of {args.machines * n_cyc}; counted losses {r['lost']}")
