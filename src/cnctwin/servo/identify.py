@@ -56,6 +56,7 @@ __all__ = [
     "SetpointChainFit",
     "SpeedLoopFit",
     "apply_setpoint_chain",
+    "common_position_runs",
     "constant_velocity_runs",
     "cut_cycles",
     "fit_axis_friction",
@@ -844,13 +845,13 @@ class AxisFrictionFit:
 
 def constant_velocity_runs(
     v_per_s: FloatArray, segs: list[slice], *, min_cycles: int = 40, rel_tol: float = 0.02,
-    min_speed_frac: float = 0.02,
+    min_speed_frac: float = 0.02, drop_first: float = 0.25,
 ) -> list[slice]:
     """Runs where the setpoint velocity is constant and non-zero.
 
     A run keeps cycles whose velocity stays within ``rel_tol`` of the run median and is above
-    ``min_speed_frac`` of the largest speed; the first quarter of each run (transient) is
-    dropped.
+    ``min_speed_frac`` of the largest speed; the first ``drop_first`` of each run (transient)
+    is dropped.
 
     Parameters
     ----------
@@ -864,6 +865,9 @@ def constant_velocity_runs(
         Allowed deviation from the run median [-].
     min_speed_frac : float, default 0.02
         Smallest speed as a share of the largest [-].
+    drop_first : float, default 0.25
+        Share of each run dropped at its start [-] (0: velocities already known to have
+        settled, e.g. the actual speed checked against the setpoint).
 
     Returns
     -------
@@ -881,15 +885,16 @@ def constant_velocity_runs(
     for s in segs:
         v = np.ascontiguousarray(v_per_s[s], dtype=np.float64)
         found = _runs_compiled(v, float(min_speed_frac * vmax), float(rel_tol),
-                               int(min_cycles))
+                               int(min_cycles), float(drop_first))
         runs.extend(slice(s.start + int(a), s.start + int(b)) for a, b in found)
     return runs
 
 
-def _runs_py(v: FloatArray, v_min: float, rel_tol: float, min_cycles: int
+def _runs_py(v: FloatArray, v_min: float, rel_tol: float, min_cycles: int, drop_first: float
              ) -> np.ndarray:  # pragma: no cover - compiled by numba; the body is the reference
     """The (start, stop) pairs of :func:`constant_velocity_runs` in one segment: greedy runs
-    within ``rel_tol`` of their first value, above ``v_min``, the first quarter dropped."""
+    within ``rel_tol`` of their first value, above ``v_min``, the first ``drop_first`` of
+    each dropped."""
     out = np.empty((v.size // max(min_cycles, 1) + 1, 2), dtype=np.int64)
     m = 0
     k = 0
@@ -903,7 +908,7 @@ def _runs_py(v: FloatArray, v_min: float, rel_tol: float, min_cycles: int
         while j < n and np.isfinite(v[j]) and abs(v[j] - ref) <= rel_tol * abs(ref):
             j += 1
         if j - k >= min_cycles:
-            out[m, 0] = k + (j - k) // 4
+            out[m, 0] = k + int((j - k) * drop_first)
             out[m, 1] = j
             m += 1
         k = max(j, k + 1)
@@ -923,6 +928,97 @@ def _outside(runs: list[slice], cut: np.ndarray, *, min_cycles: int) -> list[sli
             if b - a >= min_cycles:
                 out.append(slice(r.start + int(a), r.start + int(b)))
     return out
+
+
+def common_position_runs(
+    runs: list[slice], position: FloatArray, velocity: FloatArray, *, min_cycles: int = 40,
+    speed_tol: float = 0.1, min_share: float = 0.7, edge_cycles: int = 0,
+    unpaired_drop_first: float = 0.0,
+) -> list[slice]:
+    """Runs of opposite directions at one speed, each pair cut to the positions both cover.
+
+    A force that depends on the position only (the screw's ripple, one period per motor
+    revolution; pitch or preload variation along the screw) adds the same amount to both
+    directions' run means when they cover the same positions at constant speed (uniform
+    sampling in position), so it moves the offset of :func:`fit_axis_friction` and cancels
+    from its Coulomb term. Runs that keep different positions (the first quarter of each
+    stroke dropped as its transient: the forward run ends where the backward one starts)
+    leave half the difference of the force's means over the two ranges in the Coulomb term,
+    with the same sign on every machine whose screws share a phase.
+
+    Parameters
+    ----------
+    runs : list of slice
+        Constant-velocity runs (:func:`constant_velocity_runs`).
+    position : numpy.ndarray
+        Actual position [unit].
+    velocity : numpy.ndarray
+        Actual velocity [unit/s].
+    min_cycles : int, default 40
+        Shortest part kept: a pair whose common positions give less stays as it was.
+    min_share : float, default 0.7
+        A pair is cut only if each run keeps at least this share of its cycles [-] (strokes
+        back and forth over one span, as a test program makes them); moves of a production
+        program that overlap in part keep their length, and the precision of their means,
+        rather than trade it for a ripple's bias of ~A lead / (pi L).
+    speed_tol : float, default 0.1
+        Runs pair when their mean speeds differ by at most this share [-] (one programmed
+        feed).
+    edge_cycles : int, default 0
+        Cycles dropped at both ends of a paired run before the cut (where the speed still
+        settles or the braking begins), at most an eighth of it at each end.
+    unpaired_drop_first : float, default 0.0
+        Share of a run without a partner dropped at its start [-] (its transient, for runs
+        found without dropping one: a paired run's start is its partner's end).
+
+    Returns
+    -------
+    list of slice
+        The runs, in their order: paired ones cut to the common positions, the others with
+        ``unpaired_drop_first`` dropped.
+    """
+    found = runs
+    runs = [slice(r.start + e, r.stop - e) for r in found
+            for e in [min(edge_cycles, (r.stop - r.start) // 8)]]
+    info = []
+    for r in runs:
+        x = position[r]
+        v = float(np.nanmean(velocity[r]))
+        info.append((v, float(np.nanmin(x)), float(np.nanmax(x))) if np.isfinite(v)
+                    and np.isfinite(x).any() else (math.nan, math.nan, math.nan))
+    out = list(runs)
+    taken: set[int] = set()
+    for i, (vi, lo_i, hi_i) in enumerate(info):
+        if i in taken or not vi > 0:
+            continue
+        best, best_len = -1, 0.0
+        for j, (vj, lo_j, hi_j) in enumerate(info):
+            if j in taken or not vj < 0 or abs(abs(vj) - vi) > speed_tol * vi:
+                continue
+            common = min(hi_i, hi_j) - max(lo_i, lo_j)
+            if common > best_len:
+                best, best_len = j, common
+        if best < 0:
+            continue
+        lo, hi = max(lo_i, info[best][1]), min(hi_i, info[best][2])
+        cut = [_within(runs[k], position, lo, hi) for k in (i, best)]
+        if all(c is not None and c.stop - c.start >= max(min_cycles, min_share
+                                                          * (runs[k].stop - runs[k].start))
+               for c, k in zip(cut, (i, best), strict=True)):
+            out[i], out[best] = cut[0], cut[1]  # type: ignore[assignment]
+            taken |= {i, best}
+    for k, r in enumerate(found):
+        if k not in taken:  # as found, with its start dropped
+            out[k] = slice(r.start + int((r.stop - r.start) * unpaired_drop_first), r.stop)
+    return out
+
+
+def _within(run: slice, position: FloatArray, lo: float, hi: float) -> slice | None:
+    """The part of a monotonic run whose positions lie in [lo, hi] (None: none)."""
+    inside = np.flatnonzero((position[run] >= lo) & (position[run] <= hi))
+    if not inside.size:
+        return None
+    return slice(run.start + int(inside[0]), run.start + int(inside[-1]) + 1)
 
 
 def _identifiable(v: FloatArray, both: bool) -> bool:
@@ -1603,7 +1699,7 @@ def identify_axis(
     # cycles: ~0.1 mm/s, more than 1 % of a slow feed) does not cut a stroke into fragments
     v_settled = _centered_mean(v_act_c, segs, STEADY_SMOOTH_CYCLES)
     v_steady = np.where(np.abs(v_settled - v_des) <= 0.01 * np.abs(v_des), v_des, np.nan)
-    runs = constant_velocity_runs(v_steady, segs, rel_tol=0.01)
+    runs = constant_velocity_runs(v_steady, segs, rel_tol=0.01, drop_first=0.0)
     in_cut = 0
     if exclude_cuts and runs:
         cut, why = cuts if cuts is not None else cut_cycles(recording, spindle=spindle)
@@ -1619,6 +1715,12 @@ def identify_axis(
                     f"in cuts ({spindle} current above its air level): their parts in the cut "
                     f"are left out, {len(kept)} runs of at least 40 cycles remain")
             runs = kept
+    # a position-periodic force (screw ripple) cancels from the Coulomb term only where the
+    # two directions cover the same positions: strokes back and forth over one span are cut
+    # to it (the smoothing window off both ends: where the speed still settles or the
+    # braking begins); any other run loses its first quarter as its transient
+    runs = common_position_runs(runs, enc, v_act_c, min_cycles=40,
+                                edge_cycles=STEADY_SMOOTH_CYCLES, unpaired_drop_first=0.25)
     for code in ("CURRENT", "TORQUE"):
         if not d.has(code):
             NI[f"coulomb_{code.lower()}"] = f"{code}|{axis} is not recorded"
@@ -1637,7 +1739,8 @@ def identify_axis(
         ident.friction[code] = ff
         u = ff.unit
         meth = f"{code} = Fc*sign(v) + b*v{' + c' if ff.se_offset == ff.se_offset else ''} on " \
-               f"{ff.n_runs} constant-velocity runs; bootstrap over runs"
+               f"{ff.n_runs} constant-velocity runs (opposite runs at one feed cut to the " \
+               f"positions both cover); bootstrap over runs"
         P[f"coulomb_{code.lower()}"] = Estimate(ff.coulomb, ff.se_coulomb, u, meth)
         P[f"viscous_{code.lower()}"] = Estimate(ff.viscous, ff.se_viscous, f"{u}/({pos_u}/s)",
                                                  meth)
