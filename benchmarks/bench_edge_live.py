@@ -156,6 +156,7 @@ def _measure(args: argparse.Namespace, tmp: Path, payloads: list[bytes], n_cyc: 
     import paho.mqtt.client as mqtt
 
     cpm = args.cycles_per_message
+    batched = _batches(env)
     port = _free_port()
     broker = _mosquitto(port, tmp)
     topics = [_metadata(k) for k in range(args.machines)]
@@ -172,7 +173,7 @@ def _measure(args: argparse.Namespace, tmp: Path, payloads: list[bytes], n_cyc: 
              f'publish = "mqtt://127.0.0.1:{port}/results"', "learn-s = 5",
              "idle-timeout-s = 5", "session-expiry-s = 0", "no-twin = true",
              f"status-s = {args.status_s}",
-             f"batch-s = {args.batch_s}" if _batches(env) else "", ""]
+             f"batch-s = {args.batch_s}" if batched else "", ""]
     for k, (meta, _, _) in enumerate(topics):
         lines += ["[[machine]]", f'name = "mill-{k:03d}"',
                   f'source = "mqtt://127.0.0.1:{port}/{meta}"', ""]
@@ -265,7 +266,7 @@ def _measure(args: argparse.Namespace, tmp: Path, payloads: list[bytes], n_cyc: 
         if 0 <= j < sent_ns.shape[1]:
             ext.append((t_rx - sent_ns[m, j]) / 1e6)
     e = np.asarray(ext)
-    return {"batched": _batches(env), "lag_end_ms": lag_end * 1e3, "errors": len(errors),
+    return {"batched": batched, "lag_end_ms": lag_end * 1e3, "errors": len(errors),
             "cycles": cycles,
             "lost": lost, "p50": float(np.median(lat_p50)), "p99_median": float(
                 np.median(lat_p99)), "p99_worst": max(lat_p99), "max": max(lat_max),

@@ -80,7 +80,7 @@ def test_a_screw_ripple_cancels_from_coulomb_on_common_positions() -> None:
     raw = fit_axis_friction(v_all, effort, raw_runs, signal="TORQUE", unit="N")
     assert -0.85 < raw.coulomb - fc_n < -0.55  # the ripple's bias, -0.707 N in theory
 
-    # these runs share 30 of their 45 mm: by default (min_share 0.8, for strokes over one
+    # these runs share 30 of their 45 mm: by default (min_share 0.7, for strokes over one
     # span) they keep their length, as overlapping moves of a production program do
     assert common_position_runs(raw_runs, x_all, v_all) == raw_runs
     runs = common_position_runs(raw_runs, x_all, v_all, min_share=0.6)

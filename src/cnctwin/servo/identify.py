@@ -977,16 +977,15 @@ def common_position_runs(
         The runs, in their order: paired ones cut to the common positions, the others with
         ``unpaired_drop_first`` dropped.
     """
-    found = runs
-    runs = [slice(r.start + e, r.stop - e) for r in found
-            for e in [min(edge_cycles, (r.stop - r.start) // 8)]]
+    shaved = [slice(r.start + e, r.stop - e) for r in runs
+              for e in [min(edge_cycles, (r.stop - r.start) // 8)]]
     info = []
-    for r in runs:
+    for r in shaved:
         x = position[r]
         v = float(np.nanmean(velocity[r]))
         info.append((v, float(np.nanmin(x)), float(np.nanmax(x))) if np.isfinite(v)
                     and np.isfinite(x).any() else (math.nan, math.nan, math.nan))
-    out = list(runs)
+    out = list(shaved)
     taken: set[int] = set()
     for i, (vi, lo_i, hi_i) in enumerate(info):
         if i in taken or not vi > 0:
@@ -1001,13 +1000,13 @@ def common_position_runs(
         if best < 0:
             continue
         lo, hi = max(lo_i, info[best][1]), min(hi_i, info[best][2])
-        cut = [_within(runs[k], position, lo, hi) for k in (i, best)]
-        if all(c is not None and c.stop - c.start >= max(min_cycles, min_share
-                                                          * (runs[k].stop - runs[k].start))
-               for c, k in zip(cut, (i, best), strict=True)):
-            out[i], out[best] = cut[0], cut[1]  # type: ignore[assignment]
+        ci, cb = (_within(shaved[k], position, lo, hi) for k in (i, best))
+        if ci is not None and cb is not None and all(
+                c.stop - c.start >= max(min_cycles, min_share * (r.stop - r.start))
+                for c, r in ((ci, shaved[i]), (cb, shaved[best]))):
+            out[i], out[best] = ci, cb
             taken |= {i, best}
-    for k, r in enumerate(found):
+    for k, r in enumerate(runs):
         if k not in taken:  # as found, with its start dropped
             out[k] = slice(r.start + int((r.stop - r.start) * unpaired_drop_first), r.stop)
     return out
