@@ -251,6 +251,7 @@ class _Pumped:
         self.batch_s = float(src.batch_s)
         self.chunks = rt.begin()
         self.next_tick = 0.0
+        self.ticked = 0.0  # when its last tick was due
         self.last_data = -1e9
         self.due = 0.0  # messages wait until then (batch_s); 0: none waiting
 
@@ -364,7 +365,14 @@ class _PumpLoop:
             if not (tick or (m.due and now >= m.due)):
                 continue
             if tick:
-                m.next_tick = now + self.tick_s
+                # a machine whose data came since its last tick needs none: its chunks kept
+                # the sinks going (each write sends and takes the acknowledgements) and
+                # carry its status when due; only a due status or nothing new is ticked
+                quiet = not stopping and not m.due and m.last_data >= m.ticked \
+                    and not getattr(m.rt, "status_due", True)
+                m.ticked, m.next_tick = now, now + self.tick_s
+                if quiet:
+                    continue
             if self._over(m, functools.partial(m.pump, idle=tick)):
                 del self.machines[port]
         if self.replays:

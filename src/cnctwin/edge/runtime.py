@@ -130,7 +130,10 @@ class EdgeRuntime:
     machine : str, optional
         Machine name in the messages (default the source's).
     status_every_s : float, default 1.0
-        Wall-clock period of the status message and file [s].
+        Wall-clock period of the status message and file [s]. While data flows the status
+        goes out with a chunk's results (one batch for the sinks) once
+        ``1 - STATUS_EARLY`` of the period has passed, so its period is then 0.8 to 1 times
+        this; without data an idle tick sends it.
     checkpoint_every_s : float or None, default 10.0
         Stream time between checkpoints of the processors' state (``checkpoint.pkl`` in
         ``state_dir``: the open hole, the detectors, the estimator's history, the cycle base),
@@ -199,16 +202,38 @@ class EdgeRuntime:
         self.c.messages += len(out)
         return out
 
-    def _emit(self, results: list[Result], chunk: Chunk | None) -> None:
+    def _emit(self, results: list[Result], chunk: Chunk | None, *,
+              status: bool = False) -> None:
+        """Number ``results`` and hand them to every sink, in one batch.
+
+        With ``status``, the status (and any overload alarms) follows them in the same batch
+        (counted with them): one JSON-lines write, one outbox transaction and the publishes of
+        a chunk carry it, where a batch of its own cost as much again (BENCHMARKS.md, "where
+        a machine-second goes"); ``status.json`` is written after the sinks have the batch.
+        """
+        replays = self._suppress and any(getattr(s, "replays", False) for s in self.sinks)
+        msgs = MessageBatch(self._messages(results, chunk))  # JSON encoded once for all sinks
         repeats: MessageBatch | None = None
-        if self._suppress and any(getattr(s, "replays", False) for s in self.sinks):
+        if replays:
             # a resumed run repeats cycles: sinks that write by id (the store) get the
             # repeated results too (no seq: nothing is published twice)
             repeats = MessageBatch(self._plain_messages(results, chunk))
-        msgs = MessageBatch(self._messages(results, chunk))  # JSON encoded once for all sinks
+        st: dict[str, Any] | None = None
+        if status:
+            self._last_status = time.monotonic()
+            extra = self._overload_alarms(self.overload())
+            msgs += self._messages(extra, None)  # counted in the status
+            st = self.status()
+            extra.append(Result("status", self.c.last_cycle or 0,
+                                {k: v for k, v in st.items() if k != "machine"}))
+            msgs += self._messages(extra[-1:], None)
+            if repeats is not None:
+                repeats += self._plain_messages(extra, None)
         for s in self.sinks:
             s.write(repeats if repeats is not None and getattr(s, "replays", False) else msgs,
                     chunk)
+        if st is not None:
+            self._status_written(st)
 
     def _plain_messages(self, results: list[Result], chunk: Chunk | None
                         ) -> list[dict[str, Any]]:
@@ -260,12 +285,19 @@ class EdgeRuntime:
                 results += self._gap(run.gap_before)
             for p in self.processors:
                 results += p.process(sub)
-            self._emit(results, sub)
             self.c.cycles += len(sub)
             self.c.last_cycle = sub.last_cycle
             if getattr(self.source, "live", False):  # device clock vs edge clock
                 self.c.age_s = (time.time_ns() - int(sub.time_ns[-1])) / 1e9
-        self.c.chunks += 1
+            last = run is upd.runs[-1]
+            if last:
+                self.c.chunks += 1
+            # a status that is due goes out with the chunk's last results
+            self._emit(results, sub, status=last and time.monotonic() - self._last_status
+                       >= self.status_every_s * (1.0 - self.STATUS_EARLY))
+        if not upd.runs:  # only late or repeated rows (counted by the tracker)
+            self.c.chunks += 1
+            self._maybe_status()
         if chunk.received_ns:
             # arrival of the data (a live source: its first message) -> results handed to
             # every sink (the MQTT sink publishes in write()); the checkpoint comes after
@@ -274,7 +306,6 @@ class EdgeRuntime:
         self._maybe_checkpoint(chunk.cycle_time_s)
         self.c.busy_s += time.perf_counter() - t0
         self.c.cpu_s += time.thread_time() - c0
-        self._maybe_status()
 
     def _gap(self, gap: CounterGap) -> list[Result]:
         out = [Result("gap", gap.before_cycle, {
@@ -485,22 +516,27 @@ class EdgeRuntime:
             "issues": issues,
         }
 
+    @property
+    def status_due(self) -> bool:
+        """A status is due (``status_every_s`` passed since the last)."""
+        return time.monotonic() - self._last_status >= self.status_every_s
+
+    STATUS_EARLY = 0.2
+    """A chunk carries the status once this share of ``status_every_s`` is left: chunks
+    that come about as often as the status would otherwise miss it by a few ms in turn and
+    leave it to an idle tick, in a batch of its own."""
+
     def _maybe_status(self, *, force: bool = False) -> None:
-        now = time.monotonic()
-        if not force and now - self._last_status < self.status_every_s:
-            return
-        self._last_status = now
-        alarms = self._overload_alarms(self.overload())
-        if alarms:
-            self._emit(alarms, None)
-        st = self.status()
+        if force or self.status_due:
+            self._emit([], None, status=True)
+
+    def _status_written(self, st: dict[str, Any]) -> None:
+        """``status.json`` and the ``on_status`` callback, after the status was emitted."""
         if self._status_file is not None:
             # strict JSON: orjson writes a value not known yet (NaN) as null (RFC 8259 has no
             # NaN), as the results are encoded
             self._status_file.write(orjson.dumps(st, option=orjson.OPT_INDENT_2
                                                  | orjson.OPT_SERIALIZE_NUMPY, default=str))
-        self._emit([Result("status", self.c.last_cycle or 0,
-                           {k: v for k, v in st.items() if k not in ("machine",)})], None)
         if self._on_status is not None:
             self._on_status(st)
 
