@@ -7,6 +7,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 
 from cnctwin.edge import CycleTracker, EdgeRuntime, ReplaySource, TorqueProcessor
 from cnctwin.recording import Recording
@@ -32,6 +34,41 @@ def test_tracker_wrap_gap_late() -> None:
     c = tr.update([7, 8])  # 7 repeated across chunks: late, 8 continues
     assert c.late == 1 and c.cycles.tolist() == [M + 8] and c.runs[0].gap_before is None
     assert tr.missing_cycles == 3 and tr.late == 2
+
+
+@settings(max_examples=200, deadline=None)
+@given(steps=st.lists(st.sampled_from([1, 1, 1, 1, 1, 1, 2, 40, 0, -1, -3]), min_size=1,
+                      max_size=120),
+       cuts=st.lists(st.integers(1, 30), min_size=1, max_size=40),
+       start=st.integers(0, 999), modulus=st.sampled_from([0, 1000]))
+@example(steps=[1, 1, 1, 1, -3, 4], cuts=[6], start=997, modulus=1000)  # late across a wrap
+@example(steps=[1, 1, 1, 1, -3, 4], cuts=[4, 1, 1], start=997, modulus=1000)
+def test_tracker_recovers_the_true_cycles(steps: list[int], cuts: list[int], start: int,
+                                          modulus: int) -> None:
+    """Any mix of runs in a row (most chunks), gaps, repeats and late rows, cut into chunks
+    at random and counted modulo 1000 (a wrap every 1000 cycles): the tracker gives back the
+    true cycles that are newer than all before them, and counts the rest as late and every
+    jump as a gap."""
+    true = start + np.cumsum(steps)
+    raw = true % modulus if modulus else true
+    tr = CycleTracker(modulus=modulus)
+    kept: list[int] = []
+    k = 0
+    for n in cuts * (len(raw) // sum(cuts) + 1):
+        if k >= len(raw):
+            break
+        upd = tr.update(raw[k:k + n])
+        kept += upd.cycles.tolist()
+        assert sum(r.stop - r.start for r in upd.runs) == upd.cycles.size
+        k += n
+    newest = np.maximum.accumulate(true)
+    newer = np.concatenate([[True], true[1:] > newest[:-1]])
+    offset = int(true[0]) - int(raw[0])  # the tracker counts from the first raw value
+    assert kept == (true[newer] - offset).tolist()
+    assert tr.late == int((~newer).sum())
+    jumps = np.diff(true[newer])
+    assert len(tr.gaps) == int((jumps > 1).sum())
+    assert tr.missing_cycles == int((jumps[jumps > 1] - 1).sum())
 
 
 def test_runtime_flags_gap_and_never_invents(wear_recording: Recording,

@@ -115,20 +115,37 @@ class CycleTracker:
         """
         raw = np.asarray(raw_cycles, dtype=np.int64).ravel()
         n = raw.size
+        last_raw = self._last_raw
+        if n and self.last_cycle is not None \
+                and int(raw[0]) + self._offset == self.last_cycle + 1 \
+                and (not self.modulus or (last_raw is not None
+                                          and int(raw[0]) == last_raw + 1)) \
+                and int(raw[-1]) - int(raw[0]) == n - 1 \
+                and (n == 1 or not (raw[1:] - raw[:-1] != 1).any()):
+            # the usual chunk: the next cycles in a row, no wrap, gap or late row (the
+            # general path below gives the same, with ~15 array operations more)
+            cyc = raw + self._offset
+            self.last_cycle = int(cyc[-1])
+            if self.modulus:
+                self._last_raw = int(raw[-1])
+            return TrackerUpdate(cyc, np.ones(n, dtype=bool), [CycleRun(0, n, int(cyc[0]),
+                                                                        None)], 0, 0)
         unwrapped = np.empty(n, dtype=np.int64)
         wraps = 0
         half = self.modulus // 2
-        last_raw = self._last_raw
         offset = self._offset
         if self.modulus:
-            # vectorized unwrap: wrap where the step (from the previous raw value) < -half
+            # vectorized unwrap, each step (from the previous raw value) to the nearest:
+            # below -half the counter wrapped; above +half a late row from before the wrap
+            # came after it (back across the wrap, undone by the next step)
             prev = np.empty(n, dtype=np.int64)
             if n:
                 prev[0] = raw[0] if last_raw is None else last_raw
                 prev[1:] = raw[:-1]
-            wrap_at = (raw - prev) < -half
+            step = raw - prev
+            wrap_at = (step < -half).astype(np.int64) - (step > half)
             wraps = int(wrap_at.sum())
-            unwrapped = raw + (offset + np.cumsum(wrap_at, dtype=np.int64) * self.modulus)
+            unwrapped = raw + (offset + np.cumsum(wrap_at) * self.modulus)
             if n:
                 self._offset = offset + wraps * self.modulus
                 self._last_raw = int(raw[-1])

@@ -383,6 +383,24 @@ class HoleProcessor:
         chunk.derived[f"CUT_FEED|{za}"] = ctx.feed_mm_min
         chunk.derived[f"CUT_SPEED|{self.spindle}"] = ctx.speed_rpm
 
+    def __getstate__(self) -> dict[str, Any]:
+        """The state a checkpoint pickles: the buffer as one part of plain arrays (a chunk
+        pickles its empty event table, ~0.13 ms each; a hole's worth of 1 s chunks cost
+        ~0.5 ms per checkpoint, 0.05 ms so)."""
+        state = dict(self.__dict__)
+        if self._parts:
+            cols, cyc, t = self._buffer()
+            last = self._parts[-1]
+            state["_parts"] = [(cyc, t, cols, last.cycle_time_s, last.machine)]
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        parts = [p if isinstance(p, Chunk) else  # (a checkpoint of an earlier version)
+                 Chunk(p[0], p[1], p[2], cycle_time_s=p[3], machine=p[4])
+                 for p in state.get("_parts", [])]
+        self.__dict__.update(state)
+        self._parts = parts
+
     def _buffer(self) -> tuple[dict[str, NDArray[np.float64]], NDArray[np.int64],
                                NDArray[np.int64]]:
         """The buffered columns, cycles and times as contiguous arrays."""
