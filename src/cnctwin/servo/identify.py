@@ -236,6 +236,30 @@ _RAMP = np.arange(512, dtype=np.float64)
 _RAMP_STARTS = np.array([0, _RAMP.size], dtype=np.int64)
 
 
+def _single_from_double(
+    p2: FloatArray, local_fit: Callable[[FloatArray, bool], tuple[FloatArray, float, FloatArray]],
+    cost: Callable[[FloatArray], float],
+) -> tuple[FloatArray, float, FloatArray]:
+    """The single moving average fitted from the double one's parameters ``p2`` (windows
+    w1, w2, then delay, PT1s, second delay): its window of the same variance,
+    sqrt(w1^2 + w2^2 - 1) samples, held, then freed, then Nelder-Mead; the delay keeps the
+    total lag ((w - 1) / 2 per average)."""
+    w1, w2 = float(p2[0]), float(p2[1])
+    w = float(round(math.sqrt(max(w1 * w1 + w2 * w2 - 1.0, 1.0))))
+    x0 = np.concatenate([[w], np.asarray(p2[2:], dtype=float)])
+    x0[1] = max(float(p2[2]) + (w1 + w2 - 2.0) / 2.0 - (w - 1.0) / 2.0, 0.0)
+    xs, c, jac = local_fit(x0, True)
+    xf, cf, jf = local_fit(xs, False)
+    if cf < c:
+        xs, c, jac = xf, cf, jf
+    nm = optimize.minimize(cost, xs, method="Nelder-Mead",
+                           options={"xatol": 1e-6, "fatol": 0.0, "maxiter": 150,
+                                    "adaptive": True})
+    if nm.fun < c:
+        xs, c = np.asarray(nm.x, dtype=float), float(nm.fun)
+    return xs, c, jac
+
+
 def chain_lag_cycles(jerk_type: str, params: FloatArray) -> float:
     """Lag of a setpoint chain behind a ramp once settled [cycles] (its DC group delay).
 
@@ -447,6 +471,18 @@ def fit_setpoint_chain(
         if res2.fun > best_fit[1]:
             res2.x, res2.fun = best_fit[0], best_fit[1]
         fits[jt] = (np.asarray(res2.x, dtype=float), float(res2.fun))
+        if jt == "double_moving_average" and "moving_average" in fits \
+                and fits[jt][1] < fits["moving_average"][1]:
+            # two averages in series look like one of the same variance ((w^2 - 1) / 12
+            # each): a start there for the single average, whose own grid starts may all
+            # have missed its window (an 18 ms filter, 9 cycles, fitted from windows 1-6 as
+            # 8.5 cycles + PT1s, rms 2.6x the double's: then taken for a double average)
+            ma = _single_from_double(fits[jt][0], lambda x, f: local_fit(
+                x, f, "moving_average", resid_of("moving_average")),
+                cost_of("moving_average"))
+            if ma[1] < fits["moving_average"][1]:
+                fits["moving_average"] = (ma[0], ma[1])
+                jacs["moving_average"] = ma[2]
         # a model that explains the setpoint lag to 1e-7 of its size (or to the quantization of
         # the signals) is kept; more complex
         # models are not tried (they could only be chosen if clearly better)
@@ -818,7 +854,9 @@ class AxisFrictionFit:
         (weight/gravity) offset [signal unit] (0 if not fitted).
     se_coulomb, se_viscous, se_offset : float
         Standard errors: bootstrap over runs, times ``sqrt(n / (n - p))`` (HC1; MacKinnon &
-        White 1985, J. Econometrics 29: the bootstrap's variance is low by (n - p) / n).
+        White 1985, J. Econometrics 29: the bootstrap's variance is low by (n - p) / n);
+        with fewer than :data:`FEW_RUNS_DOF` residual degrees of freedom the noise within
+        the runs (their batch means) propagated through the fit instead.
     n_runs : int
         Constant-velocity runs used.
     signal : str
@@ -1111,11 +1149,58 @@ def fit_axis_friction(
     # the pairs bootstrap estimates the sandwich (HC0) variance, which is low by (n - p) / n
     # for few runs (an axis test gives one run per stroke: 10 for 5 feeds); HC1's factor
     se = se * math.sqrt(vm.size / (vm.size - p))
+    if vm.size - p < FEW_RUNS_DOF:
+        # few runs (a production job's air moves: 4 runs, 1 residual degree of freedom):
+        # the resamples agree by chance (u near zero) or not at all, so the noise of the run
+        # means themselves, propagated through the weighted least squares, is the u
+        noise = _run_noise_se(effort, [r for r, k in zip(runs, ok, strict=True) if k],
+                              design(vm), wm**2)
+        se = np.where(np.isfinite(noise), noise, se)
     return AxisFrictionFit(
         float(coef[0]), float(coef[1]), float(coef[2]) if both else 0.0, float(se[0]),
         float(se[1]), float(se[2]) if both else float("nan"), int(vm.size), signal, unit,
         tuple(vm.tolist()), tuple(tm.tolist()), tuple((wm**2).tolist()),
     )
+
+
+FEW_RUNS_DOF = 3
+"""Residual degrees of freedom (runs - parameters) below which a friction fit's u is the
+propagated noise of its run means, not the bootstrap over runs: a variance estimated with
+1-2 degrees of freedom scatters by more than 80 % of itself. Over 24 draws of a production
+job (4 runs, benchmarks/bench_production_friction.py) the bootstrap's smallest u was 0.06 of
+the error's scatter and its coverage 83-96 % at 1.96 u; the propagated noise: 96-100 %,
+rms z 0.69-0.93."""
+
+
+def _run_noise_se(effort: FloatArray, runs: list[slice], x: FloatArray, w: FloatArray,
+                  blocks: int = 8) -> FloatArray:
+    """Standard errors of a weighted least-squares fit of run means that the noise within
+    the runs alone leaves: each run mean's variance from its batch means (``blocks`` equal
+    parts: their scatter keeps the autocorrelated noise and a ripple longer than a sample,
+    which the samples' own variance would understate), propagated as
+    ``(X'WX)^-1 X'W diag(var) W X (X'WX)^-1`` (W the runs' weights). NaN for a run too short
+    to split.
+
+    References
+    ----------
+    G. S. Fishman, "Discrete-Event Simulation", Springer 2001, §6.6 (batch means).
+    """
+    var = np.empty(len(runs))
+    for k, r in enumerate(runs):
+        y = effort[r]
+        y = y[np.isfinite(y)]
+        m = y.size // blocks
+        if m < 2:
+            return np.full(x.shape[1], np.nan)
+        bm = y[:m * blocks].reshape(blocks, m).mean(axis=1)
+        var[k] = float(bm.var(ddof=1)) / blocks
+    xtw = x.T * w
+    try:
+        inv = np.linalg.inv(xtw @ x)
+    except np.linalg.LinAlgError:
+        return np.full(x.shape[1], np.nan)
+    cov = inv @ (xtw * var) @ xtw.T @ inv
+    return np.sqrt(np.clip(np.diag(cov), 0.0, None))
 
 
 STEADY_SMOOTH_CYCLES = 25
