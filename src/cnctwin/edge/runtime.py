@@ -221,14 +221,14 @@ class EdgeRuntime:
         st: dict[str, Any] | None = None
         if status:
             self._last_status = time.monotonic()
-            extra = self._overload_alarms(self.overload())
-            msgs += self._messages(extra, None)  # counted in the status
+            alarms = self._overload_alarms(self.overload())
+            msgs += self._messages(alarms, None)  # numbered first: counted in the status
             st = self.status()
-            extra.append(Result("status", self.c.last_cycle or 0,
-                                {k: v for k, v in st.items() if k != "machine"}))
-            msgs += self._messages(extra[-1:], None)
+            report = Result("status", self.c.last_cycle or 0,
+                            {k: v for k, v in st.items() if k != "machine"})
+            msgs += self._messages([report], None)
             if repeats is not None:
-                repeats += self._plain_messages(extra, None)
+                repeats += self._plain_messages([*alarms, report], None)
         for s in self.sinks:
             s.write(repeats if repeats is not None and getattr(s, "replays", False) else msgs,
                     chunk)
@@ -293,8 +293,7 @@ class EdgeRuntime:
             if last:
                 self.c.chunks += 1
             # a status that is due goes out with the chunk's last results
-            self._emit(results, sub, status=last and time.monotonic() - self._last_status
-                       >= self.status_every_s * (1.0 - self.STATUS_EARLY))
+            self._emit(results, sub, status=last and self._status_after(1.0 - self.STATUS_EARLY))
         if not upd.runs:  # only late or repeated rows (counted by the tracker)
             self.c.chunks += 1
             self._maybe_status()
@@ -516,10 +515,14 @@ class EdgeRuntime:
             "issues": issues,
         }
 
+    def _status_after(self, share: float) -> bool:
+        """``share`` of ``status_every_s`` has passed since the last status."""
+        return time.monotonic() - self._last_status >= self.status_every_s * share
+
     @property
     def status_due(self) -> bool:
         """A status is due (``status_every_s`` passed since the last)."""
-        return time.monotonic() - self._last_status >= self.status_every_s
+        return self._status_after(1.0)
 
     STATUS_EARLY = 0.2
     """A chunk carries the status once this share of ``status_every_s`` is left: chunks

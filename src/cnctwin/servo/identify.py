@@ -236,6 +236,10 @@ _RAMP = np.arange(512, dtype=np.float64)
 _RAMP_STARTS = np.array([0, _RAMP.size], dtype=np.int64)
 
 
+_POLISH = {"xatol": 1e-6, "fatol": 0.0, "maxiter": 150, "adaptive": True}
+"""Nelder-Mead options of the last step of every setpoint-chain fit (after least squares)."""
+
+
 def _single_from_double(
     p2: FloatArray, local_fit: Callable[[FloatArray, bool], tuple[FloatArray, float, FloatArray]],
     cost: Callable[[FloatArray], float],
@@ -252,9 +256,7 @@ def _single_from_double(
     xf, cf, jf = local_fit(xs, False)
     if cf < c:
         xs, c, jac = xf, cf, jf
-    nm = optimize.minimize(cost, xs, method="Nelder-Mead",
-                           options={"xatol": 1e-6, "fatol": 0.0, "maxiter": 150,
-                                    "adaptive": True})
+    nm = optimize.minimize(cost, xs, method="Nelder-Mead", options=_POLISH)
     if nm.fun < c:
         xs, c = np.asarray(nm.x, dtype=float), float(nm.fun)
     return xs, c, jac
@@ -465,9 +467,7 @@ def fit_setpoint_chain(
                 best_fit = (xs, c)
                 jacs[jt] = jac
         assert best_fit is not None
-        res2 = optimize.minimize(cost, best_fit[0], method="Nelder-Mead",
-                                 options={"xatol": 1e-6, "fatol": 0.0, "maxiter": 150,
-                                          "adaptive": True})
+        res2 = optimize.minimize(cost, best_fit[0], method="Nelder-Mead", options=_POLISH)
         if res2.fun > best_fit[1]:
             res2.x, res2.fun = best_fit[0], best_fit[1]
         fits[jt] = (np.asarray(res2.x, dtype=float), float(res2.fun))
