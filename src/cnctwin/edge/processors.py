@@ -15,7 +15,6 @@ Each processor wraps an existing analysis instead of re-implementing it:
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Mapping
 from typing import Any
 
@@ -41,6 +40,12 @@ __all__ = ["TORQUE_FLAGS", "AnomalyProcessor", "HoleProcessor", "TorqueProcessor
 
 TORQUE_FLAGS: Mapping[int, str] = SpeedChangeFlags.CODES
 """Codes of a ``torque`` result's ``flags`` (present when any cycle is flagged)."""
+
+
+def _no_held() -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    """No cycles held back: empty cycle, current and speed arrays."""
+    return (np.empty(0, dtype=np.int64), np.empty(0, dtype=np.float64),
+            np.empty(0, dtype=np.float64))
 
 
 class TorqueProcessor:
@@ -105,7 +110,7 @@ class TorqueProcessor:
         self._fs: float | None = None
         self.accel_term = accel_term
         self._est: StreamingTorqueEstimator | None = None
-        self._pending: deque[tuple[int, float, float]] = deque()  # (cycle, i, n) held back
+        self._held = _no_held()  # cycles, current, speed held back (the derivative's lead)
         self.samples = 0
 
     def _estimator(self, chunk: Chunk) -> StreamingTorqueEstimator:
@@ -115,7 +120,7 @@ class TorqueProcessor:
                                                  accel_term=self.accel_term)
         return self._est
 
-    def _flagged(self, tau: NDArray[np.float64], n: list[float]
+    def _flagged(self, tau: NDArray[np.float64], n: NDArray[np.float64]
                  ) -> tuple[NDArray[np.float64], NDArray[np.int8]]:
         """The estimates of consecutive output cycles with their flag codes, NaN where
         flagged (the next cycle's command is known: a cycle's estimate waits for it)."""
@@ -123,62 +128,78 @@ class TorqueProcessor:
             self._flagger = SpeedChangeFlags(
                 fs_hz=self._fs or 500.0, speed_step_rpm=self.speed_step_rpm,
                 settle_s=self.settle_s, min_speed_rpm=self.min_speed_rpm)
-        flags = self._flagger.update(n, self._pending[0][2] if self._pending else None)
+        nxt = self._held[2]
+        flags = self._flagger.update(n, float(nxt[0]) if nxt.size else None)
         if flags.any():
             tau = np.where(flags == 0, tau, np.nan)
         return tau, flags
 
-    def _result(self, cycles: list[int], tau: NDArray[np.float64], flags: NDArray[np.int8],
-                i: list[float], n: list[float]) -> Result:
+    def _result(self, cycles: NDArray[np.int64], tau: NDArray[np.float64],
+                flags: NDArray[np.int8], i: NDArray[np.float64], n: NDArray[np.float64]
+                ) -> Result:
+        """The ``torque`` result (its per-cycle values as lists: a result is plain JSON
+        values, for any sink)."""
+        c0 = int(cycles[0])
         payload: dict[str, Any] = {
-            "spindle": self.spindle, "first_cycle": cycles[0], "n": len(cycles),
-            "torque_nm": tau.tolist(), "speed_rpm": n, "current_a": i,
+            "spindle": self.spindle, "first_cycle": c0, "n": int(cycles.size),
+            "torque_nm": tau.tolist(), "speed_rpm": n.tolist(), "current_a": i.tolist(),
             "units": {"torque_nm": "Nm", "speed_rpm": "rpm", "current_a": "A"}}
         if flags.any():
             payload["flags"] = flags.tolist()
-        return Result("torque", cycles[0], payload)
+        return Result("torque", c0, payload)
 
     def process(self, chunk: Chunk) -> list[Result]:
         if self.i_col not in chunk.signals or self.n_col not in chunk.signals:
             raise ConfigError(f"the torque processor needs {self.i_col!r} and {self.n_col!r}; "
                               f"the stream has {sorted(chunk.signals)}")
         est = self._estimator(chunk)
-        i = chunk.signals[self.i_col]
-        n = chunk.signals[self.n_col]
+        i = np.asarray(chunk.signals[self.i_col], dtype=np.float64)
+        n = np.asarray(chunk.signals[self.n_col], dtype=np.float64)
         tau = est.update(i, n)
         self.samples += tau.size
-        held = list(self._pending)
-        cyc = [c for c, _, _ in held] + chunk.cycles.tolist()
-        ii = [a for _, a, _ in held] + i.tolist()
-        nn = [b for _, _, b in held] + n.tolist()
+        hc, hi, hn = self._held
+        off = hc.size
+        if off:
+            cyc = np.concatenate([hc, chunk.cycles])
+            ii = np.concatenate([hi, i])
+            nn = np.concatenate([hn, n])
+        else:
+            cyc, ii, nn = chunk.cycles, i, n
         k = tau.size
-        self._pending = deque(zip(cyc[k:], ii[k:], nn[k:], strict=True))
+        self._held = (cyc[k:].copy(), ii[k:].copy(), nn[k:].copy())
         res = None
         if k:
             tau, flags = self._flagged(tau, nn[:k])
             res = self._result(cyc[:k], tau, flags, ii[:k], nn[:k])
         derived = np.full(len(chunk), np.nan)
         # estimates for this chunk's own cycles (the held-back one of the last chunk came out)
-        off = len(held)
         own = tau[off:] if k > off else np.empty(0)
         derived[:own.size] = own
         chunk.derived[self.column] = derived
         if off and k >= off:  # the previous chunk's held-back cycle came out now
-            chunk.late[self.column] = (held[-1][0], float(tau[off - 1]))
+            chunk.late[self.column] = (int(hc[-1]), float(tau[off - 1]))
         return [res] if res is not None else []
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        pending = state.pop("_pending", None)  # a checkpoint of an earlier version
+        if pending is not None:
+            rows = list(pending)
+            state["_held"] = (np.array([r[0] for r in rows], dtype=np.int64),
+                              np.array([r[1] for r in rows], dtype=np.float64),
+                              np.array([r[2] for r in rows], dtype=np.float64))
+        self.__dict__.update(state)
 
     def _flush(self) -> list[Result]:
         if self._est is None:
             return []
         tau = self._est.flush()
-        held = list(self._pending)
-        self._pending.clear()
+        hc, hi, hn = self._held
+        self._held = _no_held()
         self.samples += tau.size
-        if not tau.size or not held:
+        if not tau.size or not hc.size:
             return []
-        n = [b for _, _, b in held]
-        tau, flags = self._flagged(tau, n)
-        return [self._result([c for c, _, _ in held], tau, flags, [a for _, a, _ in held], n)]
+        tau, flags = self._flagged(tau, hn)
+        return [self._result(hc, tau, flags, hi, hn)]
 
     def gap(self, gap: CounterGap) -> list[Result]:
         out = self._flush()
