@@ -221,9 +221,19 @@ def test_a_machine_that_fails_in_the_shared_thread_ends_alone() -> None:
 
     class Hub:
         notify: Any = None
+        driven = False
 
         def take_touched(self) -> set[Any]:
             return set()
+
+        def drive(self) -> None:  # the machines are built: the loop does the socket work
+            self.driven = True
+
+        def io(self) -> None:
+            assert self.driven
+
+        def socket(self) -> Any:
+            return None
 
     hub = Hub()
 

@@ -313,3 +313,65 @@ def test_a_machines_own_client_id_is_refused_in_a_plant(broker: Broker, tmp_path
         "their worker's MQTT connection and session (client id cnctwin-edge-plant-" \
         in proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+def test_a_driven_hub_reconnects_after_a_broker_restart_and_loses_nothing(
+        persistent_broker: Broker, signals: Recording, reference: list[dict[str, Any]],
+        tmp_path: Path) -> None:
+    """Once its machines are built the worker's thread drives the hub's socket itself (no
+    network thread); the broker stops mid-stream and comes back (its persistence keeps the
+    session and what was not acknowledged): the hub reconnects on its own (paho's back-off:
+    1 s, then 2 s: data again within 3 s, inside the machines' idle timeout), and every
+    machine gives exactly the results of its replay."""
+    broker = persistent_broker
+    machines = range(1, 4)
+    pub = publisher(broker.port)
+    for k in machines:
+        pub.publish(_topics(k)[0], _metadata(k), qos=1, retain=True).wait_for_publish(5)
+    hub = MqttHub("127.0.0.1", broker.port, client_id="plant-test-driven",
+                  session_expiry_s=600)
+    stop = threading.Event()
+    reports: list[tuple[str, str, Any]] = []
+
+    def build(k: int) -> Any:
+        def make() -> EdgeRuntime:
+            src = DatabusSource("127.0.0.1", broker.port, metadata_topic=_topics(k)[0],
+                                machine=f"mill-{k}", idle_timeout_s=6.0, hub=hub)
+            src.start()
+            d = tmp_path / f"mill-{k}"
+            return EdgeRuntime(src, _processors(), [JsonLinesSink(d / "results.jsonl")],
+                               state_dir=d)
+        return make
+
+    runner = threading.Thread(target=run_machines, args=([(f"mill-{k}", build(k))
+                                                          for k in machines],),
+                              kwargs={"report": lambda *r: reports.append(r), "stop": stop})
+    runner.start()
+    deadline = time.monotonic() + 60
+    while sum(r[1] == "started" for r in reports) < len(machines) or not hub.driven:
+        assert time.monotonic() < deadline, reports
+        time.sleep(0.05)
+    payloads = _messages(signals)
+    half = len(payloads) // 2
+    try:
+        for j, p in enumerate(payloads):
+            if j == half:
+                broker.stop()
+                time.sleep(1.5)  # the hub's first attempt (after 1 s) fails
+                broker.start()
+                while not pub.is_connected():
+                    assert time.monotonic() < deadline + 60, "the publisher did not reconnect"
+                    time.sleep(0.05)
+            for k in machines:
+                pub.publish(_topics(k)[1], p, qos=1).wait_for_publish(10)
+            time.sleep(PER_MSG * 0.002 / 8)
+        runner.join(timeout=120)
+    finally:
+        stop.set()
+        pub.loop_stop()
+        pub.disconnect()
+    assert not runner.is_alive()
+    assert sorted(r[0] for r in reports if r[1] == "done") == [f"mill-{k}" for k in machines], \
+        reports
+    for k in machines:
+        _same_as_reference(_read(tmp_path / f"mill-{k}" / "results.jsonl"), reference)

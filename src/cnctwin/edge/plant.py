@@ -43,6 +43,7 @@ import hashlib
 import multiprocessing as mp
 import os
 import queue as queue_mod
+import select
 import signal
 import threading
 import time
@@ -309,6 +310,36 @@ class _PumpLoop:
         self.machines: dict[Any, _Pumped] = {}  # the source's hub port -> machine
         self.hubs: set[Any] = set()
         self.replays: list[_Replayed] = []
+        self.driven = False  # the hubs' socket work done by this thread (drive())
+
+    def drive(self) -> None:
+        """Every machine is built (their starts waited for the metadata, which the hubs'
+        network threads delivered): the hubs' socket work moves to this thread, which then
+        reads, routes and processes in turn; no thread takes the interpreter lock from it
+        per message (BENCHMARKS.md, "the hub driven from the worker's thread")."""
+        for h in self.hubs:
+            h.drive()
+        self.driven = True
+
+    def wait(self, wait_s: float, wake: threading.Event) -> None:
+        """Wait up to ``wait_s`` for work: a message on a hub's socket once driven, else
+        the hubs' threads (``wake``)."""
+        if not self.driven:
+            wake.wait(wait_s)
+            return
+        socks = []
+        for h in self.hubs:
+            sock = h.socket()
+            if sock is None:
+                continue
+            pending = getattr(sock, "pending", None)
+            if pending is not None and pending() > 0:
+                return  # TLS: decrypted bytes wait inside the socket object already
+            socks.append(sock)
+        if socks:
+            select.select(socks, [], [], wait_s)
+        else:  # every hub reconnecting
+            time.sleep(wait_s)
 
     def add_replay(self, name: str, rt: Any) -> None:
         try:
@@ -356,6 +387,8 @@ class _PumpLoop:
         long to wait for the next [s] (0: go on at once)."""
         touched: set[Any] = set()
         for h in self.hubs:
+            if self.driven:
+                h.io()
             touched |= h.take_touched()
         now = time.monotonic()
         for port, m in list(self.machines.items()):
@@ -469,9 +502,12 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
                     _closing(rt)
                 for rt in runtimes.values():
                     rt.stop()
+        if not loop.driven and loop.hubs and not handed and \
+                not any(th.is_alive() for th in threads):
+            loop.drive()
         wait_s = loop.step(stopping=stopped)
         if wait_s > 0:
-            wake.wait(wait_s)
+            loop.wait(wait_s, wake)
     for th in threads:
         th.join()
 

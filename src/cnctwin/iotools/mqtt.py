@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import os
 import queue
+import select
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -161,6 +162,12 @@ def _offer(q: queue.Queue[Received], item: Received) -> bool:
     return True
 
 
+RECONNECT_MIN_S = 1.0
+RECONNECT_MAX_S = 120.0
+"""paho's default reconnect delays (``reconnect_delay_set``), kept when the owner's thread
+drives a connection instead of paho's network thread."""
+
+
 class _Client:
     """A paho client whose callbacks feed a bounded queue."""
 
@@ -274,6 +281,56 @@ class _Client:
             self.client.disconnect()
         with contextlib.suppress(Exception):
             self.client.loop_stop()
+
+    # ------------------------------------------------ driven from its owner's thread
+    driven = False
+    _retry_at = 0.0
+    _retry_s = RECONNECT_MIN_S
+
+    def drive(self) -> None:
+        """Stop the network thread: from now on the owner's thread calls :meth:`io` (paho's
+        external-loop calls on the same connection and session)."""
+        if not self.driven:
+            self.client.loop_stop()  # the thread ends after its select (<= 1 s)
+            self.driven = True
+
+    def readable(self) -> bool:
+        """Bytes wait: on the socket, or decrypted already inside a TLS socket."""
+        sock = self.client.socket()
+        if sock is None:
+            return False
+        pending = getattr(sock, "pending", None)
+        if pending is not None and pending() > 0:
+            return True
+        return bool(select.select([sock], [], [], 0.0)[0])
+
+    def io(self, *, max_packets: int = 10_000) -> None:
+        """Read what arrived (messages go to ``on_message``), write what waits, keep the
+        connection alive; reconnect a lost one with paho's back-off (1 s doubling to 120 s)
+        without blocking on it."""
+        c = self.client
+        now = time.monotonic()
+        if c.socket() is None:
+            if now < self._retry_at:
+                return
+            try:
+                c.reconnect()
+            except OSError:
+                self._retry_at = now + self._retry_s
+                self._retry_s = min(2.0 * self._retry_s, RECONNECT_MAX_S)
+                return
+            self._retry_s = RECONNECT_MIN_S
+        rc = 0
+        for _ in range(max_packets):  # paho reads one packet per call with nothing in flight
+            rc = c.loop_read()
+            if rc != 0 or not self.readable():
+                break
+        if rc == 0 and c.want_write():
+            rc = c.loop_write()
+        if rc == 0:
+            rc = c.loop_misc()
+        if c.socket() is None:  # lost (paho closed it): the next attempt after the delay
+            self._retry_at = now + self._retry_s
 
 
 class _HubPort:
@@ -457,6 +514,34 @@ class MqttHub:
         if moved:
             self.notify.set()
         return self.client.subscribe(topic, qos)
+
+    @property
+    def driven(self) -> bool:
+        """Driven from its owner's thread (:meth:`drive`), no network thread."""
+        return self.client.driven
+
+    def drive(self) -> None:
+        """Hand the connection's socket work to the caller's thread: stop the network thread;
+        from now on the caller calls :meth:`io` (and may wait on :meth:`socket`). A plant
+        worker does it once its machines are built (their start waits for the metadata,
+        which the thread delivers): one thread then serves the connection and the
+        machines, with no hand-over of the interpreter lock per message."""
+        with self._start_lock:
+            if self._started:
+                self.client.drive()
+
+    def socket(self) -> Any:
+        """The connection's socket (None while reconnecting)."""
+        return self.client.client.socket()
+
+    def io(self) -> None:
+        """Socket work of a driven hub: routes what arrived (see :meth:`drive`)."""
+        if self._started and self.client.driven:
+            self.client.io()
+
+    def readable(self) -> bool:
+        """Bytes wait to be read (a TLS socket's decrypted bytes included)."""
+        return self._started and self.client.readable()
 
     def take_touched(self) -> set[_HubPort]:
         """The ports that received messages since the last call (and clear :attr:`notify`)."""
