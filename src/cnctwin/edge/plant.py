@@ -445,7 +445,9 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
     -----
     A machine whose live source shares an MQTT hub (:class:`cnctwin.iotools.mqtt.MqttHub`: a
     plant worker's machines on one broker) is driven from this function's thread once built:
-    the hub's network thread routes each message to its machine's queue, this thread runs
+    the hub routes each message to its machine's queue (its network thread while machines
+    are being built, whose start waits for the metadata; then this thread, which reads the
+    hub's socket itself: :meth:`~cnctwin.iotools.mqtt.MqttHub.drive`), this thread runs
     that machine's pipeline on it (what arrived within the source's ``batch_s`` as one
     chunk), and ticks every machine (status, sinks, idle timeout) once per ``tick_s``, the
     machines' ticks spread over it: no thread per machine. A replay at full speed (no

@@ -378,7 +378,9 @@ class MqttHub:
     Each :class:`MqttRecorder` given ``hub=`` subscribes through it; the hub's network thread
     routes every message by its topic into that recorder's queue (a dictionary lookup; no
     decoding there) and notes the recorder in :attr:`touched`, so one thread can serve all
-    machines: wait on :attr:`notify`, then poll the recorders that have messages. QoS 1
+    machines: wait on :attr:`notify`, then poll the recorders that have messages; or, after
+    :meth:`drive`, that thread does the socket work itself (:meth:`io`) and no network
+    thread runs. QoS 1
     messages are acknowledged by the recorders (manual acknowledgement, as with a connection
     of their own), so exactly-once across crashes holds per machine; with a ``client_id`` and
     ``session_expiry_s`` the broker keeps one persistent session for all of them.
