@@ -380,10 +380,10 @@ class MqttHub:
     decoding there) and notes the recorder in :attr:`touched`, so one thread can serve all
     machines: wait on :attr:`notify`, then poll the recorders that have messages; or, after
     :meth:`drive`, that thread does the socket work itself (:meth:`io`) and no network
-    thread runs. QoS 1
-    messages are acknowledged by the recorders (manual acknowledgement, as with a connection
-    of their own), so exactly-once across crashes holds per machine; with a ``client_id`` and
-    ``session_expiry_s`` the broker keeps one persistent session for all of them.
+    thread runs. QoS 1 messages are acknowledged by the recorders (manual acknowledgement,
+    as with a connection of their own), so exactly-once across crashes holds per machine;
+    with a ``client_id`` and ``session_expiry_s`` the broker keeps one persistent session
+    for all of them.
 
     Messages for a topic no recorder has claimed yet (a resumed session delivers its queue
     before the machines have subscribed, or before their metadata told them the data topics)
@@ -540,10 +540,6 @@ class MqttHub:
         """Socket work of a driven hub: routes what arrived (see :meth:`drive`)."""
         if self._started and self.client.driven:
             self.client.io()
-
-    def readable(self) -> bool:
-        """Bytes wait to be read (a TLS socket's decrypted bytes included)."""
-        return self._started and self.client.readable()
 
     def take_touched(self) -> set[_HubPort]:
         """The ports that received messages since the last call (and clear :attr:`notify`)."""
