@@ -255,6 +255,7 @@ class _Pumped:
         self.ticked = 0.0  # when its last tick was due
         self.last_data = -1e9
         self.due = 0.0  # messages wait until then (batch_s); 0: none waiting
+        self.hub = src.hub
 
     def pump(self, *, idle: bool) -> bool:
         """Process what arrived (and an idle tick if ``idle``); True when the run ended."""
@@ -406,6 +407,10 @@ class _PumpLoop:
                 m.ticked, m.next_tick = now, now + self.tick_s
                 if quiet:
                     continue
+            if self.driven:
+                # what came while the machines before it were processed (a step can take
+                # tens of ms): a batch then takes its messages up to now, as with a thread
+                m.hub.io()
             if self._over(m, functools.partial(m.pump, idle=tick)):
                 del self.machines[port]
         if self.replays:
