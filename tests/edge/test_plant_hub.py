@@ -93,6 +93,29 @@ def reference(signals: Recording, tmp_path_factory: pytest.TempPathFactory
     return ref
 
 
+def _run_on_hub(hub: MqttHub, broker: Broker, tmp_path: Path, machines: range,
+                reports: list[tuple[str, str, Any]], stop: threading.Event, *,
+                idle_timeout_s: float, batch_s: Any = lambda k: 0.0) -> threading.Thread:
+    """``run_machines`` in a thread (as a plant worker runs it): live machines ``mill-<k>``
+    on ``hub``, each with the test's processors and its results in JSON lines."""
+    def build(k: int) -> Any:
+        def make() -> EdgeRuntime:
+            src = DatabusSource("127.0.0.1", broker.port, metadata_topic=_topics(k)[0],
+                                machine=f"mill-{k}", idle_timeout_s=idle_timeout_s, hub=hub,
+                                batch_s=batch_s(k))
+            src.start()
+            d = tmp_path / f"mill-{k}"
+            return EdgeRuntime(src, _processors(), [JsonLinesSink(d / "results.jsonl")],
+                               state_dir=d)
+        return make
+
+    runner = threading.Thread(target=run_machines, args=([(f"mill-{k}", build(k))
+                                                          for k in machines],),
+                              kwargs={"report": lambda *r: reports.append(r), "stop": stop})
+    runner.start()
+    return runner
+
+
 def _same_as_reference(msgs: list[dict[str, Any]], ref: list[dict[str, Any]]) -> None:
     seqs = [m["seq"] for m in msgs]
     assert len(seqs) == len(set(seqs)), "a seq was given to two messages"
@@ -127,21 +150,8 @@ def test_six_machines_share_one_connection_and_one_thread(
     stop = threading.Event()
     reports: list[tuple[str, str, Any]] = []
 
-    def build(k: int) -> Any:
-        def make() -> EdgeRuntime:
-            src = DatabusSource("127.0.0.1", broker.port, metadata_topic=_topics(k)[0],
-                                machine=f"mill-{k}", idle_timeout_s=2.0, hub=hub,
-                                batch_s=0.25 if k > 3 else 0.0)
-            src.start()
-            d = tmp_path / f"mill-{k}"
-            return EdgeRuntime(src, _processors(), [JsonLinesSink(d / "results.jsonl")],
-                               state_dir=d)
-        return make
-
-    runner = threading.Thread(target=run_machines, args=([(f"mill-{k}", build(k))
-                                                          for k in machines],),
-                              kwargs={"report": lambda *r: reports.append(r), "stop": stop})
-    runner.start()
+    runner = _run_on_hub(hub, broker, tmp_path, machines, reports, stop, idle_timeout_s=2.0,
+                         batch_s=lambda k: 0.25 if k > 3 else 0.0)
     deadline = time.monotonic() + 60
     while sum(r[1] == "started" for r in reports) < len(machines):
         assert time.monotonic() < deadline, reports
@@ -333,20 +343,7 @@ def test_a_driven_hub_reconnects_after_a_broker_restart_and_loses_nothing(
     stop = threading.Event()
     reports: list[tuple[str, str, Any]] = []
 
-    def build(k: int) -> Any:
-        def make() -> EdgeRuntime:
-            src = DatabusSource("127.0.0.1", broker.port, metadata_topic=_topics(k)[0],
-                                machine=f"mill-{k}", idle_timeout_s=6.0, hub=hub)
-            src.start()
-            d = tmp_path / f"mill-{k}"
-            return EdgeRuntime(src, _processors(), [JsonLinesSink(d / "results.jsonl")],
-                               state_dir=d)
-        return make
-
-    runner = threading.Thread(target=run_machines, args=([(f"mill-{k}", build(k))
-                                                          for k in machines],),
-                              kwargs={"report": lambda *r: reports.append(r), "stop": stop})
-    runner.start()
+    runner = _run_on_hub(hub, broker, tmp_path, machines, reports, stop, idle_timeout_s=6.0)
     deadline = time.monotonic() + 60
     while sum(r[1] == "started" for r in reports) < len(machines) or not hub.driven:
         assert time.monotonic() < deadline, reports
