@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 
 from cnctwin.analysis.segments import (
+    centered_mean,
     cutting_regions,
     hysteresis_mask,
     runs,
@@ -196,3 +197,19 @@ def test_spindle_actual_speed_from_a_wrapped_angle_with_a_gap() -> None:
     # without ENC_POS there is no actual speed
     assert spindle_actual_speed_rpm(Recording.from_arrays(cycles, {"CMD_SPEED|SP1": speed})) \
         is None
+
+
+@pytest.mark.parametrize("w", [1, 3, 4, 10, 11])
+@pytest.mark.parametrize("n", [1, 2, 9, 2300])
+@pytest.mark.parametrize("nans", [False, True])
+def test_centered_mean_is_pandas_centred_rolling_mean(w: int, n: int, nans: bool) -> None:
+    """``centered_mean`` (the hole contact search's smoothing and ``_rolling``'s mean) gives
+    pandas' centred rolling mean (min_periods=1), the one both used before (a reference
+    computed by another library, to 1e-12); NaNs skipped, a window of only NaNs NaN."""
+    a = np.random.default_rng(n + w).normal(8.0, 2.0, n)
+    if nans:
+        a[::3] = np.nan
+        a[n // 2:n // 2 + 12] = np.nan
+    ref = pd.Series(a).rolling(w, center=True, min_periods=1).mean().to_numpy()
+    np.testing.assert_allclose(centered_mean(a, w), ref, rtol=1e-12, atol=1e-12)
+

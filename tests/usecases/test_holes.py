@@ -291,15 +291,3 @@ def test_a_tool_table_keeps_an_end_mill_plunge_out_of_the_holes(tmp_path: Path) 
     rows = [json.loads(x) for x in (tmp_path / "edge").glob("*.jsonl").__next__().read_text(
         ).splitlines() if x.strip()]
     assert sum(r.get("kind") == "hole" for r in rows) == 2
-
-
-@pytest.mark.parametrize("w", [3, 4, 10, 11])
-@pytest.mark.parametrize("n", [1, 2, 9, 2300])
-def test_contact_smoothing_is_pandas_centred_rolling_mean(w: int, n: int) -> None:
-    """The contact search's smoothing gives pandas' centred rolling mean (min_periods=1),
-    the one it used before (a reference computed by another library, to 1e-12)."""
-    from cnctwin.usecases.holes import _centered_mean
-
-    a = np.random.default_rng(n + w).normal(8.0, 2.0, n)
-    ref = pd.Series(a).rolling(w, center=True, min_periods=1).mean().to_numpy()
-    np.testing.assert_allclose(_centered_mean(a, w), ref, rtol=1e-12, atol=1e-12)

@@ -42,7 +42,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from cnctwin.analysis.segments import spindle_speed_rpm
+from cnctwin.analysis.segments import centered_mean, spindle_speed_rpm
 from cnctwin.exceptions import ConfigError, SignalNotFoundError
 from cnctwin.recording import Recording
 from cnctwin.spindle import SpindleModel
@@ -429,19 +429,6 @@ def _active_tool(ev: HoleEvents, cycles: NDArray[np.int64]) -> list[int | None]:
     return [int(tv[j]) if j >= 0 else None for j in idx.tolist()]
 
 
-def _centered_mean(a: NDArray[np.float64], w: int) -> NDArray[np.float64]:
-    """Mean over a centred window of ``w`` samples, fewer at the ends: pandas'
-    ``rolling(w, center=True, min_periods=1).mean()`` (sample i averages i - w//2 to
-    i + (w-1)//2) from one cumulative sum, without a Series (~0.2 ms less per call)."""
-    n = a.size
-    c = np.concatenate(([0.0], np.cumsum(a)))
-    i = np.arange(n)
-    lo = np.maximum(i - w // 2, 0)
-    hi = np.minimum(i + (w - 1) // 2 + 1, n)
-    out: NDArray[np.float64] = (c[hi] - c[lo]) / (hi - lo)
-    return out
-
-
 def _contact(
     current: NDArray[np.float64], lo: int, hi: int, fs_hz: float
 ) -> int | None:
@@ -450,7 +437,7 @@ def _contact(
     if a.size < 10 or not np.isfinite(a).all():
         return None
     k = max(5, min(round(0.1 * fs_hz), a.size // 5))
-    smv = _centered_mean(a, max(3, round(0.02 * fs_hz)))
+    smv = centered_mean(a, max(3, round(0.02 * fs_hz)))
     air = float(np.median(smv[:k]))
     noise = 1.4826 * float(np.median(np.abs(a[:k] - np.median(a[:k]))))
     top = float(np.quantile(smv, 0.9))
