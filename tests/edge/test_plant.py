@@ -235,6 +235,9 @@ def test_a_machine_that_fails_in_the_shared_thread_ends_alone() -> None:
         def socket(self) -> Any:
             return None
 
+        def buffered(self) -> bool:
+            return False
+
     hub = Hub()
 
     class Runtime:

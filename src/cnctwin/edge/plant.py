@@ -328,15 +328,9 @@ class _PumpLoop:
         if not self.driven:
             wake.wait(wait_s)
             return
-        socks = []
-        for h in self.hubs:
-            sock = h.socket()
-            if sock is None:
-                continue
-            pending = getattr(sock, "pending", None)
-            if pending is not None and pending() > 0:
-                return  # TLS: decrypted bytes wait inside the socket object already
-            socks.append(sock)
+        if any(h.buffered() for h in self.hubs):
+            return  # TLS: decrypted bytes wait inside a socket object already
+        socks = [s for s in (h.socket() for h in self.hubs) if s is not None]
         if socks:
             select.select(socks, [], [], wait_s)
         else:  # every hub reconnecting

@@ -294,15 +294,17 @@ class _Client:
             self.client.loop_stop()  # the thread ends after its select (<= 1 s)
             self.driven = True
 
+    def buffered(self) -> bool:
+        """Decrypted bytes wait inside a TLS socket (a ``select`` on it does not see them)."""
+        pending = getattr(self.client.socket(), "pending", None)
+        return pending is not None and pending() > 0
+
     def readable(self) -> bool:
         """Bytes wait: on the socket, or decrypted already inside a TLS socket."""
         sock = self.client.socket()
         if sock is None:
             return False
-        pending = getattr(sock, "pending", None)
-        if pending is not None and pending() > 0:
-            return True
-        return bool(select.select([sock], [], [], 0.0)[0])
+        return self.buffered() or bool(select.select([sock], [], [], 0.0)[0])
 
     def io(self, *, max_packets: int = 10_000) -> None:
         """Read what arrived (messages go to ``on_message``), write what waits, keep the
@@ -535,6 +537,10 @@ class MqttHub:
     def socket(self) -> Any:
         """The connection's socket (None while reconnecting)."""
         return self.client.client.socket()
+
+    def buffered(self) -> bool:
+        """Decrypted bytes wait inside its TLS socket: read them before waiting on it."""
+        return self.client.buffered()
 
     def io(self) -> None:
         """Socket work of a driven hub: routes what arrived (see :meth:`drive`)."""
