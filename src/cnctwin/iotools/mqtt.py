@@ -30,6 +30,7 @@ from types import TracebackType
 from typing import Any
 
 from cnctwin.exceptions import ConfigError, FormatError
+from cnctwin.iotools._mqtt_read import receiving_client
 from cnctwin.iotools.databus import DatabusColumns, DatabusDecoder, merge_columns
 from cnctwin.recording import Recording
 
@@ -196,7 +197,8 @@ class _Client:
         self._sub_lock = threading.Lock()
         # MQTT 5 for a persistent session: the broker keeps the subscriptions and queues QoS 1
         # messages for this client id while it is away (up to the expiry interval)
-        self.client = mqtt.Client(
+        # a Databus message is ~400 kB: read with one copy, not paho's ten (_mqtt_read)
+        self.client = receiving_client(mqtt)(
             callback_api_version=mqtt.CallbackAPIVersion.VERSION2, client_id=client_id,
             protocol=mqtt.MQTTv5 if self.v5 else mqtt.MQTTv311,
             manual_ack=manual_ack)
