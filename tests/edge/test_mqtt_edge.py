@@ -138,6 +138,52 @@ def test_store_and_forward_across_broker_restart(broker: Broker, tmp_path: Path)
     assert seqs == list(range(30, 80))
 
 
+def test_acknowledged_messages_leave_with_the_next_write_while_results_flow(
+        broker: Broker, tmp_path: Path) -> None:
+    """While results flow, the messages the broker acknowledged are deleted in the next
+    write's transaction (one commit per chunk), counted as sent meanwhile; a lost connection
+    does not send them again; once the writes stop a pump deletes them."""
+    sink = MqttSink("127.0.0.1", broker.port, state_dir=tmp_path, machine="m1", retry_s=0.2)
+    rx = Collector(broker.port)
+    removes: list[int] = []
+    real_remove = sink.queue.remove
+    sink.queue.remove = lambda ids: (removes.append(len(ids)), real_remove(ids))[1]
+    try:
+        sink.write(_msgs(0, 1), None)
+        assert sink.flush(timeout_s=10)  # connected; the flush deletes at once
+        removes.clear()
+        for k in range(1, 6):  # a chunk's results, then the idle pumps of its period
+            sink.write(_msgs(k * 10, 3), None)
+            deadline = time.monotonic() + 5
+            while sink.status()["queued"] and time.monotonic() < deadline:
+                sink.pump()
+                time.sleep(0.01)
+            st = sink.status()
+            assert (st["queued"], st["sent"]) == (0, 1 + 3 * k)
+        assert removes == []  # no transaction of their own
+        assert len(sink.queue) == 3  # the last chunk's, deleted with the next write
+        sink._drop_client()  # a lost connection: the acknowledged ones are not sent again
+        assert len(sink.queue) == 0 and removes == [3]
+        sink.write(_msgs(100, 2), None)
+        assert sink.flush(timeout_s=10)
+        assert rx.wait(lambda: len(rx.of_kind("torque")) >= 18)
+        time.sleep(0.3)
+        seqs = sorted(m["seq"] for m in rx.of_kind("torque"))
+        assert seqs == [0, *(s for k in range(1, 6) for s in range(k * 10, k * 10 + 3)),
+                        100, 101]  # each once
+        # no write for REMOVE_IDLE_S: the pump deletes them
+        sink.write(_msgs(200, 1), None)
+        sink.REMOVE_IDLE_S = 0.2
+        deadline = time.monotonic() + 5
+        while len(sink.queue) and time.monotonic() < deadline:
+            sink.pump()
+            time.sleep(0.05)
+        assert len(sink.queue) == 0 and sink.status()["sent"] == 19
+    finally:
+        rx.close()
+        sink.close(timeout_s=1)
+
+
 def test_queue_survives_restart(tmp_path: Path) -> None:
     from cnctwin.edge import ForwardQueue
 

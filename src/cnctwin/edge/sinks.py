@@ -288,6 +288,8 @@ class MqttSink:
         self._lost = threading.Event()
         self._lock = threading.Lock()
         self._acked: list[int] = []
+        self._done: list[int] = []  # queue ids acknowledged, deleted with the next write
+        self._last_write = -1e9
         self._inflight: dict[int, int] = {}  # mid -> queue id
         self._last_id = 0
         self._fresh: list[tuple[int, str, bytes]] = []  # just queued, in memory: sent w/o SELECT
@@ -324,6 +326,7 @@ class MqttSink:
             self._acked.append(mid)
 
     def _drop_client(self) -> None:
+        self._remove_done()  # acknowledged: not to be sent again from the queue
         c = self._client
         self._client = None
         self._connected.clear()
@@ -334,6 +337,9 @@ class MqttSink:
         self._last_id = 0  # re-send from the oldest queued message
         if c is not None:
             self.disconnects += 1
+            # its callbacks off first: the DISCONNECT of a live connection calls
+            # on_disconnect, which would mark the next client lost before it connects
+            c.on_connect = c.on_disconnect = c.on_publish = None
             with contextlib.suppress(Exception):  # the connection is already gone
                 c.disconnect()
             c.loop_stop()
@@ -444,8 +450,27 @@ class MqttSink:
                 self._connected.clear()
                 self._lost.set()
 
-    def pump(self) -> None:
-        """Connect if needed, remove acknowledged messages, send the next ones in order."""
+    REMOVE_IDLE_S = 2.0
+    """While results flow (a write within this time) the acknowledged messages are deleted
+    in the next write's transaction, not in a transaction of their own per pump: one SQLite
+    commit per chunk instead of two (~0.1 ms of CPU per machine-second, BENCHMARKS.md,
+    session 25). An acknowledged message not yet deleted is not sent again (a lost
+    connection deletes them first) and counts as sent in :meth:`status`."""
+
+    def _remove_done(self) -> None:
+        if self._done:
+            self.queue.remove(self._done)
+            self._done = []
+
+    def pump(self, *, remove: bool | None = None) -> None:
+        """Connect if needed, remove acknowledged messages, send the next ones in order.
+
+        Parameters
+        ----------
+        remove : bool, optional
+            Delete the acknowledged messages now; by default only when no write came
+            within :attr:`REMOVE_IDLE_S` (else the next write's transaction does it).
+        """
         self._io()
         if self._client is not None and self._lost.is_set():
             self._drop_client()
@@ -458,7 +483,12 @@ class MqttSink:
                 self._drop_client()
                 self._failed()
             return
-        self.queue.remove(self._take_acked())
+        self._done += self._take_acked()
+        if remove is None:
+            remove = time.monotonic() - self._last_write >= self.REMOVE_IDLE_S \
+                or len(self._done) >= 1000
+        if remove:
+            self._remove_done()
         self._send()
 
     def _take_acked(self) -> list[int]:
@@ -500,7 +530,11 @@ class MqttSink:
         ready = self._client is not None and self._connected.is_set() \
             and not self._lost.is_set()
         # one transaction per chunk: the acknowledged messages go out with the new ones in
-        ids = self.queue.put_many(items, remove=self._take_acked() if ready else None)
+        if ready:
+            self._done += self._take_acked()
+        ids = self.queue.put_many(items, remove=self._done or None)
+        self._done = []
+        self._last_write = time.monotonic()
         if ready:
             self._fresh = [(i, t, p) for i, (t, p) in zip(ids, items, strict=True)]
             self._send()
@@ -512,14 +546,15 @@ class MqttSink:
         """Send until the queue is empty or ``timeout_s`` passed; True if empty."""
         deadline = time.monotonic() + timeout_s
         while len(self.queue) and time.monotonic() < deadline:
-            self.pump()
+            self.pump(remove=True)
             time.sleep(0.01)
         return len(self.queue) == 0
 
     def status(self) -> dict[str, Any]:
         return {"broker": f"{self.host}:{self.port}", "connected": self.connected,
-                "queued": len(self.queue), "dropped_oldest": self.queue.dropped,
-                "sent": self.queue.sent, "connects": self.connects,
+                "queued": len(self.queue) - len(self._done),
+                "dropped_oldest": self.queue.dropped,
+                "sent": self.queue.sent + len(self._done), "connects": self.connects,
                 "disconnects": self.disconnects, "last_error": self.last_error,
                 "failed_attempts": self._failures,
                 "retry_in_s": round(max(self._delay_s - (time.monotonic()
