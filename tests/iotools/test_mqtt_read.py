@@ -161,3 +161,45 @@ def test_reader_reuses_one_buffer_and_copies_the_payload() -> None:
         c._sock = None
         a.close()
         b.close()
+
+
+def _acks(client_cls: type, stream: bytes, *, v5: bool) -> list[tuple[Any, ...]]:
+    """Three QoS 1 messages published by a client of ``client_cls``, then ``stream`` (its
+    acknowledgements) read: what its ``on_publish`` got."""
+    a, b = socket.socketpair()
+    b.setblocking(False)
+    c = client_cls(callback_api_version=mqtt.CallbackAPIVersion.VERSION2, client_id="t",
+                   protocol=mqtt.MQTTv5 if v5 else mqtt.MQTTv311)
+    got: list[tuple[Any, ...]] = []
+    c.on_publish = lambda client, userdata, mid, rc, props: got.append(
+        (mid, rc.value, str(rc), props.json()))
+    c._sock = b
+    try:
+        c._state = mqtt._ConnectionState.MQTT_CS_CONNECTED
+        mids = [c.publish("t/x", b"result", qos=1).mid for _ in range(3)]
+        assert mids == [1, 2, 3]
+        a.sendall(stream)
+        while c._packet_read() == mqtt.MQTTErrorCode.MQTT_ERR_SUCCESS:
+            pass
+    finally:
+        c._sock = None
+        a.close()
+        b.close()
+    return got
+
+
+@pytest.mark.parametrize("v5", [False, True])
+def test_publish_acknowledgements_as_in_paho(v5: bool) -> None:
+    """PUBACKs (MQTT 3.1.1: the packet id; MQTT 5 also with a reason code and properties)
+    reach on_publish as paho gives them, an unknown id not at all."""
+    acks = b"".join(b"\x40\x02" + struct.pack("!H", m) for m in (2, 99, 1))
+    if v5:
+        props = Properties(PacketTypes.PUBACK)
+        props.ReasonString = "quota"
+        body = struct.pack("!H", 3) + b"\x97" + props.pack()
+        acks += bytes([0x40]) + _varint(len(body)) + body
+    else:
+        acks += b"\x40\x02\x00\x03"
+    ref = _acks(mqtt.Client, acks, v5=v5)
+    assert [g[0] for g in ref] == [2, 1, 3]
+    assert _acks(receiving_client(mqtt), acks, v5=v5) == ref

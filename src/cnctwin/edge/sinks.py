@@ -24,6 +24,7 @@ import pandas as pd
 from cnctwin.edge.forward import ForwardQueue
 from cnctwin.edge.pipeline import Chunk, dumps, encoded
 from cnctwin.exceptions import ConfigError
+from cnctwin.iotools._mqtt_read import receiving_client
 from cnctwin.iotools.mqtt import MqttSecurity, connect_error, refusal
 from cnctwin.recording import Recording, RecordingMeta, find_gaps
 
@@ -347,7 +348,8 @@ class MqttSink:
     def _new_client(self) -> Any:
         """A paho client with this sink's user and TLS."""
         m = self._mqtt
-        c = m.Client(callback_api_version=m.CallbackAPIVersion.VERSION2)
+        # paho's client with its PUBACK read without two objects per acknowledgement
+        c = receiving_client(m)(callback_api_version=m.CallbackAPIVersion.VERSION2)
         if self.username:
             c.username_pw_set(self.username, self.password)
         if self.security is not None:
