@@ -43,15 +43,11 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
+from cnctwin._jit import lazy_njit
 from cnctwin.analysis.align import align_external, external_on_hf
 from cnctwin.analysis.correlation import plot_correlation_heatmaps
 from cnctwin.analysis.filters import fold_frequency, lowpass, stator_frequency_hz
-from cnctwin.analysis.segments import (
-    cutting_regions,
-    samples_since,
-    speed_plateaus,
-    spindle_speed_rpm,
-)
+from cnctwin.analysis.segments import cutting_regions, speed_plateaus, spindle_speed_rpm
 from cnctwin.analysis.spectra import dominant_line
 from cnctwin.exceptions import ConfigError, IdentificationError, SignalNotFoundError
 from cnctwin.recording import Recording
@@ -1836,22 +1832,39 @@ class SpeedChangeFlags:
         -------
         numpy.ndarray of int8
         """
-        nv = np.asarray(speed_rpm, dtype=np.float64)
-        flags = np.zeros(nv.size, dtype=np.int8)
+        nv = np.ascontiguousarray(speed_rpm, dtype=np.float64).reshape(-1)
+        flags = np.empty(nv.size, dtype=np.int8)
         if not nv.size:
             return flags
-        prev = np.concatenate([[nv[0] if self._last is None else self._last], nv[:-1]])
-        nxt = np.concatenate([nv[1:], [nv[-1] if next_rpm is None else next_rpm]])
-        tol = self.speed_step_rpm
-        with np.errstate(invalid="ignore"):
-            changed = ~((np.abs(nv - prev) <= tol) & (np.abs(nxt - nv) <= tol))
-        since = samples_since(changed, before=self._since)
-        flags[since <= self.settle_samples] = 1
-        with np.errstate(invalid="ignore"):
-            flags[~(np.abs(nv) >= self.min_speed_rpm)] = 2
+        first = float(nv[0]) if self._last is None else self._last
+        after = float(nv[-1]) if next_rpm is None else float(next_rpm)
+        self._since = int(_speed_flags(nv, first, after, float(self.speed_step_rpm),
+                                       float(self.min_speed_rpm), self.settle_samples,
+                                       self._since, flags))
         self._last = float(nv[-1])
-        self._since = int(since[-1])
         return flags
+
+
+def _speed_flags_py(nv: NDArray[np.float64], first: float, after: float, tol: float,
+                    min_speed: float, settle: int, since: int, out: NDArray[np.int8]) -> int:
+    """:meth:`SpeedChangeFlags.update` as one loop (compiled; every edge chunk runs it twice):
+    a sample changed when it differs from the one before (``first`` for the first) or after
+    (``after`` for the last) by more than ``tol`` or is NaN; flag 1 up to ``settle`` samples
+    after a change, 2 below ``min_speed``. Returns the samples since the last change."""
+    n = nv.size
+    for k in range(n):
+        v = nv[k]
+        p = nv[k - 1] if k > 0 else first
+        q = nv[k + 1] if k < n - 1 else after
+        since = since + 1 if abs(v - p) <= tol and abs(q - v) <= tol else 0
+        f = 1 if since <= settle else 0
+        if not abs(v) >= min_speed:  # NaN too
+            f = 2
+        out[k] = f
+    return since
+
+
+_speed_flags = lazy_njit(_speed_flags_py)
 
 
 def speed_change_flags(speed_rpm: ArrayLike, *, fs_hz: float = 500.0,

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
+from cnctwin._jit import lazy_njit
 from cnctwin.analysis.filters import lowpass
 from cnctwin.exceptions import ConfigError, SignalNotFoundError
 from cnctwin.recording import Recording
@@ -136,10 +137,23 @@ def samples_since(mask: ArrayLike, *, before: int) -> NDArray[np.int64]:
     >>> samples_since([False, True, False, False], before=5).tolist()
     [6, 0, 1, 2]
     """
-    m = np.asarray(mask, dtype=bool)
-    idx = np.arange(m.size, dtype=np.int64)
-    last = np.maximum.accumulate(np.where(m, idx, -1))
-    return np.where(last >= 0, idx - last, before + idx + 1)
+    m = np.ascontiguousarray(mask, dtype=np.bool_).reshape(-1)
+    out = np.empty(m.size, dtype=np.int64)
+    _since(m, int(before), out)
+    return out
+
+
+def _since_py(m: NDArray[np.bool_], before: int, out: NDArray[np.int64]) -> int:
+    """:func:`samples_since` as one loop (compiled: the edge calls it on every chunk);
+    returns the last count."""
+    c = before
+    for k in range(m.size):
+        c = 0 if m[k] else c + 1
+        out[k] = c
+    return c
+
+
+_since = lazy_njit(_since_py)
 
 
 def lf_on_hf(rec: Recording, code: str, axis: str | None) -> pd.Series | None:

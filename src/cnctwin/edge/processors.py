@@ -22,7 +22,8 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from cnctwin.analysis.segments import runs_of, samples_since
+from cnctwin._jit import lazy_njit
+from cnctwin.analysis.segments import runs_of
 from cnctwin.edge.cut import CutTracker
 from cnctwin.edge.pipeline import Chunk, Result
 from cnctwin.exceptions import ConfigError
@@ -596,6 +597,27 @@ HOLE_UNITS: dict[str, str] = {
 """Units of the hole-row fields (from :data:`cnctwin.usecases.holes.HOLE_COLUMNS`)."""
 
 
+def _air_samples_py(x: NDArray[np.float64], y: NDArray[np.float64], z: NDArray[np.float64],
+                    lx: float, ly: float, lz: float, step: float, still: int, after: int,
+                    since_move: int, since_down: int, out: NDArray[np.float64]
+                    ) -> tuple[int, int]:
+    """:meth:`AnomalyProcessor._air` as one loop (compiled): a sample moves when any
+    setpoint steps more than ``step`` from the one before (``lx, ly, lz`` for the first) or
+    is NaN, and goes down when Z steps below ``-step``; 1.0 where ``still`` samples passed
+    since the last move and ``after`` since the last step down. Returns both counts."""
+    for k in range(x.size):
+        dx, dy, dz = x[k] - lx, y[k] - ly, z[k] - lz
+        still_now = abs(dx) <= step and abs(dy) <= step and abs(dz) <= step
+        since_move = since_move + 1 if still_now else 0
+        since_down = 0 if dz < -step else since_down + 1
+        out[k] = 1.0 if since_move >= still and since_down >= after else 0.0
+        lx, ly, lz = x[k], y[k], z[k]
+    return since_move, since_down
+
+
+_air_samples = lazy_njit(_air_samples_py)
+
+
 def _row_payload(row: dict[str, Any]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for k, v in row.items():
@@ -838,21 +860,17 @@ class AnomalyProcessor:
         axes = [chunk.signals.get(f"DES_POS|{a}") for a in (*self.xy_axes, self.z_axis)]
         if n_rows == 0 or any(v is None for v in axes):
             return np.zeros(n_rows)
-        step = 0.05 * chunk.cycle_time_s  # 0.05 mm/s, the hole record's standstill
-        pos = np.vstack([v for v in axes if v is not None])  # X, Y, Z setpoints, a row each
-        first = pos[:, :1] if self._air_last is None else np.array(self._air_last)[:, None]
-        d = np.diff(np.hstack([first, pos]), axis=1)
-        self._air_last = tuple(pos[:, -1].tolist())
-        with np.errstate(invalid="ignore"):
-            moving = ~(np.abs(d) <= step).all(axis=0)
-            zdown = d[-1] < -step
+        x, y, z = (np.ascontiguousarray(v, dtype=np.float64) for v in axes)
         ct = chunk.cycle_time_s
-        since_move = samples_since(moving, before=self._air_since_move)
-        since_down = samples_since(zdown, before=self._air_since_down)
-        self._air_since_move, self._air_since_down = int(since_move[-1]), int(since_down[-1])
-        out = ((since_move >= round(self.air_still_s / ct))
-               & (since_down >= round(self.air_after_plunge_s / ct)))
-        return out.astype(np.float64)
+        last = (float(x[0]), float(y[0]), float(z[0])) if self._air_last is None \
+            else self._air_last
+        out = np.empty(n_rows)
+        self._air_since_move, self._air_since_down = (int(v) for v in _air_samples(
+            x, y, z, *last, 0.05 * ct,  # 0.05 mm/s, the hole record's standstill
+            round(self.air_still_s / ct), round(self.air_after_plunge_s / ct),
+            self._air_since_move, self._air_since_down, out))
+        self._air_last = (float(x[-1]), float(y[-1]), float(z[-1]))
+        return out
 
     def _alarms(self, cycles: NDArray[np.int64], sc: NDArray[np.float64],
                 x: dict[str, NDArray[np.float64]], offset: int, refr: int,
