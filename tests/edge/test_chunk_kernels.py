@@ -9,6 +9,9 @@ random chunks, must give the same values, and the chunked stream the same as one
 
 from __future__ import annotations
 
+import itertools
+from typing import Any
+
 import numpy as np
 import pandas as pd
 from hypothesis import given, settings
@@ -106,7 +109,7 @@ def test_speed_change_flags_as_the_numpy_expression(data: st.DataObject) -> None
     f = SpeedChangeFlags()
     cuts = [0, *_cuts(nv.size, data), nv.size]
     got = []
-    for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+    for a, b in itertools.pairwise(cuts):
         got += f.update(nv[a:b], float(nv[b]) if b < nv.size else None).tolist()
     assert got == want.tolist()
 
@@ -127,10 +130,79 @@ def test_anomaly_air_input_as_the_numpy_expression(data: st.DataObject) -> None:
     p = AnomalyProcessor(learn_s=0.0)
     cuts = [0, *_cuts(n, data), n]
     got = []
-    for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+    for a, b in itertools.pairwise(cuts):
         ch = Chunk(np.arange(a, b, dtype=np.int64), np.arange(a, b, dtype=np.int64) * 2_000_000,
                    {"DES_POS|X1": x[a:b], "DES_POS|Y1": y[a:b], "DES_POS|Z1": z[a:b]},
                    events=pd.DataFrame())
         got += p._air(ch).tolist()
     want = _air_numpy(x, y, z, step=0.05 * 0.002, still=150, after=500)
     assert got == want.tolist()
+
+
+class _FormerPhysicsChunks:
+    """PhysicsResidualDetector's chunk path as NumPy/SciPy code (up to session 24)."""
+
+    def __init__(self, det: Any) -> None:
+        self.d = det
+
+    def smooth(self, x: dict[str, np.ndarray]) -> np.ndarray:
+        from scipy.signal import lfilter
+
+        d = self.d
+        r = x[d.measured] - x[d.predicted]
+        a = d._alpha
+        out = np.empty_like(r)
+        if d._ewma is None:
+            out[0] = prev = float(r[0])
+            start = 1
+        else:
+            start, prev = 0, d._ewma
+        if r.size > start:
+            out[start:] = lfilter([a], [1.0, -(1.0 - a)], r[start:], zi=[(1.0 - a) * prev])[0]
+        d._ewma = float(out[-1])
+        return out
+
+    def steady(self, x: dict[str, np.ndarray]) -> np.ndarray:
+        d = self.d
+        return np.array([d._steady({d.speed: v}) for v in x[d.speed].tolist()], dtype=bool)
+
+    def score(self, x: dict[str, np.ndarray]) -> np.ndarray:
+        d = self.d
+        s = self.smooth(x)
+        ok = self.steady(x) & (x[d.gate] == 1.0)
+        std = d._std(x[d.predicted])
+        mean = d._stats.mean if d._stats.n else 0.0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = np.where(std > 0, np.abs(s - mean) / std - d.threshold_sigma, 0.0)
+        out[~ok] = np.nan
+        return out
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.data())
+def test_physics_detector_chunks_as_the_former_numpy_code(data: st.DataObject) -> None:
+    """The edge's detector (current against the twin, gated on air) scored chunk by chunk:
+    the compiled loop gives the scores of the former lfilter/NumPy code (to 1e-12 of the
+    score: the same operations in the same order, the EWMA as lfilter computes it)."""
+    from cnctwin.usecases.anomaly import PhysicsResidualDetector
+
+    speed = _speed_stream(data)
+    n = speed.size
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1)))
+    pred = 3.0 + 1e-4 * np.abs(np.nan_to_num(speed))
+    x = {"current_a": pred + rng.normal(0.0, 0.05, n), "predicted_current_a": pred,
+         "speed_rpm": speed, "air": (rng.random(n) < 0.7).astype(np.float64)}
+    make = lambda: PhysicsResidualDetector(gate="air", rel_floor=0.1,  # noqa: E731
+                                           abs_floor=0.05)
+    det, old = make(), make()
+    old._stats.update_many(np.array([0.01, -0.02, 0.03]))  # something learned, in both
+    det._stats.update_many(np.array([0.01, -0.02, 0.03]))
+    former = _FormerPhysicsChunks(old)
+    cuts = [0, *_cuts(n, data), n]
+    for a, b in itertools.pairwise(cuts):
+        part = {k: v[a:b] for k, v in x.items()}
+        got, want = det.score_chunk(part), former.score(part)
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+        assert (det._n_ref, det._n_prev, det._since_change) == (
+            old._n_ref, old._n_prev, old._since_change)

@@ -42,6 +42,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
+from cnctwin._jit import lazy_njit
 from cnctwin.exceptions import ConfigError, SignalNotFoundError
 
 if TYPE_CHECKING:
@@ -311,57 +312,41 @@ class PhysicsResidualDetector(Detector):
         mean = self._stats.mean if self._stats.n else 0.0
         return abs(s - mean) / std - self.threshold_sigma
 
-    # ------------------------------------------------------------ chunks (array code)
-    def _smooth_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> NDArray[np.float64]:
-        from scipy.signal import lfilter
-
-        r = np.asarray(x[self.measured], dtype=np.float64) - np.asarray(
-            x[self.predicted], dtype=np.float64)
-        if r.size == 0:
-            return r
-        a = self._alpha
-        out = np.empty_like(r)
-        if self._ewma is None:
-            out[0] = prev = float(r[0])
-            start = 1
-        else:
-            start, prev = 0, self._ewma
-        # e[k] = e[k-1] + a (r[k] - e[k-1]) = a r[k] + (1 - a) e[k-1]
-        if r.size > start:
-            out[start:] = lfilter([a], [1.0, -(1.0 - a)], r[start:], zi=[(1.0 - a) * prev])[0]
-        self._ewma = float(out[-1])
-        return out
-
-    def _steady_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> NDArray[np.bool_]:
-        """:meth:`_steady` of each sample; array code when the speed holds over the chunk."""
-        if self.speed is None:
-            return np.ones(len(next(iter(x.values()))), dtype=bool)
-        n = np.asarray(x[self.speed], dtype=np.float64)
-        k = n.size
-        ref, prev = self._n_ref, self._n_prev
-        if k and ref is not None and prev is not None and np.isfinite(n).all():
-            step = np.abs(np.diff(n, prepend=prev))
-            band = max(10.0 * self.speed_tol_rpm, 0.01 * abs(ref))
-            if (step <= self.speed_tol_rpm).all() and (np.abs(n - ref) <= band).all():
-                since = self._since_change + np.arange(1, k + 1)
-                self._since_change += k
-                self._n_prev = float(n[-1])
-                return since > self.settle_samples
-        key = self.speed
-        return np.array([self._steady({key: v}) for v in n.tolist()], dtype=bool)
-
-    def _open_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> NDArray[np.bool_]:
-        if self.gate is None:
-            return np.ones(len(next(iter(x.values()))), dtype=bool)
-        return np.asarray(x[self.gate], dtype=np.float64) == 1.0
+    # ------------------------------------------------------------ chunks (compiled loop)
+    def _chunk_steps(self, x: Mapping[str, NDArray[np.float64]]
+                     ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """The EWMA of the residual and whether each sample counts (speed steady, gate
+        open): :meth:`_smooth`, :meth:`_steady` and :meth:`_open` of each sample, in one
+        compiled loop (the edge runs it on every chunk)."""
+        meas = np.ascontiguousarray(x[self.measured], dtype=np.float64)
+        pred = np.ascontiguousarray(x[self.predicted], dtype=np.float64)
+        k = meas.size
+        speed = _NONE if self.speed is None else np.ascontiguousarray(x[self.speed],
+                                                                      dtype=np.float64)
+        gate = _NONE if self.gate is None else np.ascontiguousarray(x[self.gate],
+                                                                    dtype=np.float64)
+        s = np.empty(k)
+        ok = np.empty(k, dtype=np.bool_)
+        ewma, ref, prev = self._ewma, self._n_ref, self._n_prev
+        got = _residual_steps(meas, pred, speed, gate, self._alpha,
+                              ewma is not None, 0.0 if ewma is None else ewma,
+                              ref is not None, 0.0 if ref is None else ref,
+                              prev is not None, 0.0 if prev is None else prev,
+                              self._since_change, float(self.speed_tol_rpm),
+                              int(self.settle_samples), s, ok)
+        if k:
+            self._ewma = float(got[0])
+        self._n_ref = float(got[2]) if got[1] else None
+        self._n_prev = float(got[4]) if got[3] else None
+        self._since_change = int(got[5])
+        return s, ok
 
     def learn_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> None:
-        s = self._smooth_chunk(x)
-        self._stats.update_many(s[self._steady_chunk(x) & self._open_chunk(x)])
+        s, ok = self._chunk_steps(x)
+        self._stats.update_many(s[ok])
 
     def score_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> NDArray[np.float64]:
-        s = self._smooth_chunk(x)
-        steady = self._steady_chunk(x) & self._open_chunk(x)
+        s, steady = self._chunk_steps(x)
         std = self._std(np.asarray(x[self.predicted], dtype=np.float64))
         mean = self._stats.mean if self._stats.n else 0.0
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -369,9 +354,50 @@ class PhysicsResidualDetector(Detector):
         out[~steady] = np.nan
         return out
 
-    @classmethod
-    def _unit_test_params(cls) -> dict[str, Any]:
-        return {"smoothing": 5.0}
+
+_NONE = np.empty(0)  # no speed or gate key
+
+
+def _residual_steps_py(meas: NDArray[np.float64], pred: NDArray[np.float64],
+                       speed: NDArray[np.float64], gate: NDArray[np.float64], alpha: float,
+                       has_ewma: bool, ewma: float, has_ref: bool, ref: float,
+                       has_prev: bool, prev: float, since: int, tol: float, settle: int,
+                       s_out: NDArray[np.float64], ok_out: NDArray[np.bool_]
+                       ) -> tuple[float, bool, float, bool, float, int]:
+    """:meth:`PhysicsResidualDetector._smooth`, ``_steady`` and ``_open`` of each sample
+    (an empty ``speed``/``gate``: no such key). The EWMA is computed as ``scipy.signal.lfilter``
+    computed it before (``a r + (1 - a) e``; the first sample of a stream starts it).
+    Returns the state after the samples: ewma, has_ref, ref, has_prev, prev, since."""
+    c = 1.0 - alpha
+    use_speed = speed.size > 0
+    use_gate = gate.size > 0
+    for k in range(meas.size):
+        r = meas[k] - pred[k]
+        if has_ewma:
+            ewma = alpha * r + c * ewma
+        else:
+            ewma = r
+            has_ewma = True
+        s_out[k] = ewma
+        steady = True
+        if use_speed:
+            n = speed[k]
+            if math.isfinite(n):
+                p, has_p = prev, has_prev
+                prev, has_prev = n, True
+                if (not has_ref or not has_p or abs(n - p) > tol
+                        or abs(n - ref) > max(10.0 * tol, 0.01 * abs(ref))):
+                    ref, has_ref = n, True
+                    since = 0
+                    steady = False
+                else:
+                    since += 1
+                    steady = since > settle
+        ok_out[k] = steady and (not use_gate or gate[k] == 1.0)
+    return ewma, has_ref, ref, has_prev, prev, since
+
+
+_residual_steps = lazy_njit(_residual_steps_py)
 
 
 class EnvelopeDetector(Detector):
