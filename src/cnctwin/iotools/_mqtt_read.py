@@ -3,20 +3,23 @@
 paho 2.x reads a packet's body with ``recv(remaining)`` calls, each allocating a buffer the
 size of what is still missing, appends them to a ``bytearray`` and then unpacks a PUBLISH
 with three ``struct.unpack`` copies of the whole body: for a 400 kB Databus message (one
-second of 11 datapoints at 500 Hz) about ten buffers and copies of its size, 2.7 ms of CPU
-per message in a receiver on a 2-vCPU VM (BENCHMARKS.md, session 25). Here the body goes
-with ``recv_into`` into one buffer that lives as long as the client, and a PUBLISH of QoS 0
-or 1 is read from a view of it: the payload is copied once, into the ``bytes`` the
-``on_message`` callback gets (0.63 ms per message on the same VM).
+second of 11 datapoints at 500 Hz) about ten buffers and copies of its size. Here the body
+goes with ``recv_into`` into one buffer that lives as long as the client, and a PUBLISH of
+QoS 0 or 1 is read from a view of it: the payload is copied once, into the ``bytes`` the
+``on_message`` callback gets. CPU per 400 kB message on a 2-vCPU VM: 0.90-0.97 against
+0.64-0.65 ms in a receiver alone (``benchmarks/bench_mqtt_receive.py``; 2.2-2.7 against
+0.63 ms in a fresh process, whose allocator still maps every large buffer anew), 0.92
+against 0.72 ms in a plant worker (BENCHMARKS.md, session 25). An MQTT 3.1.1 PUBACK
+(what the result sinks read) is read without the ``ReasonCode`` and ``Properties``
+objects paho makes for each.
 
-Only the reading of a packet, the unpacking of a QoS 0/1 PUBLISH and of an MQTT 3.1.1
-PUBACK (the result sinks') are replaced; every
+Only the reading of a packet and the unpacking of those two kinds are replaced; every
 packet is still handled by paho (``_packet_handle``: acknowledgements, the keepalive, QoS 2
-flows, ``manual_ack``), and the callback gets the same :class:`paho.mqtt.client.MQTTMessage`
-(topic, payload, QoS, retain, dup, MQTT 5 properties). The packet-reading methods of paho
-2.x are not public API: the project pins ``paho-mqtt>=2.0,<3`` and
-``tests/iotools/test_mqtt_read.py`` feeds the same byte streams to paho's own client and to
-this one and compares what comes out.
+flows, ``manual_ack``), and the callbacks get what paho gives them (the same
+:class:`paho.mqtt.client.MQTTMessage` fields, MQTT 5 properties included). The
+packet-reading methods of paho 2.x are not public API: the project pins
+``paho-mqtt>=2.0,<3`` and ``tests/iotools/test_mqtt_read.py`` feeds the same byte streams
+to paho's own client and to this one and compares what comes out.
 """
 
 from __future__ import annotations
