@@ -206,3 +206,33 @@ def test_physics_detector_chunks_as_the_former_numpy_code(data: st.DataObject) -
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
         assert (det._n_ref, det._n_prev, det._since_change) == (
             old._n_ref, old._n_prev, old._since_change)
+
+
+def test_prepare_compiles_the_loops_and_leaves_the_state() -> None:
+    """A live runtime calls ``prepare()`` of its processors before the first message: after
+    it every compiled loop of the chunk path is compiled, and a processor's pickled state
+    (what a checkpoint keeps) is what it was."""
+    import pickle
+
+    from cnctwin.analysis import segments
+    from cnctwin.edge import processors
+    from cnctwin.edge.processors import TorqueProcessor
+    from cnctwin.spindle import SpindleModel
+    from cnctwin.spindle import _speed_flags as flags_kernel
+    from cnctwin.usecases import anomaly
+    from cnctwin.usecases.air_friction import AirFrictionCheck
+
+    model = SpindleModel(1.04, 8.42e-5, 0.35, j_kgm2=0.0045)
+    procs = [TorqueProcessor(model),
+             AnomalyProcessor(anomaly.PhysicsResidualDetector(gate="air"), model=model,
+                              friction_check=AirFrictionCheck())]
+    kernels = (segments._since, flags_kernel, processors._air_samples,
+               anomaly._residual_steps)
+    for kernel in kernels:  # as in a fresh process (numba's disk cache loads them again)
+        kernel._fn = None
+    before = [pickle.dumps(p) for p in procs]
+    for p in procs:
+        p.prepare()
+    assert [pickle.dumps(p) for p in procs] == before
+    for kernel in kernels:
+        assert kernel._fn is not None, kernel.py.__name__

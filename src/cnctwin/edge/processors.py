@@ -23,7 +23,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from cnctwin._jit import lazy_njit
-from cnctwin.analysis.segments import runs_of
+from cnctwin.analysis.segments import runs_of, samples_since
 from cnctwin.edge.cut import CutTracker
 from cnctwin.edge.pipeline import Chunk, Result
 from cnctwin.exceptions import ConfigError
@@ -120,6 +120,10 @@ class TorqueProcessor:
             self._est = StreamingTorqueEstimator(self.model, fs_hz=self._fs,
                                                  accel_term=self.accel_term)
         return self._est
+
+    def prepare(self) -> None:
+        """Compile the speed-change flags (numba) before a live stream's first chunk."""
+        SpeedChangeFlags().update(np.zeros(2))
 
     def _flagged(self, tau: NDArray[np.float64], n: NDArray[np.float64]
                  ) -> tuple[NDArray[np.float64], NDArray[np.int8]]:
@@ -854,6 +858,16 @@ class AnomalyProcessor:
                     "hole": None, "units": {"current_a": "A", "predicted_current_a": "A",
                                             "speed_rpm": "rpm", "score": "-"}}))
         return out
+
+    def prepare(self) -> None:
+        """Compile the loops of its chunk path (numba) before a live stream's first chunk;
+        the state is not touched."""
+        z = np.zeros(1)
+        _air_samples(z, z, z, 0.0, 0.0, 0.0, 1.0, 1, 1, 0, 0, np.empty(1))
+        samples_since(np.zeros(1, dtype=np.bool_), before=0)  # the rapid-traverse air
+        if self.friction_check is not None:
+            SpeedChangeFlags().update(np.zeros(2))
+        self.detector.prepare()
 
     def _air(self, chunk: Chunk) -> NDArray[np.float64]:
         """1.0 where the tool cannot be cutting: every feed axis (X, Y, Z setpoints) has stood

@@ -149,6 +149,10 @@ class Detector:
             out[i] = self.score_one(dict(zip(keys, row, strict=True)))
         return out
 
+    def prepare(self) -> None:
+        """Compile what the chunk calls use (numba), so that a live stream's first chunk
+        does not wait for it; the detector's state is not touched. Nothing by default."""
+
     def clone(self) -> Detector:
         """A fresh, unlearned copy with the same parameters."""
         return type(self)(**self._params())
@@ -340,6 +344,11 @@ class PhysicsResidualDetector(Detector):
         self._n_prev = float(got[4]) if got[3] else None
         self._since_change = int(got[5])
         return s, ok
+
+    def prepare(self) -> None:
+        one, flag = np.ones(1), np.empty(1, dtype=np.bool_)
+        _residual_steps(one, one, one, one, self._alpha, False, 0.0, False, 0.0, False, 0.0,
+                        0, 1.0, 0, np.empty(1), flag)
 
     def learn_chunk(self, x: Mapping[str, NDArray[np.float64]]) -> None:
         s, ok = self._chunk_steps(x)
