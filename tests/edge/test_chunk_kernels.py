@@ -236,3 +236,18 @@ def test_prepare_compiles_the_loops_and_leaves_the_state() -> None:
     assert [pickle.dumps(p) for p in procs] == before
     for kernel in kernels:
         assert kernel._fn is not None, kernel.py.__name__
+
+
+def test_prepare_kernels_compiles_every_loop() -> None:
+    """``cnctwin edge run`` with a live source compiles the loops before it connects."""
+    from cnctwin.analysis import segments
+    from cnctwin.edge import processors
+    from cnctwin.spindle import _speed_flags as flags_kernel
+    from cnctwin.usecases import anomaly
+
+    kernels = (segments._since, flags_kernel, processors._air_samples,
+               anomaly._residual_steps)
+    for kernel in kernels:
+        kernel._fn = None
+    processors.prepare_kernels()
+    assert all(kernel._fn is not None for kernel in kernels)

@@ -517,6 +517,12 @@ def _build(args: argparse.Namespace) -> Any:
         ca_file=args.tls_ca, cert_file=args.tls_cert, key_file=args.tls_key,
         username=args.mqtt_user, password_file=args.password_file)
     src: Any
+    if args.source.startswith(("mqtt://", "tcp://", "opc.tcp://")):
+        # a live source streams from its start on: the processors' compiled loops first
+        # (numba, ~2 s without its cache), not while the first messages wait
+        from cnctwin.edge.processors import prepare_kernels
+
+        prepare_kernels()
     if args.source.startswith(("mqtt://", "tcp://")):
         u = parse_mqtt_url(args.source)
         if not u.topic:

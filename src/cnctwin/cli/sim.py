@@ -262,8 +262,9 @@ def _realtime(args: argparse.Namespace, program_kw: dict[str, Any],
     for p in res.paths:
         print(p)
     _print_limits(res.truth["limits"])
+    mean = summary["override_pct"]["mean"]  # None: no override applied while cutting
     print(f"adaptive: cycle time {summary['cycle_time_s']:.2f} s, override "
-          f"{summary['override_pct']['mean']:.1f} % mean, stop request "
+          f"{'n/a' if mean is None else f'{mean:.1f} %'} mean, stop request "
           f"{summary['stop_request'] or 'none'}, {summary['writes']} writes from the edge, "
           f"{len(plc.fallbacks)} heartbeat fallbacks; {out / 'adaptive.json'}")
     return 0

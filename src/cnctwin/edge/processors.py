@@ -37,7 +37,7 @@ from cnctwin.usecases.holes import HOLE_COLUMNS, HoleEvents, holes_from_arrays
 from cnctwin.usecases.tool_life import ToolLifeTracker
 
 __all__ = ["TORQUE_FLAGS", "AnomalyProcessor", "HoleProcessor", "TorqueProcessor",
-           "TwinCompareProcessor"]
+           "TwinCompareProcessor", "prepare_kernels"]
 
 TORQUE_FLAGS: Mapping[int, str] = SpeedChangeFlags.CODES
 """Codes of a ``torque`` result's ``flags`` (present when any cycle is flagged)."""
@@ -623,6 +623,18 @@ def _air_samples_py(x: NDArray[np.float64], y: NDArray[np.float64], z: NDArray[n
 
 
 _air_samples = lazy_njit(_air_samples_py)
+
+
+def prepare_kernels() -> None:
+    """Compile (or load from numba's cache) the loops of the processors' chunk paths: the
+    speed-change flags, the anomaly processor's air and rapid-traverse counts, the physics
+    detector. A live source calls it before it connects (``cnctwin edge run``); each
+    processor's ``prepare`` covers what it uses as well."""
+    SpeedChangeFlags().update(np.zeros(2))
+    z = np.zeros(1)
+    _air_samples(z, z, z, 0.0, 0.0, 0.0, 1.0, 1, 1, 0, 0, np.empty(1))
+    samples_since(np.zeros(1, dtype=np.bool_), before=0)
+    PhysicsResidualDetector().prepare()
 
 
 def _row_payload(row: dict[str, Any]) -> dict[str, Any]:
