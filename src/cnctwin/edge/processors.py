@@ -631,10 +631,15 @@ def prepare_kernels() -> None:
     detector. A live source calls it before it connects (``cnctwin edge run``); each
     processor's ``prepare`` covers what it uses as well."""
     SpeedChangeFlags().update(np.zeros(2))
+    _prepare_air()
+    PhysicsResidualDetector().prepare()
+
+
+def _prepare_air() -> None:
+    """Compile the anomaly processor's air count and the rapid-traverse air's."""
     z = np.zeros(1)
     _air_samples(z, z, z, 0.0, 0.0, 0.0, 1.0, 1, 1, 0, 0, np.empty(1))
     samples_since(np.zeros(1, dtype=np.bool_), before=0)
-    PhysicsResidualDetector().prepare()
 
 
 def _row_payload(row: dict[str, Any]) -> dict[str, Any]:
@@ -874,9 +879,7 @@ class AnomalyProcessor:
     def prepare(self) -> None:
         """Compile the loops of its chunk path (numba) before a live stream's first chunk;
         the state is not touched."""
-        z = np.zeros(1)
-        _air_samples(z, z, z, 0.0, 0.0, 0.0, 1.0, 1, 1, 0, 0, np.empty(1))
-        samples_since(np.zeros(1, dtype=np.bool_), before=0)  # the rapid-traverse air
+        _prepare_air()
         if self.friction_check is not None:
             SpeedChangeFlags().update(np.zeros(2))
         self.detector.prepare()

@@ -363,6 +363,10 @@ class PhysicsResidualDetector(Detector):
         out[~steady] = np.nan
         return out
 
+    @classmethod
+    def _unit_test_params(cls) -> dict[str, Any]:
+        return {"smoothing": 5.0}
+
 
 _NONE = np.empty(0)  # no speed or gate key
 
