@@ -1794,6 +1794,10 @@ class SpeedChangeFlags:
         Time after the last change still flagged (speed loop and current filter) [s].
     min_speed_rpm : float, default 10
         Standstill below this [rpm].
+    settled_at_start : bool, default True
+        The stream's first samples follow a steady speed (a recording's start); False: what
+        came before is not known (a live stream joined at any moment), so they are flagged
+        for ``settle_s`` like samples after a change.
 
     Notes
     -----
@@ -1808,7 +1812,8 @@ class SpeedChangeFlags:
     }
 
     def __init__(self, *, fs_hz: float = 500.0, speed_step_rpm: float = 1.0,
-                 settle_s: float = 0.3, min_speed_rpm: float = 10.0) -> None:
+                 settle_s: float = 0.3, min_speed_rpm: float = 10.0,
+                 settled_at_start: bool = True) -> None:
         if not (fs_hz > 0 and speed_step_rpm > 0 and settle_s >= 0 and min_speed_rpm >= 0):
             raise ConfigError(f"fs_hz ({fs_hz}) and speed_step_rpm ({speed_step_rpm}) must be "
                               f"> 0, settle_s ({settle_s}) and min_speed_rpm ({min_speed_rpm}) "
@@ -1816,7 +1821,8 @@ class SpeedChangeFlags:
         self.speed_step_rpm, self.min_speed_rpm = speed_step_rpm, min_speed_rpm
         self.settle_samples = round(settle_s * fs_hz)
         self._last: float | None = None
-        self._since = 1 << 40  # samples since the last change (none seen)
+        # samples since the last change (none seen; or "just now" when the past is unknown)
+        self._since = 1 << 40 if settled_at_start else 0
 
     def update(self, speed_rpm: ArrayLike, next_rpm: float | None = None) -> NDArray[np.int8]:
         """Flag codes of the next consecutive samples.

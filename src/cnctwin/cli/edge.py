@@ -217,7 +217,8 @@ def _add_run_options(r: argparse.ArgumentParser) -> None:
     r.add_argument("--max-queue", type=int, default=200_000,
                    help="store-and-forward bound [messages]")
     r.add_argument("--idle-timeout-s", type=float, default=None,
-                   help="live source: stop after this long without data [s]")
+                   help="live source: stop after this long without data [s] (an OPC UA source "
+                   "counts from its first value: it waits for the program to start)")
     r.add_argument("--batch-s", type=float, default=0.0, metavar="S",
                    help="live Databus machine of a plant (edge run --config): process its "
                    "messages at most every S seconds, what arrived meanwhile as one chunk "

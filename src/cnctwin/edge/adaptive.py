@@ -45,7 +45,7 @@ from cnctwin.engagement import Stock, ZMap
 from cnctwin.exceptions import ConfigError
 from cnctwin.machine.tooltable import read_toml
 from cnctwin.recording import CounterGap
-from cnctwin.spindle import SpindleModel
+from cnctwin.spindle import SpeedChangeFlags, SpindleModel
 from cnctwin.usecases.adaptive import AdaptiveFeedController
 
 __all__ = ["AdaptiveConfig", "AdaptiveProcessor", "planned_torque", "read_adaptive_config"]
@@ -267,6 +267,7 @@ class AdaptiveProcessor:
         self._tool = 0
         self._ctrl: dict[int, AdaptiveFeedController] = {}
         self._teach: dict[int, list[float]] = {}
+        self._teach_flags: SpeedChangeFlags | None = None
         self._alarmed: set[tuple[int, str]] = set()
         self.heartbeat = 0
 
@@ -376,7 +377,10 @@ class AdaptiveProcessor:
         if ctrl is None:  # teach-in: the mean torque of the first steady cut
             with np.errstate(invalid="ignore"):
                 tau = self.model.cutting_torque(i, n, fs_hz=fs) * np.sign(n)
-            ok = np.isfinite(tau) & (np.abs(n) > 50.0) & (tau > 0.3)
+            if self._teach_flags is None:  # a run-up's current is the rotor's, not the cut's
+                self._teach_flags = SpeedChangeFlags(fs_hz=fs, settled_at_start=False)
+            ok = (np.isfinite(tau) & (np.abs(n) > 50.0) & (tau > 0.3)
+                  & (self._teach_flags.update(n) == 0))
             seen = self._teach.setdefault(self._tool, [])
             if ok.mean() > 0.9:
                 seen.extend(tau[ok].tolist())

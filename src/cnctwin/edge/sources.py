@@ -583,7 +583,10 @@ class OpcUaSource:
         handed on as soon as they arrive, so a chunk holds what arrived since the last one
         (the adaptive feed's loop latency depends on it).
     idle_timeout_s : float or None
-        Stop when no row arrived for this long [s].
+        Stop when no row arrived for this long after the first [s]. Before the first row
+        the source waits (the edge connects before the operator starts the program; a loaded
+        control can take seconds from the subscription to its first value); interrupt it to
+        end a run that never gets data.
     machine : str
         Machine name.
     """
@@ -659,13 +662,13 @@ class OpcUaSource:
     def chunks(self) -> Iterator[Chunk]:
         """One chunk per poll window with rows; an empty one after a window without any."""
         self.start()
-        last = time.monotonic()
+        last: float | None = None  # time.monotonic() of the last row; None: none yet
         while not self._interrupted:
             self.recorder.new_rows.wait(self.window_s)
             self.recorder.new_rows.clear()
             rows = self.recorder.rows()[self._done:]
             if not rows:
-                if self.idle_timeout_s is not None and \
+                if self.idle_timeout_s is not None and last is not None and \
                         time.monotonic() - last > self.idle_timeout_s:
                     return
                 # the runtime's idle tick: its status and sinks keep going without data

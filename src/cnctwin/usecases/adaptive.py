@@ -15,6 +15,12 @@ see). ``edge_share`` (T_e / T_target, default 0.25: the edge force's share of th
 force at a typical chip, docs/optimizer.md) sets T_e; the loop is stable for any share in
 0..1 with gain <= 1 because the update is monotone in T_now.
 
+Samples while the spindle's speed command changes, and for the settling time after
+(:class:`cnctwin.spindle.SpeedChangeFlags`: the current then accelerates the rotor, ~20 Nm on a
+run-up against ~2.6 Nm of the cut, known only as well as J and a derivative that a chunk of
+one OPC UA value cannot give), and a standing spindle, carry no cutting torque: they are
+left out of every mean below (the torque processor flags the same samples).
+
 Air (torque below ``air_nm``): the override goes to its maximum (cutting air costs time).
 Overload (torque above ``overload_nm`` for ``overload_s``): the override goes to its minimum
 and ``state.overload`` asks for a feed hold. Breakage (the torque falls to the air level in
@@ -32,7 +38,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cnctwin.exceptions import ConfigError
-from cnctwin.spindle import SpindleModel
+from cnctwin.spindle import SpeedChangeFlags, SpindleModel
 
 __all__ = ["AdaptiveFeedController", "AdaptiveState"]
 
@@ -94,13 +100,18 @@ class AdaptiveFeedController:
         Samples gathered per override update [s] (e.g. 0.1 when the signals arrive every
         20 ms over OPC UA: the override moves on a 100 ms mean, breakage is judged on every
         call); None: every call updates.
+    settle_s : float, default 0.3
+        Samples for this long after a change of the speed command, and at the start (the
+        speed before the first sample is not known: a live stream may join a run-up), carry
+        no cutting torque (:class:`cnctwin.spindle.SpeedChangeFlags`) [s]; 0: only the
+        changing samples themselves.
     """
 
     def __init__(self, model: SpindleModel, *, target_nm: float, min_pct: float = 50.0,
                  max_pct: float = 120.0, air_nm: float | None = None,
                  overload_nm: float | None = None, overload_s: float = 0.2, gain: float = 0.5,
                  edge_share: float = 0.25, fs_hz: float = 500.0, min_cut_s: float = 0.5,
-                 update_s: float | None = None) -> None:
+                 update_s: float | None = None, settle_s: float = 0.3) -> None:
         if not (math.isfinite(target_nm) and target_nm > 0):
             raise ConfigError(f"target_nm must be a positive torque, got {target_nm!r}")
         if not (0.0 < min_pct <= max_pct):
@@ -127,6 +138,10 @@ class AdaptiveFeedController:
         self.update_s = update_s
         self._buf_tau: list[NDArray[np.float64]] = []
         self._buf_s = 0.0
+        if not (math.isfinite(settle_s) and settle_s >= 0):
+            raise ConfigError(f"settle_s must be >= 0 [s], got {settle_s!r}")
+        self._flags = SpeedChangeFlags(fs_hz=self.fs_hz, settle_s=settle_s,
+                                       settled_at_start=False)
 
     def set_target(self, target_nm: float) -> None:
         """Hold a new torque (a power target at a new speed: P / omega); the air, overload and
@@ -181,7 +196,8 @@ class AdaptiveFeedController:
             return st
         with np.errstate(invalid="ignore"):
             tau = self.model.cutting_torque(i, n, fs_hz=self.fs_hz) * np.sign(n)
-        ok = np.isfinite(tau) & (np.abs(n) > 50.0)
+        # steady speed only: a run-up's or braking's current is the rotor's, not the cut's
+        ok = np.isfinite(tau) & (np.abs(n) > 50.0) & (self._flags.update(n) == 0)
         t_new = float(np.mean(tau[ok])) if ok.any() else math.nan
         # a collapse inside these samples: their last fifth already at the air level (the
         # stop request then comes with them, not with the next call)
