@@ -230,3 +230,24 @@ def test_merging_messages_equals_a_table_of_their_values(
         exp = [want[cc].get(c, np.nan) for cc in sorted(want)]
         np.testing.assert_array_equal(got.columns[c], exp)
     assert set(got.columns) == {c for r in want.values() for c in r}
+
+
+@settings(max_examples=300, deadline=None)
+@given(data=st.binary(min_size=1, max_size=80).map(lambda b: bytes(x % 3 for x in b)),
+       seed=st.integers(0, 2**32 - 1))
+def test_the_compiled_byte_compare_equals_slices(data: bytes, seed: int) -> None:
+    """The template compare of the scan reads 8 bytes per load (one unaligned load, the last
+    word overlapping): equal to comparing the slices, at every offset and length the buffer
+    holds, up to its last byte (bytes of three values, so equal runs are common)."""
+    import random
+
+    from cnctwin.iotools import _databus_scan as scan
+
+    scan._scanner()  # compiled: the helpers are numba functions from here on
+    buf = np.frombuffer(data, dtype=np.uint8)
+    rng = random.Random(seed)
+    n = buf.size
+    for _ in range(50):
+        m = rng.randint(0, n)
+        a, b = rng.randint(0, n - m), rng.randint(0, n - m)
+        assert scan._same_bytes(buf, a, b, m) == (data[a:a + m] == data[b:b + m]), (a, b, m)
