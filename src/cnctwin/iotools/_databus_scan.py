@@ -743,7 +743,7 @@ def _load8_intrinsic() -> Any:
     from numba import types
     from numba.extending import intrinsic
 
-    @intrinsic  # type: ignore[misc]
+    @intrinsic
     def load8(typingctx, arr, idx):  # type: ignore[no-untyped-def]
         if not (isinstance(arr, types.Array) and arr.dtype == types.uint8):
             return None
