@@ -70,3 +70,33 @@ def test_a_drilling_run_starts_each_hole_once() -> None:
     assert len(rows) == 12
     for s, row in zip(starts, rows, strict=True):
         assert s.cycle <= int(row["start_cycle"])
+
+
+def test_the_live_cut_context_does_not_depend_on_the_chunks() -> None:
+    """The live hole context (``HOLE``, ``CUT_PROGRESS``, ``CUT_DEPTH``, ``CUT_FEED``,
+    ``CUT_SPEED``: feed and speed latched from each cut's first 25 new-material cycles, then
+    held) is a function of the stream, not of how it is cut into chunks: 500-, 137- and
+    7-cycle chunks give the same arrays, bit for bit (the latch cycles are written at once
+    per chunk since session 26); each of the 6 holes has its context, depth within 0..20 mm,
+    progress within 0..1.05 (the encoder passes the 20 mm depth by a few um)."""
+    rec = tool_wear_run(n_holes=6, holes_per_set=6, dynamometer=False, seed=2).recording
+    got = []
+    for size in (500, 137, 7):
+        p = HoleProcessor(live_context=True)
+        parts: dict[str, list[np.ndarray]] = {}
+        for chunk in ReplaySource(rec, chunk_cycles=size).chunks():
+            p.process(chunk)
+            for k, v in chunk.derived.items():
+                parts.setdefault(k, []).append(v)
+        got.append({k: np.concatenate(v) for k, v in parts.items()})
+    assert set(got[0]) == {"HOLE|Z1", "CUT_PROGRESS|Z1", "CUT_DEPTH|Z1", "CUT_FEED|Z1",
+                           "CUT_SPEED|SP1"}
+    for other in got[1:]:
+        for k, v in got[0].items():
+            np.testing.assert_array_equal(other[k], v, err_msg=k)
+    ctx = got[0]
+    assert sorted(set(ctx["HOLE|Z1"][ctx["HOLE|Z1"] >= 0].astype(int))) == list(range(6))
+    cut = np.isfinite(ctx["CUT_DEPTH|Z1"])
+    assert cut.any()
+    assert ctx["CUT_DEPTH|Z1"][cut].min() >= 0.0 and ctx["CUT_DEPTH|Z1"][cut].max() <= 20.05
+    assert ctx["CUT_PROGRESS|Z1"][cut].max() <= 1.05

@@ -289,6 +289,7 @@ class CutTracker:
                     self._deepest = math.inf
                     self._xy = here
                     self._feeds, self._speeds = [], []
+            latched: list[tuple[int, float, float]] = []  # (cycle, feed, speed) so far
             while j < e and len(self._feeds) < self.latch_cycles:
                 z_e = float(ze[j])
                 if z_e < self._deepest:  # else a re-entry through material already cut
@@ -298,8 +299,16 @@ class CutTracker:
                     self._speeds.append(abs(float(sp[j])))
                     self._feed = statistics.median(self._feeds)
                     self._speed = statistics.median(self._speeds)
-                    self._put(out, j, j + 1, geo, np.array([True]), ze)
+                    latched.append((j, self._feed, self._speed))
                 j += 1
+            if latched:  # the latch cycles' context at once (each with its own medians)
+                k = np.array([x[0] for x in latched], dtype=np.int64)
+                d = geo[0] - ze[k]
+                out.hole[k] = self.hole
+                out.depth_mm[k] = d
+                out.progress[k] = d / geo[1]
+                out.feed_mm_min[k] = [x[1] for x in latched]
+                out.speed_rpm[k] = [x[2] for x in latched]
             if j < e:  # feed and speed latched: the rest of the run at once
                 z_run = ze[j:e]
                 before = np.minimum.accumulate(np.concatenate([[self._deepest], z_run[:-1]]))

@@ -514,8 +514,12 @@ class MqttSink:
         self._fresh = []
         if fresh and fresh[0][0] <= self._last_id + 1:  # no backlog before them: no SELECT
             nxt = [x for x in fresh if x[0] > self._last_id][:room]
+        elif self._last_id >= self.queue.enqueued:
+            return  # everything ever queued has gone out: nothing to SELECT (an idle pump)
         else:
             nxt = self.queue.peek(room, after_id=self._last_id)
+            if not nxt:  # the ids up to the newest were sent (and deleted) or dropped
+                self._last_id = self.queue.enqueued
         for qid, topic, payload in nxt:
             info = self._client.publish(topic, payload, qos=1)
             if info.rc != 0:

@@ -24,6 +24,7 @@ to paho's own client and to this one and compares what comes out.
 
 from __future__ import annotations
 
+import copy
 import ssl
 import struct
 from functools import cache
@@ -188,8 +189,13 @@ def receiving_client(mqtt: Any) -> type:
                             raise malformed("property length longer than 4 bytes")
                     if i + size > len(packet):
                         raise malformed("properties longer than the packet")
-                    props = Properties(PacketTypes.PUBLISH)
-                    props.unpack(bytes(packet[pos:i + size]))
+                    if size:
+                        props = Properties(PacketTypes.PUBLISH)
+                        props.unpack(bytes(packet[pos:i + size]))
+                    else:  # none (a Databus message): a copy of an empty one, not a new one
+                        if self._no_props is None:
+                            self._no_props = Properties(PacketTypes.PUBLISH)
+                        props = copy.copy(self._no_props)
                     pos = i + size
                 payload = bytes(packet[pos:])
             except malformed:
@@ -209,6 +215,7 @@ def receiving_client(mqtt: Any) -> type:
             return err.MQTT_ERR_SUCCESS
 
         _puback: tuple[Any, Any] | None = None
+        _no_props: Any = None
 
         def _handle_pubackcomp(self, cmd: str) -> Any:
             packet = self._in_packet["packet"]
