@@ -69,6 +69,7 @@ def receiving_client(mqtt: Any) -> type:
         _in_packet: dict[str, Any]  # paho's state of the packet being read
         _body_buf: bytearray | None = None
         _body_pos = 0
+        _no_props: Any = None  # an empty MQTT 5 Properties of PUBLISH, copied per message
 
         def _recv_into(self, view: memoryview) -> int:
             sock = self._sock
@@ -215,7 +216,6 @@ def receiving_client(mqtt: Any) -> type:
             return err.MQTT_ERR_SUCCESS
 
         _puback: tuple[Any, Any] | None = None
-        _no_props: Any = None
 
         def _handle_pubackcomp(self, cmd: str) -> Any:
             packet = self._in_packet["packet"]
