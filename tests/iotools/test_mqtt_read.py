@@ -203,3 +203,50 @@ def test_publish_acknowledgements_as_in_paho(v5: bool) -> None:
     ref = _acks(mqtt.Client, acks, v5=v5)
     assert [g[0] for g in ref] == [2, 1, 3]
     assert _acks(receiving_client(mqtt), acks, v5=v5) == ref
+
+
+def test_held_packets_go_out_together_byte_for_byte() -> None:
+    """Packets made while :meth:`holding_writes` (PUBACKs of QoS 1 messages, a QoS 1 PUBLISH)
+    leave in one ``send``, the same bytes in the same order as paho writes them one by one;
+    a QoS 0 PUBLISH among them is written on its own, so paho still calls its on_publish."""
+    def run(cls: type, hold: bool) -> tuple[bytes, int, list[int]]:
+        a, b = socket.socketpair()
+        a.setblocking(False)
+        c = cls(callback_api_version=mqtt.CallbackAPIVersion.VERSION2, client_id="t",
+                manual_ack=True)
+        c._sock = a
+        c._state = mqtt._ConnectionState.MQTT_CS_CONNECTED
+        published: list[int] = []
+        c.on_publish = lambda client, userdata, mid, *rest: published.append(mid)
+        sends = [0]
+        raw = c._sock_send
+
+        def counting(buf: Any) -> int:
+            sends[0] += 1
+            return int(raw(buf))
+
+        c._sock_send = counting
+        ctx = c.holding_writes() if hold else contextlib.nullcontext()
+        with ctx:
+            for mid in (3, 4, 5):
+                c.ack(mid, 1)
+            c.publish("r/m/torque", b"x" * 30_000, qos=1)
+            c.publish("r/m/status", b"{}", qos=0)
+            c.ack(6, 1)
+        c.loop_write()
+        out = b""
+        b.setblocking(False)
+        with contextlib.suppress(BlockingIOError):
+            while chunk := b.recv(1 << 20):
+                out += chunk
+        c._sock = None
+        a.close()
+        b.close()
+        return out, sends[0], published
+
+    ref, ref_sends, ref_pub = run(mqtt.Client, hold=False)
+    ours, our_sends, our_pub = run(receiving_client(mqtt), hold=True)
+    assert ours == ref and len(ref) > 30_000
+    assert ref_sends == 6
+    assert our_sends == 3  # the first four at once, the QoS 0 PUBLISH, the last PUBACK
+    assert our_pub == ref_pub == [2]  # the QoS 0 message's on_publish (mid 2)

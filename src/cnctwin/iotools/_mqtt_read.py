@@ -24,13 +24,23 @@ to paho's own client and to this one and compares what comes out.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import ssl
 import struct
+from collections.abc import Iterator
 from functools import cache
 from typing import Any
 
 _PUBLISH = 0x30
+_PUBACK = 0x40
+_DISCONNECT = 0xE0
+
+
+def _quiet(packet: dict[str, Any]) -> bool:
+    """Nothing happens in paho once this queued packet is written (see ``_packet_write``)."""
+    cmd = packet["command"] & 0xF0
+    return cmd != _DISCONNECT and not (cmd == _PUBLISH and packet["qos"] == 0)
 
 
 def _fresh_packet() -> dict[str, Any]:
@@ -216,6 +226,46 @@ def receiving_client(mqtt: Any) -> type:
             return err.MQTT_ERR_SUCCESS
 
         _puback: tuple[Any, Any] | None = None
+
+        # ------------------------------------------------------------ writing
+        _holding = False
+
+        @contextlib.contextmanager
+        def holding_writes(self) -> Iterator[None]:
+            """Packets made inside (acknowledgements, publishes) are queued, not written;
+            the next :meth:`loop_write` sends them together, in one system call where they
+            fit the socket's buffer (see :meth:`_packet_write`)."""
+            self._holding = True
+            try:
+                yield
+            finally:
+                self._holding = False
+
+        def _packet_queue(self, command: int, packet: Any, mid: int, qos: int,
+                          info: Any = None) -> Any:
+            if not self._holding:
+                return super()._packet_queue(command, packet, mid, qos, info)
+            self._out_packet.append({"command": command, "mid": mid, "qos": qos, "pos": 0,
+                                     "to_process": len(packet), "packet": packet,
+                                     "info": info})
+            return err.MQTT_ERR_SUCCESS
+
+        def _packet_write(self) -> Any:
+            # consecutive packets not begun and without anything to do once written (all
+            # but a QoS 0 PUBLISH, whose on_publish paho calls then, and a DISCONNECT) go
+            # out as one: on loopback each send runs the broker's TCP receive path too
+            q = self._out_packet
+            if len(q) > 1 and q[0]["pos"] == 0:
+                run = []
+                while q and q[0]["pos"] == 0 and _quiet(q[0]):
+                    run.append(q.popleft())
+                if len(run) > 1:
+                    blob = b"".join(bytes(p["packet"]) for p in run)
+                    q.appendleft({"command": _PUBACK, "mid": 0, "qos": 1, "pos": 0,
+                                  "to_process": len(blob), "packet": blob, "info": None})
+                else:
+                    q.extendleft(run)
+            return super()._packet_write()
 
         def _handle_pubackcomp(self, cmd: str) -> Any:
             packet = self._in_packet["packet"]
