@@ -520,15 +520,22 @@ class MqttSink:
             nxt = self.queue.peek(room, after_id=self._last_id)
             if not nxt:  # the ids up to the newest were sent (and deleted) or dropped
                 self._last_id = self.queue.enqueued
-        for qid, topic, payload in nxt:
-            info = self._client.publish(topic, payload, qos=1)
-            if info.rc != 0:
-                self.last_error = f"publish failed (rc {info.rc})"
-                self._lost.set()
-                return
-            with self._lock:
-                self._inflight[info.mid] = qid
-            self._last_id = qid
+        c = self._client
+        # a chunk's messages (its torque and status) leave in one send, not one each
+        with c.holding_writes():
+            for qid, topic, payload in nxt:
+                info = c.publish(topic, payload, qos=1)
+                if info.rc != 0:
+                    self.last_error = f"publish failed (rc {info.rc})"
+                    self._lost.set()
+                    return
+                with self._lock:
+                    self._inflight[info.mid] = qid
+                self._last_id = qid
+        if nxt and c.loop_write() != 0 and not self._lost.is_set():
+            self.last_error = "connection lost while sending"
+            self._connected.clear()
+            self._lost.set()
 
     def write(self, messages: list[dict[str, Any]], chunk: Chunk | None) -> None:
         items = [(self.topic(m["kind"]), e)
