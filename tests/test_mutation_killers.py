@@ -58,22 +58,37 @@ def test_save_machine_leaves_the_old_file_when_the_write_fails(
 
 def test_edge_checkpoint_is_written_atomically(tmp_path: Path,
                                                monkeypatch: pytest.MonkeyPatch) -> None:
-    # mutation: the checkpoint written in place
-    from cnctwin.edge.runtime import CHECKPOINT_FILE, read_checkpoint, write_checkpoint
+    # mutations: the checkpoint written over the newest slot, or without its checksum
+    from cnctwin.edge.runtime import CHECKPOINT_SLOTS, read_checkpoint, write_checkpoint
 
-    write_checkpoint(tmp_path, {"version": 1, "cycle": 10})
-    before = (tmp_path / CHECKPOINT_FILE).read_bytes()
+    write_checkpoint(tmp_path, {"version": 3, "cycle": 10})
+    write_checkpoint(tmp_path, {"version": 3, "cycle": 20})
+    assert read_checkpoint(tmp_path)["cycle"] == 20
+    before = {n: (tmp_path / n).read_bytes() for n in CHECKPOINT_SLOTS}
 
-    def crash(src: object, dst: object) -> None:
-        raise OSError("killed before the rename")
+    def crash(fd: int, data: bytes, offset: int) -> int:  # a power loss inside the write:
+        os.write(fd, data[:len(data) // 2])  # half of it reached the disk
+        raise OSError("killed in the middle of the write")
 
-    monkeypatch.setattr(os, "replace", crash)
+    monkeypatch.setattr(os, "pwrite", crash)
     with pytest.raises(OSError):
-        write_checkpoint(tmp_path, {"version": 1, "cycle": 20})
-    assert (tmp_path / CHECKPOINT_FILE).read_bytes() == before
+        write_checkpoint(tmp_path, {"version": 3, "cycle": 30, "pad": b"x" * 10_000})
     monkeypatch.undo()
-    doc = read_checkpoint(tmp_path)
-    assert doc is None or doc.get("cycle") == 10  # the old one, or none: never half a file
+    after = {n: (tmp_path / n).read_bytes() for n in CHECKPOINT_SLOTS}
+    # the slot of cycle 20 untouched; the torn one is not taken
+    assert sum(after[n] == before[n] for n in CHECKPOINT_SLOTS) == 1
+    assert read_checkpoint(tmp_path)["cycle"] == 20
+    write_checkpoint(tmp_path, {"version": 3, "cycle": 40})  # over the torn slot
+    assert read_checkpoint(tmp_path)["cycle"] == 40
+    write_checkpoint(tmp_path, {"version": 3, "cycle": 50})  # over the slot of cycle 20
+    assert read_checkpoint(tmp_path)["cycle"] == 50
+    # a flipped byte of the newest: the one before it
+    p = max((tmp_path / n for n in CHECKPOINT_SLOTS),  # the higher sequence number
+            key=lambda q: int.from_bytes(q.read_bytes()[8:16], "little"))
+    raw = bytearray(p.read_bytes())
+    raw[-3] ^= 0xFF
+    p.write_bytes(bytes(raw))
+    assert read_checkpoint(tmp_path)["cycle"] == 40
 
 
 # --------------------------------------------------------------- speed law: extrapolation

@@ -161,11 +161,12 @@ def test_restart_without_checkpoint_stays_right(machine: dict[str, Any], tmp_pat
         time.sleep(rng.uniform(0.0, 0.8))
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=10)
-        ck = out / "checkpoint.pkl"
-        if kill == 0:
-            ck.unlink(missing_ok=True)
-        else:
-            ck.write_bytes(b"not a pickle")
+        for name in ("checkpoint.a", "checkpoint.b"):  # both slots
+            ck = out / name
+            if kill == 0:
+                ck.unlink(missing_ok=True)
+            elif ck.exists():
+                ck.write_bytes(b"not a pickle")
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=300,
                          env={**os.environ, "PYTHONUNBUFFERED": "1"})
     assert res.returncode == 0, res.stderr
