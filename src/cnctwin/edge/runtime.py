@@ -761,7 +761,7 @@ class CheckpointFile:
         head = _CK_HEAD.pack(_CK_MAGIC, self._seq, len(payload), zlib.crc32(payload))
         os.pwrite(fd, head + payload, 0)
         os.ftruncate(fd, _CK_HEAD.size + len(payload))
-        os.fdatasync(fd)
+        _datasync(fd)
         self._next = 1 - k
 
     def close(self) -> None:
@@ -775,6 +775,9 @@ class CheckpointFile:
         """Close and delete every checkpoint file (a clean end)."""
         self.close()
         remove_checkpoint(self.dir)
+
+
+_datasync = getattr(os, "fdatasync", os.fsync)  # (macOS has no fdatasync)
 
 
 def _sync_dir(path: Path) -> None:
