@@ -123,7 +123,7 @@ class TorqueProcessor:
 
     def prepare(self) -> None:
         """Compile the speed-change flags (numba) before a live stream's first chunk."""
-        SpeedChangeFlags().update(np.zeros(2))
+        _prepare_flags()
 
     def _flagged(self, tau: NDArray[np.float64], n: NDArray[np.float64]
                  ) -> tuple[NDArray[np.float64], NDArray[np.int8]]:
@@ -630,9 +630,14 @@ def prepare_kernels() -> None:
     speed-change flags, the anomaly processor's air and rapid-traverse counts, the physics
     detector. A live source calls it before it connects (``cnctwin edge run``); each
     processor's ``prepare`` covers what it uses as well."""
-    SpeedChangeFlags().update(np.zeros(2))
+    _prepare_flags()
     _prepare_air()
     PhysicsResidualDetector().prepare()
+
+
+def _prepare_flags() -> None:
+    """Compile the speed-change flags (torque processor, friction check)."""
+    SpeedChangeFlags().update(np.zeros(2))
 
 
 def _prepare_air() -> None:
@@ -881,7 +886,7 @@ class AnomalyProcessor:
         the state is not touched."""
         _prepare_air()
         if self.friction_check is not None:
-            SpeedChangeFlags().update(np.zeros(2))
+            _prepare_flags()
         self.detector.prepare()
 
     def _air(self, chunk: Chunk) -> NDArray[np.float64]:

@@ -672,9 +672,8 @@ class EdgeRuntime:
         finally:
             if close:
                 self.finish()
-            elif self._ckpt_file is not None:  # its slots stay for a resume; the files close
-                self._ckpt_file.close()
-                self._ckpt_file = None
+            else:  # its slots stay for a resume; the files close
+                self._close_checkpoint()
         return self.final_status if self.final_status is not None else self.status()
 
     def finish(self) -> None:
@@ -694,10 +693,14 @@ class EdgeRuntime:
         self.source.close()
         if self.state_dir is not None:  # a clean end: the next run continues without a gap
             _write_seq(self.state_dir, self._seq)
-            if self._ckpt_file is not None:
-                self._ckpt_file.close()
-                self._ckpt_file = None
+            self._close_checkpoint()
             remove_checkpoint(self.state_dir)
+
+    def _close_checkpoint(self) -> None:
+        """Close the checkpoint's slot files (a later checkpoint opens them again)."""
+        if self._ckpt_file is not None:
+            self._ckpt_file.close()
+            self._ckpt_file = None
 
 
 CHECKPOINT_FILE = "checkpoint.pkl"  # the single-file form before session 26 (read, removed)
@@ -770,11 +773,6 @@ class CheckpointFile:
             if fd is not None:
                 os.close(fd)
                 self._fds[k] = None
-
-    def remove(self) -> None:
-        """Close and delete every checkpoint file (a clean end)."""
-        self.close()
-        remove_checkpoint(self.dir)
 
 
 _datasync = getattr(os, "fdatasync", os.fsync)  # (macOS has no fdatasync)
