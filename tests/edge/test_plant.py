@@ -355,8 +355,8 @@ def test_workers_start_with_one_blas_thread(tmp_path: Path, wear_run: dict[str, 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="no open-file limit to raise on Windows")
 def test_a_worker_raises_its_open_file_limit_to_what_its_machines_need() -> None:
-    """Linux's usual soft limit of 1024 open files would stop a worker at ~100 machines (10
-    files each: outbox with WAL and shared memory, results, MQTT socket and wake-up pair,
+    """Linux's usual soft limit of 1024 open files would stop a worker at ~100 machines (9
+    files each: the outbox's two segments, results, MQTT socket and wake-up pair,
     the checkpoint's two slots, the status file);
     the worker raises the soft limit to the need, and where the hard limit is lower it says
     what to do. Run in a child process, whose limits are its own."""
@@ -365,13 +365,14 @@ import resource, sys
 from cnctwin.edge.plant import FILES_PER_MACHINE, raise_open_file_limit
 soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
 resource.setrlimit(resource.RLIMIT_NOFILE, (300, 2000))
-assert raise_open_file_limit(20) == ""  # 264 files: within 300, nothing changes
+assert raise_open_file_limit(20) == ""  # 244 files: within 300, nothing changes
 assert resource.getrlimit(resource.RLIMIT_NOFILE) == (300, 2000)
 assert raise_open_file_limit(150) == ""
 assert resource.getrlimit(resource.RLIMIT_NOFILE) == (150 * FILES_PER_MACHINE + 64, 2000)
-msg = raise_open_file_limit(400)  # 4064 files, but at most 2000
+msg = raise_open_file_limit(400)  # 3664 files, but at most 2000
 assert resource.getrlimit(resource.RLIMIT_NOFILE) == (2000, 2000)
-assert "4064 open files" in msg and "2000" in msg and "LimitNOFILE" in msg, msg
+need = 400 * FILES_PER_MACHINE + 64
+assert f"{need} open files" in msg and "2000" in msg and "LimitNOFILE" in msg, msg
 print("ok")
 """
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

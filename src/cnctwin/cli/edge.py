@@ -82,7 +82,7 @@ def _add_run_options(r: argparse.ArgumentParser) -> None:
                    help="calibrated spindle model (.json/.toml, cnctwin.edge.save_spindle_model); "
                    "not needed with --machine FILE.toml")
     r.add_argument("--out", type=Path, metavar="DIR",
-                   help="state directory: results.jsonl, status.json, outbox.sqlite")
+                   help="state directory: results.jsonl, status.json, outbox/")
     r.add_argument("--publish", metavar="URL",
                    help="mqtt://host:port/<topic prefix> for results (default prefix cnctwin)")
     r.add_argument("--store", metavar="URL", help="also append results to this store")
@@ -674,7 +674,7 @@ def _build(args: argparse.Namespace) -> Any:
                         username=u.username, password=u.password, security=security)
         unreachable = sink.check()  # a refused password or an untrusted certificate: stop
         if unreachable:
-            print(f"note: {unreachable}; results are kept in {out / 'outbox.sqlite'} until "
+            print(f"note: {unreachable}; results are kept in {out / 'outbox'} until "
                   "the broker can be reached", file=sys.stderr)
         sinks.append(sink)
     if args.store:

@@ -8,7 +8,8 @@ Layers (pure pieces first, orchestration last):
 * :mod:`~cnctwin.edge.sources`: replay of any recording file, live Databus over MQTT.
 * :mod:`~cnctwin.edge.cut`: the live hole context (hole number, tip depth, progress) per cycle.
 * :mod:`~cnctwin.edge.processors`: cutting torque, per-hole record, anomaly detectors.
-* :mod:`~cnctwin.edge.forward`: the bounded on-disk queue of store-and-forward.
+* :mod:`~cnctwin.edge.forward_log`: the bounded on-disk queue of store-and-forward (an
+  append-only log; :mod:`~cnctwin.edge.forward`: the SQLite queue of earlier versions).
 * :mod:`~cnctwin.edge.sinks`: MQTT (store-and-forward), the store, JSON lines.
 * :mod:`~cnctwin.edge.opcua`: an OPC UA server sink (extra ``opcua``; import it from there).
 * :mod:`~cnctwin.edge.runtime`: :class:`EdgeRuntime`, the loop and its status.
@@ -20,6 +21,7 @@ See docs/edge.md.
 
 from cnctwin.edge.cycles import CycleTracker
 from cnctwin.edge.forward import ForwardQueue
+from cnctwin.edge.forward_log import ForwardLog
 from cnctwin.edge.model_file import load_spindle_model, save_spindle_model
 from cnctwin.edge.pipeline import Chunk, Result
 from cnctwin.edge.processors import AnomalyProcessor, HoleProcessor, TorqueProcessor
@@ -38,6 +40,7 @@ __all__ = [
     "CycleTracker",
     "DatabusSource",
     "EdgeRuntime",
+    "ForwardLog",
     "ForwardQueue",
     "HoleProcessor",
     "JsonLinesSink",

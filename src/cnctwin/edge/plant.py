@@ -514,10 +514,11 @@ def run_machines(builders: Sequence[tuple[str, Callable[[], _Runtime]]], *,
 
 
 # ---------------------------------------------------------------------- many processes
-FILES_PER_MACHINE = 10
-"""Open files one machine of a plant worker holds: its outbox (the SQLite file, its WAL and
-shared memory), ``results.jsonl``, its MQTT sink's socket and paho's wake-up socket pair, its
-checkpoint's two slot files, and one being written (the status file)."""
+FILES_PER_MACHINE = 9
+"""Open files one machine of a plant worker holds: its outbox (the newest segment, and an
+older one while a backlog is sent), ``results.jsonl``, its MQTT sink's socket and paho's
+wake-up socket pair, its checkpoint's two slot files, and one being written (the status
+file)."""
 
 
 def raise_open_file_limit(machines: int) -> str:

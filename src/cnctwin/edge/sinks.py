@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 
 from cnctwin.edge.forward import ForwardQueue
+from cnctwin.edge.forward_log import ForwardLog
 from cnctwin.edge.pipeline import Chunk, dumps, encoded
 from cnctwin.exceptions import ConfigError
 from cnctwin.iotools._mqtt_read import receiving_client
@@ -232,11 +233,12 @@ class JsonLinesSink:
 class MqttSink:
     """Publish messages to ``<topic_prefix>/<machine>/<kind>`` with store-and-forward.
 
-    Every message goes through a :class:`~cnctwin.edge.forward.ForwardQueue` on disk and is
-    removed when the broker acknowledged it (QoS 1). While the broker is unreachable the queue
-    grows (bounded; the oldest are dropped and counted); the sink retries the connection with
-    exponential backoff (``retry_s``, doubled after each failed attempt up to ``max_retry_s``,
-    +-10 % jitter; paho's own reconnect is off) and then sends the backlog oldest first. A lost
+    Every message goes through a :class:`~cnctwin.edge.forward_log.ForwardLog` on disk (the
+    ``outbox`` directory) and is removed when the broker acknowledged it (QoS 1). While the
+    broker is unreachable the queue grows (bounded; the oldest are dropped and counted); the
+    sink retries the connection with exponential backoff (``retry_s``, doubled after each
+    failed attempt up to ``max_retry_s``, +-10 % jitter; paho's own reconnect is off) and
+    then sends the backlog oldest first. A lost
     connection discards the client (and its in-flight messages, which are still in the queue)
     and a new one is made, so only the queue decides what is sent and in which order.
 
@@ -245,7 +247,9 @@ class MqttSink:
     host, port : str, int
         Broker.
     state_dir : str or path-like
-        Directory of the queue file ``outbox.sqlite``.
+        Directory of the queue (``outbox/``). Messages still queued in an ``outbox.sqlite``
+        there (the queue before session 27) are moved into it first, then that file is
+        removed.
     machine : str
         Machine name in the topics.
     topic_prefix : str, default 'cnctwin'
@@ -282,8 +286,8 @@ class MqttSink:
         self.max_inflight = max_inflight
         self.username, self.password = username, password
         self.security = security
-        self.queue = ForwardQueue(Path(state_dir) / "outbox.sqlite",
-                                  max_messages=max_queue_messages)
+        self.queue = ForwardLog(Path(state_dir) / "outbox", max_messages=max_queue_messages)
+        _move_legacy_queue(Path(state_dir) / "outbox.sqlite", self.queue)
         self._client: Any = None
         self._connected = threading.Event()
         self._lost = threading.Event()
@@ -567,6 +571,7 @@ class MqttSink:
         return {"broker": f"{self.host}:{self.port}", "connected": self.connected,
                 "queued": len(self.queue) - len(self._done),
                 "dropped_oldest": self.queue.dropped,
+                **({"outbox_issues": self.queue.issues} if self.queue.issues else {}),
                 "sent": self.queue.sent + len(self._done), "connects": self.connects,
                 "disconnects": self.disconnects, "last_error": self.last_error,
                 "failed_attempts": self._failures,
@@ -580,6 +585,26 @@ class MqttSink:
         self.flush(timeout_s=timeout_s)
         self._drop_client()
         self.queue.close()
+
+
+def _move_legacy_queue(path: Path, log: ForwardLog) -> None:
+    """Move what an older version left queued in its SQLite outbox into the empty ``log``
+    (with its counts of sent and dropped messages), then remove the SQLite files. A crash in
+    between moves them again on the next start: sent at least once, as always."""
+    if not path.exists():
+        return
+    old = ForwardQueue(path)
+    try:
+        if not log.enqueued:
+            log.continue_counts(sent=old.sent, dropped=old.dropped)
+        after = 0
+        while batch := old.peek(1000, after_id=after):
+            log.put_many([(t, p) for _, t, p in batch])
+            after = batch[-1][0]
+    finally:
+        old.close()
+    for suffix in ("", "-wal", "-shm"):
+        Path(f"{path}{suffix}").unlink(missing_ok=True)
 
 
 class StoreSink:
