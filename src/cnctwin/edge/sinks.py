@@ -544,9 +544,15 @@ class MqttSink:
     def write(self, messages: list[dict[str, Any]], chunk: Chunk | None) -> None:
         items = [(self.topic(m["kind"]), e)
                  for m, e in zip(messages, encoded(messages), strict=True)]
+        if self._client is not None and self._connected.is_set():
+            # the acknowledgements of what went out with the last chunk, read now that they
+            # have had the time to come (read right after a send, the socket had none: a
+            # system call and paho's read path for nothing, every chunk)
+            self._io()
         ready = self._client is not None and self._connected.is_set() \
             and not self._lost.is_set()
-        # one transaction per chunk: the acknowledged messages go out with the new ones in
+        # one write per chunk: the acknowledged messages go out of the queue with the new
+        # ones in
         if ready:
             self._done += self._take_acked()
         ids = self.queue.put_many(items, remove=self._done or None)
@@ -555,7 +561,8 @@ class MqttSink:
         if ready:
             self._fresh = [(i, t, p) for i, (t, p) in zip(ids, items, strict=True)]
             self._send()
-            self._io()
+            if self._client is not None and self._client.want_write():
+                self._io()  # (the socket took only part: the rest now, not a chunk later)
         else:
             self.pump()
 
