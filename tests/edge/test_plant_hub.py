@@ -179,6 +179,40 @@ def test_six_machines_share_one_connection_and_one_thread(
             (k, chunks)
 
 
+def test_a_batch_longer_than_the_tick_is_one_chunk(broker: Broker, signals: Recording,
+                                                   tmp_path: Path) -> None:
+    """Messages every 0.1 s in batches of 1 s, with the worker's idle tick every 0.5 s: one
+    chunk per batch (a tick does its own work and leaves the gathering messages alone; it
+    took them as a chunk of their own before, two chunks per batch, each paying the work per
+    chunk), every cycle processed once."""
+    k = 7
+    pub = publisher(broker.port)
+    pub.publish(_topics(k)[0], _metadata(k), qos=1, retain=True).wait_for_publish(5)
+    hub = MqttHub("127.0.0.1", broker.port)
+    stop = threading.Event()
+    reports: list[tuple[str, str, Any]] = []
+    runner = _run_on_hub(hub, broker, tmp_path, range(k, k + 1), reports, stop,
+                         idle_timeout_s=2.0, batch_s=lambda k: 1.0)
+    deadline = time.monotonic() + 60
+    while not any(r[1] == "started" for r in reports):
+        assert time.monotonic() < deadline, reports
+        time.sleep(0.05)
+    payloads = _messages(signals)[:45]
+    t0 = time.monotonic()
+    for j, p in enumerate(payloads):  # 4.5 s of messages, one every 0.1 s
+        time.sleep(max(t0 + 0.1 * j - time.monotonic(), 0.0))
+        pub.publish(_topics(k)[1], p, qos=1)
+    runner.join(timeout=60)
+    pub.loop_stop()
+    pub.disconnect()
+    assert not runner.is_alive() and [r[1] for r in reports] == ["started", "done"], reports
+    st = json.loads((tmp_path / f"mill-{k}" / "status.json").read_text())
+    assert st["cycles"] == len(payloads) * PER_MSG
+    # the first message at once, then a batch per second (4.5 s), the end's idle flush:
+    # two chunks per second were 9 or more
+    assert st["chunks"] <= 7, st["chunks"]
+
+
 def test_batch_s_is_refused_outside_a_plant(tmp_path: Path, wear_run: dict[str, Any],
                                             capsys: pytest.CaptureFixture[str]) -> None:
     from cnctwin.cli import main
