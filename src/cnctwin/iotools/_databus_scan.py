@@ -852,5 +852,6 @@ def scan_bulk(message: bytes, lut: NDArray[np.int64]) -> BulkScan | None:
         if rest.size != nv - n_exact:
             return None
         values[n_exact:] = rest
-    return BulkScan(k=int(k), cols=col[:k].copy(), t_ns=t_row[:nv // k].copy(), values=values,
-                    qc=qc[:nv].copy(), seq=int(seq) if has_seq == 1 else None)
+    # views: the arrays were made for this call alone (no copy per message)
+    return BulkScan(k=int(k), cols=col[:k], t_ns=t_row[:nv // k], values=values, qc=qc[:nv],
+                    seq=int(seq) if has_seq == 1 else None)
