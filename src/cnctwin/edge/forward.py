@@ -20,7 +20,7 @@ from pathlib import Path
 
 from cnctwin.exceptions import ConfigError
 
-__all__ = ["ForwardQueue"]
+__all__ = ["ForwardQueue", "QueueCounts"]
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS outbox (
@@ -35,7 +35,34 @@ INSERT OR IGNORE INTO counters VALUES ('dropped', 0), ('enqueued', 0), ('sent', 
 # and their rows stay for the versions before that, which read them
 
 
-class ForwardQueue:
+class QueueCounts:
+    """The counts of a store-and-forward queue (:class:`ForwardQueue`,
+    :class:`~cnctwin.edge.forward_log.ForwardLog`): ids are given in order from 1, never
+    reused; what was appended is sent, dropped or still queued."""
+
+    _last_id: int
+    _dropped: int
+
+    def __len__(self) -> int:  # messages queued
+        raise NotImplementedError
+
+    @property
+    def dropped(self) -> int:
+        """Messages deleted unsent because the bound was hit (over the queue's life)."""
+        return self._dropped
+
+    @property
+    def enqueued(self) -> int:
+        """Messages ever appended (the newest id)."""
+        return self._last_id
+
+    @property
+    def sent(self) -> int:
+        """Messages acknowledged and removed."""
+        return self._last_id - self._dropped - len(self)
+
+
+class ForwardQueue(QueueCounts):
     """Bounded FIFO of ``(topic, payload)`` on disk.
 
     Parameters
@@ -69,21 +96,6 @@ class ForwardQueue:
 
     def __len__(self) -> int:
         return self._len
-
-    @property
-    def dropped(self) -> int:
-        """Messages deleted unsent because the bound was hit (over the file's life)."""
-        return self._dropped
-
-    @property
-    def enqueued(self) -> int:
-        """Messages ever appended."""
-        return self._last_id
-
-    @property
-    def sent(self) -> int:
-        """Messages acknowledged and removed."""
-        return self._last_id - self._dropped - self._len
 
     def put_many(self, items: list[tuple[str, bytes]], *,
                  remove: list[int] | None = None) -> list[int]:

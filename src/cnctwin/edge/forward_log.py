@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
 
+from cnctwin.edge.forward import QueueCounts
 from cnctwin.exceptions import ConfigError
 
 __all__ = ["ForwardLog"]
@@ -88,7 +89,7 @@ def _u64(body: memoryview) -> array:
     return out
 
 
-class ForwardLog:
+class ForwardLog(QueueCounts):
     """Bounded FIFO of ``(topic, payload)`` on disk, as an append-only log of segments.
 
     The interface of :class:`~cnctwin.edge.forward.ForwardQueue`.
@@ -127,21 +128,6 @@ class ForwardLog:
     # ------------------------------------------------------------------ counts
     def __len__(self) -> int:
         return self._last_id - self._done_through - len(self._acked)
-
-    @property
-    def dropped(self) -> int:
-        """Messages deleted unsent because the bound was hit (over the log's life)."""
-        return self._dropped
-
-    @property
-    def enqueued(self) -> int:
-        """Messages ever appended (the newest id)."""
-        return self._last_id
-
-    @property
-    def sent(self) -> int:
-        """Messages acknowledged and removed."""
-        return self._last_id - self._dropped - len(self)
 
     # ------------------------------------------------------------------ writing
     def put_many(self, items: list[tuple[str, bytes]], *,
