@@ -5,8 +5,9 @@ The same queue as :class:`~cnctwin.edge.forward.ForwardQueue` (bounded, ordered,
 acknowledged messages removed, the oldest dropped and counted beyond the bound), kept as
 records appended to segment files instead of rows of a SQLite table. A live plant appends one
 chunk's results and removes the previous chunk's acknowledged ones every machine-second; in
-SQLite that is a transaction (~0.27 ms of CPU on a busy 2-vCPU worker, 4 % of a machine's
-whole cost), here one ``writev`` of the records (BENCHMARKS.md, session 27).
+SQLite that is a transaction (~0.35 ms of CPU per machine-second on a busy 2-vCPU worker,
+5-6 % of a machine's whole cost), here one ``writev`` of the records (BENCHMARKS.md,
+session 27).
 
 Records (little-endian): a 20-byte header ``magic (u32), kind (u8), 0, topic length (u16),
 body length (u32), value (u64)``, the body, and the CRC-32 of header and body (u32):
@@ -42,6 +43,7 @@ from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
 
+from cnctwin.edge._files import sync_dir
 from cnctwin.edge.forward import QueueCounts
 from cnctwin.exceptions import ConfigError
 
@@ -285,7 +287,7 @@ class ForwardLog(QueueCounts):
         path = self.path / f"{first_id:020d}{_SUFFIX}"
         self._fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_APPEND | os.O_TRUNC, 0o644)
         self._segs.append(_Segment(path, first_id))
-        _sync_dir(self.path)
+        sync_dir(self.path)  # the new name survives a power loss
 
     # ------------------------------------------------------------------ reading
     def peek(self, n: int, *, after_id: int = 0) -> list[tuple[int, str, bytes]]:
@@ -386,12 +388,7 @@ class ForwardLog(QueueCounts):
                 self._acked = {i for i in _u64(body[8:]) if i > self._done_through}
             off = end
         seg.size = len(data)
-        self._segs.append(seg)
-        acked, d = self._acked, self._done_through
-        while d + 1 in acked:
-            d += 1
-            acked.discard(d)
-        self._done_through = d
+        self._segs.append(seg)  # (the done mark moves over the acknowledged in _open)
 
     def close(self) -> None:
         """Close the files (they stay)."""
@@ -400,16 +397,3 @@ class ForwardLog(QueueCounts):
                 os.close(fd)
         self._fd = self._read = None
 
-
-def _sync_dir(path: Path) -> None:
-    """A new segment's name survives a power loss."""
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:  # a file system without directory sync
-        pass
-    finally:
-        os.close(fd)

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 import orjson
 
+from cnctwin.edge._files import sync_dir
 from cnctwin.edge.cycles import CycleTracker
 from cnctwin.edge.pipeline import (
     Chunk,
@@ -759,7 +760,7 @@ class CheckpointFile:
             new = not path.exists()
             fd = self._fds[k] = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
             if new:  # the new name itself must survive a power loss
-                _sync_dir(self.dir)
+                sync_dir(self.dir)
         self._seq = max(self._seq, 0) + 1
         head = _CK_HEAD.pack(_CK_MAGIC, self._seq, len(payload), zlib.crc32(payload))
         os.pwrite(fd, head + payload, 0)
@@ -776,15 +777,6 @@ class CheckpointFile:
 
 
 _datasync = getattr(os, "fdatasync", os.fsync)  # (macOS has no fdatasync)
-
-
-def _sync_dir(path: Path) -> None:
-    with contextlib.suppress(OSError):  # a file system without directory sync
-        fd = os.open(path, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
 
 
 def _slot(path: Path, *, load: bool = False) -> tuple[int, bytes | None]:

@@ -238,9 +238,9 @@ class MqttSink:
     broker is unreachable the queue grows (bounded; the oldest are dropped and counted); the
     sink retries the connection with exponential backoff (``retry_s``, doubled after each
     failed attempt up to ``max_retry_s``, +-10 % jitter; paho's own reconnect is off) and
-    then sends the backlog oldest first. A lost
-    connection discards the client (and its in-flight messages, which are still in the queue)
-    and a new one is made, so only the queue decides what is sent and in which order.
+    then sends the backlog oldest first. A lost connection discards the client (and its
+    in-flight messages, which are still in the queue) and a new one is made, so only the
+    queue decides what is sent and in which order.
 
     Parameters
     ----------
